@@ -1,0 +1,79 @@
+"""`EnergyPlusEnv`: the data center as a Gymnasium environment (one EnergyPlus process per episode)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from .reward import RewardConfig
+from .simulation import OBS_HIGH, OBS_LOW, Simulation, SimulationConfig
+
+
+def observation_space() -> gym.spaces.Box:
+    return gym.spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
+
+
+def action_space(n: int) -> gym.spaces.Box:
+    return gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+
+
+class EnergyPlusEnv(gym.Env):
+    """The paper's environment: 6 observations, 2 or 4 normalized actions, its reward.
+
+    `reset()` starts a new EnergyPlus process (stopping a running one) and returns the state at the
+    start of the run period; each `step()` runs one 15-minute zone timestep under the given action.
+    The episode ends (`terminated=True`) after the run period's last timestep.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        weather: str | Path | list[str] = "CA",
+        model: str = "temp_fan",
+        run_days: int = 365,
+        output_dir: str | Path | None = None,
+        keep_episodes: int | None = None,
+        reward: RewardConfig | Mapping[str, float] | str | None = None,
+        step_timeout_s: float = 60.0,
+        start_timeout_s: float = 180.0,
+        idf: str | Path | None = None,
+    ):
+        weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
+        self.config = SimulationConfig(
+            weather=weathers[0],
+            model=model,
+            run_days=run_days,
+            output_dir=None if output_dir is None else str(output_dir),
+            keep_episodes=keep_episodes,
+            reward=RewardConfig.from_any(reward),
+            start_timeout_s=start_timeout_s,
+            step_timeout_s=step_timeout_s,
+            idf=None if idf is None else str(idf),
+        )
+        self.sim = Simulation(self.config, weathers)
+        if not self.sim.elements:
+            raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
+        self.observation_space = observation_space()
+        self.action_space = action_space(len(self.sim.elements))
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        weather_index = (options or {}).get("weather_index")
+        return self.sim.start(weather_index)
+
+    def step(self, action):
+        self.sim.send(action)
+        obs, reward, terminated, info = self.sim.receive()
+        return obs, reward, terminated, False, info
+
+    @property
+    def episode_dir(self) -> Path | None:
+        return self.sim.episode_dir
+
+    def close(self) -> None:
+        self.sim.close()

@@ -1,0 +1,143 @@
+"""One episode's directory, its record of every step, and the paper's summary statistics."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .model import COMFORT_BAND_C, SENSOR_NAMES, TIMESTEPS_PER_HOUR, ZONE_TEMP_NAMES
+
+STEPS_FILE = "steps.csv"
+SUMMARY_FILE = "summary.json"
+MODEL_FILE = "model.idf"
+REWARD_PARTS = ("reward_comfort", "reward_band", "reward_power")
+
+_RUN_PERIOD = re.compile(r"^[ \t]*RunPeriod,[^;]*;", re.MULTILINE | re.IGNORECASE)
+_TIMESTEP = re.compile(r"^[ \t]*Timestep,[^;]*;", re.MULTILINE | re.IGNORECASE)
+
+
+def run_period_end(run_days: int) -> tuple[int, int]:
+    """(month, day) of the last day of a run starting Jan 1; 2013 stands in for any non-leap year."""
+    if not 1 <= run_days <= 365:
+        raise ValueError(f"run_days must be within 1..365, got {run_days}")
+    end = dt.date(2013, 1, 1) + dt.timedelta(days=run_days - 1)
+    return end.month, end.day
+
+
+def write_episode_idf(source: Path, target: Path, run_days: int) -> None:
+    """Copy the model with one run period of `run_days` from Jan 1 and the model's timestep."""
+    text = source.read_text(encoding="latin-1")
+    if not _RUN_PERIOD.search(text):
+        raise ValueError(f"{source} has no RunPeriod object to set the episode length in")
+    month, day = run_period_end(run_days)
+    run_period = (
+        "  RunPeriod,\n    Episode,\n    1,\n    1,\n    ,\n"
+        f"    {month},\n    {day},\n    ,\n"
+        "    Tuesday,\n    Yes,\n    Yes,\n    No,\n    Yes,\n    Yes;  ! set by parallel-eplus"
+    )
+    text = _RUN_PERIOD.sub("", text)  # exactly one run period: the episode's
+    text = _TIMESTEP.sub("", text)
+    text += f"\n{run_period}\n\n  Timestep,{TIMESTEPS_PER_HOUR};\n"
+    target.write_text(text, encoding="latin-1")
+
+
+def link_or_copy(source: Path, target: Path) -> None:
+    """Weather files are never modified: a hard link records which one ran at no disk cost."""
+    try:
+        os.link(source, target)
+    except OSError:
+        shutil.copyfile(source, target)
+
+
+def err_tail(episode_dir: Path | None, lines: int = 12) -> str:
+    """Last lines of EnergyPlus's error file and of the EnergyPlus process's own log."""
+    if episode_dir is None:
+        return ""
+    parts = []
+    for name in ("eplusout.err", "energyplus.log"):
+        path = episode_dir / name
+        if path.is_file():
+            text = path.read_text(errors="replace").strip().splitlines()
+            if text:
+                parts.append(f"[{name}]\n" + "\n".join(text[-lines:]))
+    return "\n".join(parts)
+
+
+class StepRecorder:
+    """Rows of (time, observation, action, reward, components), kept in preallocated arrays."""
+
+    def __init__(self, action_names: tuple[str, ...], capacity: int):
+        self.columns = (*SENSOR_NAMES, *action_names, "reward", *REWARD_PARTS)
+        self.values = np.empty((capacity, len(self.columns)))
+        self.times: list[dt.datetime] = [None] * capacity  # type: ignore[list-item]
+        self.n = 0
+
+    def add(self, time: dt.datetime, row: np.ndarray) -> None:
+        if self.n == len(self.times):  # episodes never exceed their run period, but stay safe
+            self.values = np.concatenate([self.values, np.empty_like(self.values)])
+            self.times.extend([None] * len(self.times))  # type: ignore[list-item]
+        self.values[self.n] = row
+        self.times[self.n] = time
+        self.n += 1
+
+    def frame(self) -> pd.DataFrame:
+        df = pd.DataFrame(self.values[: self.n], columns=list(self.columns))
+        df.insert(0, "time", pd.to_datetime(self.times[: self.n]))
+        return df
+
+
+def read_steps(episode_dir: str | Path) -> pd.DataFrame:
+    """An episode's step table, as written at its end."""
+    return pd.read_csv(Path(episode_dir) / STEPS_FILE, parse_dates=["time"])
+
+
+def summarize(steps: pd.DataFrame) -> dict[str, float]:
+    """The paper's episode statistics (Section 5): power in kW, zone temperatures, share in 22-25 C."""
+    out: dict[str, float] = {"steps": float(len(steps))}
+    if steps.empty:
+        return out
+    out["reward_mean"] = float(steps["reward"].mean())
+    out["power_kw"] = float(steps["power_w"].mean() / 1000)
+    out["it_power_kw"] = float(steps["it_power_w"].mean() / 1000)
+    out["hvac_power_kw"] = float(steps["hvac_power_w"].mean() / 1000)
+    low, high = COMFORT_BAND_C
+    in_band = []
+    for col in ZONE_TEMP_NAMES:
+        zone = col.removesuffix("_temp_c")
+        t = steps[col]
+        out[f"{zone}_temp_mean"] = float(t.mean())
+        out[f"{zone}_temp_std"] = float(t.std(ddof=0))
+        out[f"{zone}_temp_min"] = float(t.min())
+        out[f"{zone}_temp_max"] = float(t.max())
+        ok = t.between(low, high)
+        out[f"{zone}_in_band_pct"] = float(100 * ok.mean())
+        in_band.append(ok.to_numpy())
+    out["in_band_pct"] = float(100 * np.concatenate(in_band).mean())
+    return out
+
+
+def write_records(episode_dir: Path, steps: pd.DataFrame, extra: dict) -> dict:
+    """Write the step table and summary.json; returns the summary."""
+    steps.to_csv(episode_dir / STEPS_FILE, index=False, float_format="%.6g")
+    summary = {**extra, **summarize(steps)}
+    (episode_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str))
+    return summary
+
+
+def prune_episodes(output_dir: Path, keep: int | None) -> None:
+    """Keep the newest `keep` episode directories whole; older ones keep only their summary."""
+    if keep is None:
+        return
+    dirs = sorted(p for p in output_dir.glob("episode-*") if p.is_dir())
+    full = [d for d in dirs if any(f.name != SUMMARY_FILE for f in d.iterdir())]
+    for d in full[: max(len(full) - keep, 0)]:
+        for f in d.iterdir():
+            if f.name != SUMMARY_FILE:
+                shutil.rmtree(f) if f.is_dir() else f.unlink()

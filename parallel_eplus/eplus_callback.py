@@ -1,0 +1,189 @@
+"""The EnergyPlus side of the pipes: runs one simulation through the pyenergyplus API.
+
+    python -m parallel_eplus.eplus_callback --act-pipe A --obs-pipe O --idf M.idf --epw W.epw \
+        --output-dir D --model temp_fan --steps N --initial-action 20 20 4 4
+
+Timing (one control step = one zone timestep, no shift between an observation and its action):
+- warmup and sizing hold the initial action and never produce a step;
+- at the run period's first AfterPredictorAfterHVACManagers, observation 0 (the state at the end of
+  warmup) goes out and action 1 comes back and is applied to timestep 1;
+- at the end of every zone timestep (after zone reporting) observation k goes out and action k+1
+  comes back; AfterPredictorAfterHVACManagers applies it to timestep k+1;
+- after timestep N the observation goes out as an END frame and no action is awaited.
+Frame values: year, month, day, hour, minute (time the observation was taken), then the sensors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import traceback
+
+from . import pipe
+from .model import SENSORS, control_model
+
+TIME_FIELDS = 5  # year, month, day, hour, minute
+KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
+
+
+class Bridge:
+    """Holds the handles and the current action; its two methods are the EnergyPlus callbacks."""
+
+    def __init__(self, api, act_fd: int, obs_fd: int, model: str, steps: int, initial: list[float]):
+        self.api = api
+        self.x = api.exchange
+        self.act_fd = act_fd
+        self.obs_fd = obs_fd
+        self.elements = control_model(model).actions
+        if len(initial) != len(self.elements):
+            raise SystemExit(f"--initial-action needs {len(self.elements)} values, got {len(initial)}")
+        self.action = list(initial)
+        self.steps = steps
+        self.step = 0
+        self.started = False
+        self.done = False
+        self.error: BaseException | None = None
+        self.sensor_handles: list[int] = []
+        self.actuator_handles: list[tuple[int, int]] = []  # (handle, action index)
+        self.last_obs: list[float] = [0.0] * len(SENSORS)
+        self._act_size = 4 + 8 * len(self.elements)
+
+    # -- setup --------------------------------------------------------------------------------
+    def _handles_ready(self, state) -> bool:
+        if self.sensor_handles:
+            return True
+        if not self.x.api_data_fully_ready(state):
+            return False
+        missing = []
+        for s in SENSORS:
+            h = self.x.get_variable_handle(state, s.variable, s.key)
+            if h < 0:
+                missing.append(f"variable '{s.variable}' for '{s.key}'")
+            self.sensor_handles.append(h)
+        for i, elem in enumerate(self.elements):
+            for a in elem.actuators:
+                h = self.x.get_actuator_handle(state, a.component_type, a.control_type, a.key)
+                if h < 0:
+                    missing.append(f"actuator '{a.component_type}/{a.control_type}' for '{a.key}'")
+                self.actuator_handles.append((h, i))
+        if missing:
+            raise RuntimeError("the model lacks " + "; ".join(missing))
+        return True
+
+    def _in_run_period(self, state) -> bool:
+        return not self.x.warmup_flag(state) and self.x.kind_of_sim(state) == KIND_RUN_PERIOD_WEATHER
+
+    # -- exchange -----------------------------------------------------------------------------
+    def _read_sensors(self, state) -> list[float]:
+        get = self.x.get_variable_value
+        return [get(state, h) for h in self.sensor_handles]
+
+    def _time(self, state, at_start: bool = False) -> list[float]:
+        x = self.x
+        hour, minute = (0, 0) if at_start else (x.hour(state), x.minutes(state))
+        return [x.year(state), x.month(state), x.day_of_month(state), hour, minute]
+
+    def _exchange(self, values: list[float]) -> None:
+        os.write(self.obs_fd, pipe.encode(values))
+        code, action = pipe.decode(lambda n: pipe.read_exact_blocking(self.act_fd, n))
+        if code != pipe.DATA or len(action) != len(self.elements):
+            raise pipe.ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
+        self.action = action.tolist()
+
+    def _guard(self, state, fn) -> None:
+        """Exceptions cannot cross the C callback boundary: record them and stop EnergyPlus."""
+        if self.error is not None or self.done:
+            return
+        try:
+            fn(state)
+        except BaseException as e:  # noqa: BLE001 - reported to the env as an ERROR frame
+            self.error = e
+            traceback.print_exc()
+            self.api.runtime.stop_simulation(state)
+
+    def apply_action(self, state) -> None:
+        self._guard(state, self._apply_action)
+
+    def observe(self, state) -> None:
+        self._guard(state, self._observe)
+
+    def _apply_action(self, state) -> None:
+        if not self._handles_ready(state):
+            return
+        if not self.started and self._in_run_period(state):
+            self.started = True
+            self._exchange(self._time(state, at_start=True) + self.last_obs)
+        set_value = self.x.set_actuator_value
+        action = self.action
+        for h, i in self.actuator_handles:
+            set_value(state, h, action[i])
+
+    def _observe(self, state) -> None:
+        if not self._handles_ready(state):
+            return
+        sensors = self._read_sensors(state)
+        if not self.started:  # warmup or sizing: keep the latest state for observation 0
+            self.last_obs = sensors
+            return
+        self.step += 1
+        values = self._time(state) + sensors
+        if self.step >= self.steps:
+            os.write(self.obs_fd, pipe.encode(values, pipe.END))
+            self.done = True
+            return
+        self._exchange(values)
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description="Run one EnergyPlus simulation driven over named pipes.")
+    p.add_argument("--act-pipe", required=True)
+    p.add_argument("--obs-pipe", required=True)
+    p.add_argument("--idf", required=True)
+    p.add_argument("--epw", required=True)
+    p.add_argument("--output-dir", required=True)
+    p.add_argument("--model", default="temp_fan")
+    p.add_argument("--steps", type=int, required=True, help="zone timesteps in the run period")
+    p.add_argument("--initial-action", type=float, nargs="*", default=[])
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    # Open our ends first: the env holds both FIFOs open, so neither open blocks.
+    obs_fd = os.open(args.obs_pipe, os.O_WRONLY)
+    act_fd = os.open(args.act_pipe, os.O_RDONLY)
+
+    def fail(status: float) -> int:
+        try:
+            os.write(obs_fd, pipe.encode([status], pipe.ERROR))
+        except OSError:
+            pass  # the env is gone; nobody to tell
+        return 1
+
+    try:
+        from pyenergyplus.api import EnergyPlusAPI
+
+        api = EnergyPlusAPI()
+        state = api.state_manager.new_state()
+        api.runtime.set_console_output_status(state, False)
+        bridge = Bridge(api, act_fd, obs_fd, args.model, args.steps, args.initial_action)
+        api.runtime.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
+        api.runtime.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
+        status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])
+    except BaseException:  # noqa: BLE001
+        traceback.print_exc()
+        return fail(-1.0)
+    if bridge.error is not None:
+        return fail(-2.0)
+    if status != 0:
+        print(f"EnergyPlus exited with status {status}", file=sys.stderr)
+        return fail(float(status))
+    if not bridge.done:
+        print(f"simulation ended after {bridge.step} of {args.steps} steps", file=sys.stderr)
+        return fail(-3.0)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,115 @@
+"""The data-center model: every fact about its sensors, actuators, bounds and files, declared once.
+
+Both sides of the pipe read this module: the env builds its spaces and scales actions from it, and the
+EnergyPlus-side callback looks up the same variable and actuator names.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+IDF_DIR = ROOT / "idf"
+BASELINE_IDF = IDF_DIR / "2ZoneDataCenterHVAC_wEconomizer.idf"
+AGENT_IDF = IDF_DIR / "2ZoneDataCenterHVAC_wEconomizer_agent.idf"
+
+TIMESTEPS_PER_HOUR = 4  # the model's Timestep object: one control step is 15 minutes
+STEPS_PER_DAY = 24 * TIMESTEPS_PER_HOUR
+ZONES = ("West", "East")
+
+# Zone temperatures counted as "in range" in the paper's results (Section 5).
+COMFORT_BAND_C = (22.0, 25.0)
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """One observation element: an EnergyPlus output variable with the paper's bounds."""
+
+    name: str  # column and `info` key
+    variable: str  # EnergyPlus output variable name
+    key: str  # EnergyPlus key (zone, node or 'Whole Building')
+    low: float
+    high: float
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """One EnergyPlus actuator; several may share one action element."""
+
+    component_type: str
+    control_type: str
+    key: str
+
+
+@dataclass(frozen=True)
+class ActionElement:
+    """One element of the agent's action, scaled from [-1, 1] to [low, high] physical units."""
+
+    name: str
+    unit: str
+    low: float
+    high: float
+    actuators: tuple[Actuator, ...]
+    initial: float  # held from the first timestep until the first action arrives (also warmup/sizing)
+
+
+# Observation in the paper's order and units (Section 4.2.1).
+SENSORS: tuple[Sensor, ...] = (
+    Sensor("outdoor_temp_c", "Site Outdoor Air Drybulb Temperature", "Environment", -20.0, 50.0),
+    Sensor("west_temp_c", "Zone Mean Air Temperature", "West Zone", -20.0, 50.0),
+    Sensor("east_temp_c", "Zone Mean Air Temperature", "East Zone", -20.0, 50.0),
+    Sensor("power_w", "Facility Total Electricity Demand Rate", "Whole Building", 0.0, 1e9),
+    Sensor("it_power_w", "Facility Total Building Electricity Demand Rate", "Whole Building", 0.0, 1e9),
+    Sensor("hvac_power_w", "Facility Total HVAC Electricity Demand Rate", "Whole Building", 0.0, 1e9),
+)
+SENSOR_NAMES = tuple(s.name for s in SENSORS)
+ZONE_TEMP_NAMES = ("west_temp_c", "east_temp_c")
+
+
+def _setpoint_nodes(zone: str) -> tuple[Actuator, ...]:
+    nodes = (
+        f"{zone} Zone DEC Outlet Node",
+        f"{zone} Zone IEC Outlet Node",
+        f"{zone} Zone CCoil Air Outlet Node",
+        f"{zone} Air Loop Outlet Node",
+    )
+    return tuple(Actuator("System Node Setpoint", "Temperature Setpoint", n) for n in nodes)
+
+
+def _fan(zone: str) -> tuple[Actuator, ...]:
+    return (Actuator("Fan", "Fan Air Mass Flow Rate", f"{zone} Zone Supply Fan"),)
+
+
+# Action in the paper's order and ranges (Section 4.2.2).
+ACTIONS: tuple[ActionElement, ...] = (
+    ActionElement("west_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("West"), initial=20.0),
+    ActionElement("east_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("East"), initial=20.0),
+    ActionElement("west_fan_kg_s", "kg/s", 1.75, 7.0, _fan("West"), initial=4.0),
+    ActionElement("east_fan_kg_s", "kg/s", 1.75, 7.0, _fan("East"), initial=4.0),
+)
+
+
+@dataclass(frozen=True)
+class ControlModel:
+    """A building variant and the part of the action the agent owns in it."""
+
+    name: str
+    idf: Path
+    actions: tuple[ActionElement, ...]
+
+
+# `temp_fan` controls setpoints and fans; `temp` only setpoints (fans stay on EnergyPlus's VAV control);
+# `baseline` is the built-in controller: the stock setpoint managers, no agent action.
+MODELS: dict[str, ControlModel] = {
+    "temp_fan": ControlModel("temp_fan", AGENT_IDF, ACTIONS),
+    "temp": ControlModel("temp", AGENT_IDF, ACTIONS[:2]),
+    "baseline": ControlModel("baseline", BASELINE_IDF, ()),
+}
+
+
+def control_model(name: str) -> ControlModel:
+    try:
+        return MODELS[name]
+    except KeyError:
+        raise ValueError(f"unknown model {name!r}; choose one of {', '.join(MODELS)}") from None

@@ -1,0 +1,169 @@
+"""The wire between the env and EnergyPlus: a private pair of named pipes carrying float frames.
+
+Frame: little-endian int32 count, then `count` float64 values (the paper's bare vectors). A negative
+count is a control frame: the code, then an int32 count and its values. END carries the final real
+observation; ERROR carries an exit status. Anything else, or a frame cut short, is a ProtocolError.
+
+The env's end opens both FIFOs read-write, so opening never blocks on a child that died before opening
+its end; child death is noticed through a pidfd (or a short poll) instead of waiting for EOF.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import shutil
+import struct
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ProtocolError
+
+DATA = 0
+END = -1
+ERROR = -2
+CONTROL_CODES = (END, ERROR)
+MAX_VALUES = 4096  # far above any real frame; a larger count means a corrupt stream
+
+_INT = struct.Struct("<i")
+
+
+def encode(values, code: int = DATA) -> bytes:
+    """One frame as bytes: written with a single write, so it arrives whole (frames < PIPE_BUF)."""
+    payload = np.ascontiguousarray(values, dtype="<f8").tobytes()
+    n = len(payload) // 8
+    if code == DATA:
+        return _INT.pack(n) + payload
+    if code not in CONTROL_CODES:
+        raise ValueError(f"unknown control code {code}")
+    return _INT.pack(code) + _INT.pack(n) + payload
+
+
+def decode(read_exact: Callable[[int], bytes]) -> tuple[int, np.ndarray]:
+    """Read one frame through `read_exact(n) -> bytes`; returns (code, values)."""
+    (count,) = _INT.unpack(read_exact(4))
+    code = DATA
+    if count < 0:
+        code = count
+        if code not in CONTROL_CODES:
+            raise ProtocolError(f"malformed frame: unknown control code {code}")
+        (count,) = _INT.unpack(read_exact(4))
+    if not 0 <= count <= MAX_VALUES:
+        raise ProtocolError(f"malformed frame: value count {count} outside 0..{MAX_VALUES}")
+    return code, np.frombuffer(read_exact(8 * count), dtype="<f8")
+
+
+def read_exact_blocking(fd: int, n: int) -> bytes:
+    """Read n bytes from a blocking fd (the EnergyPlus side); EOF mid-frame is a ProtocolError."""
+    buf = os.read(fd, n)
+    while len(buf) < n:
+        chunk = os.read(fd, n - len(buf))
+        if not chunk:
+            raise ProtocolError(f"pipe closed after {len(buf)} of {n} bytes")
+        buf += chunk
+    return buf
+
+
+class PipePair:
+    """Two FIFOs in a private 0700 directory: `act` (env -> EnergyPlus) and `obs` (EnergyPlus -> env).
+
+    Each instance makes its own directory with mkdtemp, so names never collide however many envs run
+    in one process or on one machine. `close()` removes the FIFOs and the directory.
+    """
+
+    def __init__(self, parent_dir: str | os.PathLike | None = None):
+        self.dir = Path(tempfile.mkdtemp(prefix="parallel-eplus-", dir=parent_dir))
+        os.chmod(self.dir, 0o700)
+        self.act_path = self.dir / "act"
+        self.obs_path = self.dir / "obs"
+        os.mkfifo(self.act_path, 0o600)
+        os.mkfifo(self.obs_path, 0o600)
+        self.act_fd = os.open(self.act_path, os.O_RDWR)
+        self.obs_fd = os.open(self.obs_path, os.O_RDWR | os.O_NONBLOCK)
+        self._pidfd: int | None = None
+        self._alive: Callable[[], bool] = lambda: True
+
+    def watch(self, pid: int, alive: Callable[[], bool]) -> None:
+        """Wake reads when the process on the other end exits."""
+        self._close_pidfd()
+        self._alive = alive
+        try:
+            self._pidfd = os.pidfd_open(pid)
+        except (AttributeError, OSError):  # pragma: no cover - kernels without pidfd
+            self._pidfd = None
+
+    def drain(self) -> None:
+        """Discard bytes left by a previous simulation, so a new one starts on a clean stream."""
+        for fd in (self.obs_fd, self.act_fd):
+            blocking = os.get_blocking(fd)
+            os.set_blocking(fd, False)
+            try:
+                while os.read(fd, 65536):
+                    pass
+            except BlockingIOError:
+                pass
+            finally:
+                os.set_blocking(fd, blocking)
+
+    def send(self, frame: bytes) -> None:
+        os.write(self.act_fd, frame)
+
+    def recv(self, timeout: float) -> tuple[int, np.ndarray]:
+        """Next frame from EnergyPlus. Raises TimeoutError or ChildProcessError, never returns zeros."""
+        deadline = time.monotonic() + timeout
+        return decode(lambda n: self._read_exact(n, deadline))
+
+    def _read_exact(self, n: int, deadline: float) -> bytes:
+        buf = b""
+        while True:
+            try:
+                chunk = os.read(self.obs_fd, n - len(buf))
+                buf += chunk
+                if len(buf) == n:
+                    return buf
+            except BlockingIOError:
+                pass
+            self._wait_readable(deadline, got=len(buf), want=n)
+
+    def _wait_readable(self, deadline: float, got: int, want: int) -> None:
+        fds = [self.obs_fd] if self._pidfd is None else [self.obs_fd, self._pidfd]
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError(f"no data from EnergyPlus (had {got} of {want} bytes)")
+            slice_s = remaining if self._pidfd is not None else min(remaining, 0.2)
+            ready, _, _ = select.select(fds, [], [], slice_s)
+            if self.obs_fd in ready:
+                return
+            if ready or not self._alive():
+                if self._has_data():  # a last frame written just before the exit
+                    return
+                where = f" mid-frame ({got} of {want} bytes)" if got else ""
+                raise ChildProcessError(f"EnergyPlus process exited{where}")
+
+    def _has_data(self) -> bool:
+        ready, _, _ = select.select([self.obs_fd], [], [], 0)
+        return bool(ready)
+
+    def _close_pidfd(self) -> None:
+        if self._pidfd is not None:
+            os.close(self._pidfd)
+            self._pidfd = None
+
+    def close(self) -> None:
+        self._close_pidfd()
+        for fd in (self.act_fd, self.obs_fd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self.act_fd = self.obs_fd = -1
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def __del__(self):
+        if getattr(self, "act_fd", -1) >= 0:
+            self.close()

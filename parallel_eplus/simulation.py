@@ -1,0 +1,262 @@
+"""One EnergyPlus process at a time behind one pipe pair: the unit the env and the vector env step.
+
+`Simulation` owns everything per step that must not be written twice: action checks and scaling, the
+reward, observation clipping, the step record and the error handling. `EnergyPlusEnv` drives one;
+the vector env drives several, writing every action before reading any observation.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import pipe
+from .episode import (
+    MODEL_FILE,
+    StepRecorder,
+    err_tail,
+    link_or_copy,
+    prune_episodes,
+    write_episode_idf,
+    write_records,
+)
+from .errors import EnergyPlusError, ProtocolError
+from .model import SENSORS, STEPS_PER_DAY, control_model
+from .reward import RewardConfig, reward
+from .weather import resolve_weather, weather_label
+
+log = logging.getLogger(__name__)
+
+TIME_FIELDS = 5  # year, month, day, hour, minute: see eplus_callback
+OBS_LOW = np.array([s.low for s in SENSORS], dtype=np.float32)
+OBS_HIGH = np.array([s.high for s in SENSORS], dtype=np.float32)
+_WEST, _EAST, _POWER = 1, 2, 3  # sensor positions used by the reward
+
+
+@dataclass
+class SimulationConfig:
+    """What one worker simulates; plain data, so it can be logged, saved and sent to Ray actors."""
+
+    weather: str = "CA"  # code or .epw path; a list cycles episode by episode
+    model: str = "temp_fan"
+    run_days: int = 365
+    output_dir: str | None = None  # None: a temporary directory removed on close
+    keep_episodes: int | None = None  # newest full episode directories kept; None keeps all
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    start_timeout_s: float = 180.0  # sizing and warmup come before the first observation
+    step_timeout_s: float = 60.0
+    idf: str | None = None  # override the model's IDF (same sensors and actuators)
+
+
+def _time(values: np.ndarray) -> dt.datetime:
+    year, month, day, hour, minute = (int(v) for v in values[:TIME_FIELDS])
+    return dt.datetime(year, month, day) + dt.timedelta(hours=hour, minutes=minute)
+
+
+class Simulation:
+    """Spawns, steps and stops EnergyPlus processes for consecutive episodes."""
+
+    def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0"):
+        self.config = config
+        self.name = name
+        self.model = control_model(config.model)
+        self.elements = self.model.actions
+        self.idf = Path(config.idf) if config.idf else self.model.idf
+        if not self.idf.is_file():
+            raise FileNotFoundError(f"model file not found: {self.idf}")
+        self.weathers = weathers or [config.weather]
+        self.weather_paths = [resolve_weather(w) for w in self.weathers]  # fail before spawning
+        self.steps_per_episode = config.run_days * STEPS_PER_DAY
+        self._tmp = None
+        if config.output_dir is None:
+            self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
+        self.output_dir = Path(config.output_dir or self._tmp)
+        self.output_dir.mkdir(parents=True, exist_ok=True)
+        self.low = np.array([e.low for e in self.elements])
+        self.high = np.array([e.high for e in self.elements])
+        self.initial_action = np.array([e.initial for e in self.elements])
+        self.action_names = tuple(e.name for e in self.elements)
+        self.pipes: pipe.PipePair | None = None
+        self.proc: subprocess.Popen | None = None
+        self.episode = 0
+        self.episode_dir: Path | None = None
+        self.weather = self.weathers[0]
+        self.records: StepRecorder | None = None
+        self.last_summary: dict | None = None
+        self._action = self.initial_action.copy()
+        self._awaiting = False  # an action was sent and its observation not yet read
+        self._closed = False
+
+    # -- episode lifecycle --------------------------------------------------------------------
+    def start(self, weather_index: int | None = None) -> tuple[np.ndarray, dict]:
+        """Stop any running process, start the next episode and return observation 0."""
+        self.stop()
+        if self.pipes is None:
+            self.pipes = pipe.PipePair()
+        self.pipes.drain()
+        i = self.episode % len(self.weathers) if weather_index is None else weather_index
+        self.episode += 1
+        self.weather = self.weathers[i]
+        epw = self.weather_paths[i]
+        label = weather_label(self.weather)
+        self.episode_dir = self.output_dir / f"episode-{self.episode:06d}-{label}"
+        if self.episode_dir.exists():
+            shutil.rmtree(self.episode_dir)
+        self.episode_dir.mkdir(parents=True)
+        write_episode_idf(self.idf, self.episode_dir / MODEL_FILE, self.config.run_days)
+        link_or_copy(epw, self.episode_dir / epw.name)
+        cmd = [
+            sys.executable, "-m", "parallel_eplus.eplus_callback",
+            "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path),
+            "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
+            "--output-dir", str(self.episode_dir), "--model", self.model.name,
+            "--steps", str(self.steps_per_episode),
+            "--initial-action", *map(str, self.initial_action),
+        ]  # fmt: skip
+        with open(self.episode_dir / "energyplus.log", "wb") as logf:
+            self.proc = subprocess.Popen(
+                cmd, stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT,
+                start_new_session=True,  # Ctrl-C reaches the learner, which stops us cleanly
+            )  # fmt: skip
+        self.pipes.watch(self.proc.pid, lambda: self.proc is not None and self.proc.poll() is None)
+        self.records = StepRecorder(self.action_names, self.steps_per_episode)
+        self._action = self.initial_action.copy()
+        self.last_summary = None
+        code, values = self._recv(self.config.start_timeout_s, "the first observation")
+        if code != pipe.DATA:
+            raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
+        obs, info = self._observation(values)
+        return obs, info
+
+    def send(self, action) -> None:
+        """Check, clip, scale and send one action; its observation is read by `receive`."""
+        if self.proc is None:
+            raise RuntimeError("no simulation running: call reset() first")
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != (len(self.elements),):
+            raise ValueError(f"action must have {len(self.elements)} elements, got shape {a.shape}")
+        bad = ~np.isfinite(a)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"action element {i} ({self.action_names[i]}) is {a[i]}; actions must be finite")
+        self._action = self.low + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (self.high - self.low)
+        try:
+            self.pipes.send(pipe.encode(self._action))
+        except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
+            raise self._error(f"cannot send the action: {e}") from e
+        self._awaiting = True
+
+    def receive(self) -> tuple[np.ndarray, float, bool, dict]:
+        """(observation, reward, terminated, info) for the action last sent."""
+        code, values = self._recv(self.config.step_timeout_s, "an observation")
+        self._awaiting = False
+        obs, info = self._observation(values)
+        r, parts = reward((info["west_temp_c"], info["east_temp_c"]), info["power_w"], self.config.reward)
+        info.update(parts)
+        row = np.concatenate([values[TIME_FIELDS:], self._action, (r, *parts.values())])
+        self.records.add(info["time"], row)
+        terminated = code == pipe.END
+        if terminated:
+            self._finish()
+            info["episode_summary"] = self.last_summary
+        return obs, r, terminated, info
+
+    # -- internals ----------------------------------------------------------------------------
+    def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
+        if len(values) != TIME_FIELDS + len(SENSORS):
+            raise self._error(f"observation frame has {len(values)} values", ProtocolError)
+        raw = values[TIME_FIELDS:]
+        info = {s.name: float(v) for s, v in zip(SENSORS, raw)}
+        info["time"] = _time(values)
+        info["weather"] = self.weather
+        info["episode_dir"] = str(self.episode_dir)
+        obs = raw.astype(np.float32)
+        if ((obs < OBS_LOW) | (obs > OBS_HIGH)).any():
+            info["raw_observation"] = raw.copy()
+            obs = np.clip(obs, OBS_LOW, OBS_HIGH)
+        return obs, info
+
+    def _recv(self, timeout: float, what: str) -> tuple[int, np.ndarray]:
+        try:
+            code, values = self.pipes.recv(timeout)
+        except TimeoutError as e:
+            raise self._error(f"EnergyPlus sent no {what} within {timeout:.0f} s (hung?)") from e
+        except ChildProcessError as e:
+            raise self._error(f"EnergyPlus died while we waited for {what}: {e}") from e
+        except ProtocolError as e:
+            raise self._error(f"malformed frame from EnergyPlus: {e}", ProtocolError) from e
+        if code == pipe.ERROR:
+            raise self._error(f"EnergyPlus failed (status {values[0] if len(values) else '?'})")
+        return code, values
+
+    def _error(self, message: str, kind: type[EnergyPlusError] = EnergyPlusError) -> EnergyPlusError:
+        """Stop the process first, so the error file is complete and nothing is left running."""
+        self._kill()
+        return kind(
+            f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir)
+        )
+
+    def _finish(self) -> None:
+        """The run period is over: let EnergyPlus finish its files, then write the records."""
+        if self.proc is not None:
+            try:
+                self.proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                log.warning("EnergyPlus did not exit after the last step; killing it")
+            self._kill()
+        self._write_records(complete=True)
+
+    def _write_records(self, complete: bool) -> None:
+        if self.records is None or self.episode_dir is None:
+            return
+        extra = {
+            "episode": self.episode,
+            "worker": self.name,
+            "weather": weather_label(self.weather),
+            "model": self.model.name,
+            "run_days": self.config.run_days,
+            "complete": complete,
+        }
+        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra)
+        self.records = None
+        prune_episodes(self.output_dir, self.config.keep_episodes)
+
+    def _kill(self) -> None:
+        proc, self.proc = self.proc, None
+        if proc is None:
+            return
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+    def stop(self) -> None:
+        """End a running episode early: kill EnergyPlus and keep the partial record."""
+        if self.proc is not None:
+            self._kill()
+        if self.records is not None and self.records.n:
+            self._write_records(complete=False)
+        self.records = None
+        self._awaiting = False
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self.stop()
+        if self.pipes is not None:
+            self.pipes.close()
+            self.pipes = None
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+
+    def __del__(self):
+        if not getattr(self, "_closed", True):
+            self.close()

@@ -1,0 +1,50 @@
+"""The paper's five weather files by short code, or any .epw by path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .model import ROOT
+
+WEATHER_DIR = ROOT / "weather"
+
+# Paper, Section 5.1.2. The files come from the pyenergyplus-lbnl wheel (TMY3).
+WEATHER_FILES: dict[str, str] = {
+    "CA": "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw",
+    "CO": "USA_CO_Golden-NREL.724666_TMY3.epw",
+    "FL": "USA_FL_Tampa.Intl.AP.722110_TMY3.epw",
+    "IL": "USA_IL_Chicago-OHare.Intl.AP.725300_TMY3.epw",
+    "VA": "USA_VA_Sterling-Washington.Dulles.Intl.AP.724030_TMY3.epw",
+}
+
+
+def resolve_weather(weather: str | Path) -> Path:
+    """A code (CA, CO, FL, IL, VA) or a path to an .epw file; fails before anything is spawned."""
+    text = str(weather)
+    if text.upper() in WEATHER_FILES:
+        path = WEATHER_DIR / WEATHER_FILES[text.upper()]
+    elif text.lower().endswith(".epw"):
+        path = Path(text).expanduser()
+    else:
+        raise ValueError(
+            f"unknown weather {text!r}: use a code ({', '.join(WEATHER_FILES)}) or a path to an .epw file"
+        )
+    if not path.is_file():
+        raise FileNotFoundError(f"weather file not found: {path}")
+    return path.resolve()
+
+
+def weather_label(weather: str | Path) -> str:
+    """Short label for logs and records: the code, or the file's stem."""
+    text = str(weather)
+    return text.upper() if text.upper() in WEATHER_FILES else Path(text).stem
+
+
+def parse_weathers(spec: str) -> list[str]:
+    """'CA,CO,FL' -> ['CA', 'CO', 'FL'], each checked."""
+    items = [w.strip() for w in spec.split(",") if w.strip()]
+    if not items:
+        raise ValueError("no weather given")
+    for w in items:
+        resolve_weather(w)
+    return items
