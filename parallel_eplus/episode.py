@@ -125,7 +125,7 @@ def summarize(steps: pd.DataFrame) -> dict[str, float]:
 
 def write_records(episode_dir: Path, steps: pd.DataFrame, extra: dict) -> dict:
     """Write the step table and summary.json; returns the summary."""
-    steps.to_csv(episode_dir / STEPS_FILE, index=False, float_format="%.6g")
+    steps.to_csv(episode_dir / STEPS_FILE, index=False, float_format="%.10g")
     summary = {**extra, **summarize(steps)}
     (episode_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str))
     return summary

@@ -10,7 +10,9 @@ Timing (one control step = one zone timestep, no shift between an observation an
 - at the end of every zone timestep (after zone reporting) observation k goes out and action k+1
   comes back; AfterPredictorAfterHVACManagers applies it to timestep k+1;
 - after timestep N the observation goes out as an END frame and no action is awaited.
-Frame values: year, month, day, hour, minute (time the observation was taken), then the sensors.
+AfterPredictorAfterHVACManagers runs at every HVAC sub-timestep; actuators keep their values, so the
+action is written once per zone timestep. Frame values: year, day of year, hour, minute (when the
+observation was taken; EnergyPlus's own clock at this point is the last sub-timestep's), then the sensors.
 """
 
 from __future__ import annotations
@@ -23,7 +25,6 @@ import traceback
 from . import pipe
 from .model import SENSORS, control_model
 
-TIME_FIELDS = 5  # year, month, day, hour, minute
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
 
 
@@ -43,6 +44,7 @@ class Bridge:
         self.step = 0
         self.started = False
         self.done = False
+        self.pending = True  # the current action has not been written to the actuators yet
         self.error: BaseException | None = None
         self.sensor_handles: list[int] = []
         self.actuator_handles: list[tuple[int, int]] = []  # (handle, action index)
@@ -81,8 +83,10 @@ class Bridge:
 
     def _time(self, state, at_start: bool = False) -> list[float]:
         x = self.x
-        hour, minute = (0, 0) if at_start else (x.hour(state), x.minutes(state))
-        return [x.year(state), x.month(state), x.day_of_month(state), hour, minute]
+        if at_start:
+            return [x.calendar_year(state), x.day_of_year(state), 0, 0]
+        minute = x.zone_time_step_number(state) * 60 // x.num_time_steps_in_hour(state)
+        return [x.calendar_year(state), x.day_of_year(state), x.hour(state), minute]
 
     def _exchange(self, values: list[float]) -> None:
         os.write(self.obs_fd, pipe.encode(values))
@@ -90,6 +94,7 @@ class Bridge:
         if code != pipe.DATA or len(action) != len(self.elements):
             raise pipe.ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
         self.action = action.tolist()
+        self.pending = True
 
     def _guard(self, state, fn) -> None:
         """Exceptions cannot cross the C callback boundary: record them and stop EnergyPlus."""
@@ -114,10 +119,12 @@ class Bridge:
         if not self.started and self._in_run_period(state):
             self.started = True
             self._exchange(self._time(state, at_start=True) + self.last_obs)
-        set_value = self.x.set_actuator_value
-        action = self.action
-        for h, i in self.actuator_handles:
-            set_value(state, h, action[i])
+        if self.pending:
+            self.pending = False
+            set_value = self.x.set_actuator_value
+            action = self.action
+            for h, i in self.actuator_handles:
+                set_value(state, h, action[i])
 
     def _observe(self, state) -> None:
         if not self._handles_ready(state):
@@ -125,6 +132,7 @@ class Bridge:
         sensors = self._read_sensors(state)
         if not self.started:  # warmup or sizing: keep the latest state for observation 0
             self.last_obs = sensors
+            self.pending = True  # re-assert the held action each zone timestep until the run starts
             return
         self.step += 1
         values = self._time(state) + sensors

@@ -10,6 +10,7 @@ its end; child death is noticed through a pidfd (or a short poll) instead of wai
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import shutil
@@ -27,6 +28,7 @@ DATA = 0
 END = -1
 ERROR = -2
 CONTROL_CODES = (END, ERROR)
+TIME_FIELDS = 4  # observation frames start with year, day of year, hour, minute; sensors follow
 MAX_VALUES = 4096  # far above any real frame; a larger count means a corrupt stream
 
 _INT = struct.Struct("<i")
@@ -157,10 +159,8 @@ class PipePair:
     def close(self) -> None:
         self._close_pidfd()
         for fd in (self.act_fd, self.obs_fd):
-            try:
+            with contextlib.suppress(OSError):
                 os.close(fd)
-            except OSError:
-                pass
         self.act_fd = self.obs_fd = -1
         shutil.rmtree(self.dir, ignore_errors=True)
 

@@ -35,7 +35,6 @@ from .weather import resolve_weather, weather_label
 
 log = logging.getLogger(__name__)
 
-TIME_FIELDS = 5  # year, month, day, hour, minute: see eplus_callback
 OBS_LOW = np.array([s.low for s in SENSORS], dtype=np.float32)
 OBS_HIGH = np.array([s.high for s in SENSORS], dtype=np.float32)
 _WEST, _EAST, _POWER = 1, 2, 3  # sensor positions used by the reward
@@ -57,8 +56,20 @@ class SimulationConfig:
 
 
 def _time(values: np.ndarray) -> dt.datetime:
-    year, month, day, hour, minute = (int(v) for v in values[:TIME_FIELDS])
-    return dt.datetime(year, month, day) + dt.timedelta(hours=hour, minutes=minute)
+    year, day_of_year, hour, minute = (int(v) for v in values[: pipe.TIME_FIELDS])
+    return dt.datetime(year, 1, 1) + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)
+
+
+def scale_action(action, low: np.ndarray, high: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+    """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
+    a = np.asarray(action, dtype=np.float64).reshape(-1)
+    if a.shape != low.shape:
+        raise ValueError(f"action must have {len(low)} elements, got shape {np.shape(action)}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"action element {i} ({names[i]}) is {a[i]}; actions must be finite")
+    return low + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (high - low)
 
 
 class Simulation:
@@ -140,14 +151,7 @@ class Simulation:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
         if self.proc is None:
             raise RuntimeError("no simulation running: call reset() first")
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != (len(self.elements),):
-            raise ValueError(f"action must have {len(self.elements)} elements, got shape {a.shape}")
-        bad = ~np.isfinite(a)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"action element {i} ({self.action_names[i]}) is {a[i]}; actions must be finite")
-        self._action = self.low + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (self.high - self.low)
+        self._action = scale_action(action, self.low, self.high, self.action_names)
         try:
             self.pipes.send(pipe.encode(self._action))
         except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
@@ -161,23 +165,23 @@ class Simulation:
         obs, info = self._observation(values)
         r, parts = reward((info["west_temp_c"], info["east_temp_c"]), info["power_w"], self.config.reward)
         info.update(parts)
-        row = np.concatenate([values[TIME_FIELDS:], self._action, (r, *parts.values())])
+        row = np.concatenate([values[pipe.TIME_FIELDS :], self._action, (r, *parts.values())])
         self.records.add(info["time"], row)
         terminated = code == pipe.END
         if terminated:
             self._finish()
             info["episode_summary"] = self.last_summary
+            info["episode_dir"] = str(self.episode_dir)
         return obs, r, terminated, info
 
     # -- internals ----------------------------------------------------------------------------
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
-        if len(values) != TIME_FIELDS + len(SENSORS):
+        if len(values) != pipe.TIME_FIELDS + len(SENSORS):
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
-        raw = values[TIME_FIELDS:]
-        info = {s.name: float(v) for s, v in zip(SENSORS, raw)}
+        raw = values[pipe.TIME_FIELDS :]
+        info = {s.name: float(v) for s, v in zip(SENSORS, raw, strict=False)}
         info["time"] = _time(values)
         info["weather"] = self.weather
-        info["episode_dir"] = str(self.episode_dir)
         obs = raw.astype(np.float32)
         if ((obs < OBS_LOW) | (obs > OBS_HIGH)).any():
             info["raw_observation"] = raw.copy()

@@ -1,0 +1,105 @@
+"""`parallel-eplus`: the command line. Each subcommand is a thin layer over a library function."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger("parallel_eplus")
+
+
+def _format_summary(summary: dict) -> str:
+    lines = [
+        f"weather {summary.get('weather')}  model {summary.get('model')}  steps {int(summary.get('steps', 0))}",
+        f"mean reward           {summary.get('reward_mean', float('nan')):10.3f}",
+        f"mean power total      {summary.get('power_kw', float('nan')):10.1f} kW",
+        f"           IT         {summary.get('it_power_kw', float('nan')):10.1f} kW",
+        f"           HVAC       {summary.get('hvac_power_kw', float('nan')):10.1f} kW",
+    ]
+    for zone in ("west", "east"):
+        lines.append(
+            f"{zone.title():5s} zone  mean {summary[f'{zone}_temp_mean']:5.2f} C  std {summary[f'{zone}_temp_std']:4.2f}"
+            f"  min {summary[f'{zone}_temp_min']:5.2f}  max {summary[f'{zone}_temp_max']:5.2f}"
+            f"  in 22-25 C {summary[f'{zone}_in_band_pct']:5.1f} %"
+        )
+    lines.append(f"zone samples in 22-25 C {summary['in_band_pct']:8.2f} %")
+    return "\n".join(lines)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .env import EnergyPlusEnv
+
+    env = EnergyPlusEnv(
+        weather=args.weather,
+        model=args.model,
+        run_days=args.days,
+        output_dir=args.output_dir,
+        reward=args.reward,
+    )
+    try:
+        env.action_space.seed(args.seed)
+        obs, info = env.reset(seed=args.seed)
+        constant = np.zeros(env.action_space.shape, dtype=np.float32)
+        if args.action:
+            constant = np.array([float(v) for v in args.action.split(",")], dtype=np.float32)
+        total = env.sim.steps_per_episode
+        with tqdm(total=total, desc=f"simulate {args.weather}", unit="step", disable=args.quiet) as bar:
+            terminated = False
+            while not terminated:
+                action = env.action_space.sample() if args.policy == "random" else constant
+                obs, reward, terminated, _, info = env.step(action)
+                bar.update()
+        print(_format_summary(info["episode_summary"]))
+        if args.output_dir:
+            print(f"episode records: {info['episode_dir']}")
+    finally:
+        env.close()
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="parallel-eplus", description=__doc__)
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    sim = sub.add_parser("simulate", help="run one episode and print the paper's episode statistics")
+    sim.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or a path to an .epw (default CA)")
+    sim.add_argument("--days", type=int, default=7, help="run period length from Jan 1 (default 7)")
+    sim.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    sim.add_argument("--policy", default="constant", choices=["constant", "random"])
+    sim.add_argument("--action", help="the constant action in [-1, 1], comma-separated (default all 0)")
+    sim.add_argument("--output-dir", type=Path, help="keep the episode records here")
+    sim.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--quiet", action="store_true", help="no progress bar")
+    sim.set_defaults(func=cmd_simulate)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    from .errors import EnergyPlusError
+
+    try:
+        return args.func(args)
+    except (EnergyPlusError, ValueError, FileNotFoundError) as e:
+        log.error("%s", e)
+        return 2
+    except KeyboardInterrupt:
+        log.warning("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,151 @@
+"""EnergyPlusEnv against real EnergyPlus processes on short run periods."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import parallel_eplus
+from parallel_eplus import EnergyPlusEnv
+from parallel_eplus.episode import read_steps
+from parallel_eplus.model import SENSOR_NAMES, STEPS_PER_DAY
+
+INFO_KEYS = {"power_w", "it_power_w", "hvac_power_w", "west_temp_c", "east_temp_c", "outdoor_temp_c", "time"}
+
+
+def run_episode(env, action) -> tuple[int, list[float], dict]:
+    env.reset(seed=0)
+    rewards, terminated, info = [], False, {}
+    while not terminated:
+        _, r, terminated, truncated, info = env.step(action)
+        assert not truncated
+        rewards.append(r)
+    return len(rewards), rewards, info
+
+
+def test_registered_and_two_day_episode_steps_exactly(tmp_path, no_leaks):
+    env = gym.make(parallel_eplus.ENV_ID, weather="CA", model="temp_fan", run_days=2, output_dir=tmp_path)
+    try:
+        obs, info = env.reset(seed=0)
+        assert obs.shape == (6,) and obs.dtype == np.float32
+        assert env.observation_space.contains(obs)
+        assert str(info["time"]) == "2013-01-01 00:00:00"
+        n, rewards, info = run_episode(env, np.zeros(4, dtype=np.float32))
+        assert n == 2 * STEPS_PER_DAY
+        assert np.all(np.isfinite(rewards))
+        assert INFO_KEYS | {"reward_comfort", "reward_band", "reward_power"} <= set(info)
+        assert info["reward_comfort"] + info["reward_band"] + info["reward_power"] == pytest.approx(
+            rewards[-1]
+        )
+        # The last observation is a real one, taken at the end of the run period.
+        assert (info["time"].month, info["time"].day, info["time"].hour) == (1, 3, 0)
+        assert info["power_w"] > info["it_power_w"] > 0
+    finally:
+        env.close()
+
+
+def test_episode_records(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather="FL", run_days=1, output_dir=tmp_path)
+    try:
+        n, rewards, info = run_episode(env, np.array([-0.6, -0.6, 0.2, 0.2]))
+    finally:
+        env.close()
+    ep = tmp_path / "episode-000001-FL"
+    assert {"model.idf", "steps.csv", "summary.json", "eplusout.err", "eplusout.csv"} <= {
+        p.name for p in ep.iterdir()
+    }
+    assert any(p.suffix == ".epw" for p in ep.iterdir())
+    steps = read_steps(ep)
+    assert len(steps) == n == STEPS_PER_DAY
+    assert set(SENSOR_NAMES) <= set(steps.columns)
+    np.testing.assert_allclose(steps["west_setpoint_c"], 16.0)  # -0.6 -> 10 + 0.2 * 30
+    np.testing.assert_allclose(steps["east_fan_kg_s"], 1.75 + 0.6 * 5.25)
+    np.testing.assert_allclose(steps["reward"], rewards, rtol=1e-8, atol=1e-9)
+    assert pd.api.types.is_datetime64_any_dtype(steps["time"])
+    summary = info["episode_summary"]
+    assert summary["power_kw"] == pytest.approx(steps["power_w"].mean() / 1000)
+    assert 0 <= summary["in_band_pct"] <= 100
+    # EnergyPlus's own timestep output agrees with what the env observed.
+    eplus = pd.read_csv(ep / "eplusout.csv")
+    col = next(c for c in eplus.columns if c.startswith("WEST ZONE:Zone Mean Air Temperature"))
+    np.testing.assert_allclose(eplus[col].to_numpy()[-n:], steps["west_temp_c"], atol=1e-3)
+
+
+def mean_zone_temps(tmp_path, west: float, east: float) -> tuple[float, float]:
+    env = EnergyPlusEnv(weather="CA", model="temp", run_days=1, output_dir=tmp_path)
+    try:
+        _, _, _ = run_episode(env, np.array([west, east], dtype=np.float32))
+        steps = read_steps(env.episode_dir)
+    finally:
+        env.close()
+    late = steps.iloc[len(steps) // 2 :]  # after the zones have settled
+    return late["west_temp_c"].mean(), late["east_temp_c"].mean()
+
+
+def test_each_zone_follows_its_own_setpoint(tmp_path, no_leaks):
+    # West cold / East warm, then the reverse: each zone must move with its own setpoint only.
+    w_lo, e_hi = mean_zone_temps(tmp_path / "a", -0.8, 0.0)  # 14 C vs 25 C supply air
+    w_hi, e_lo = mean_zone_temps(tmp_path / "b", 0.0, -0.8)
+    assert w_hi - w_lo > 3.0, (w_lo, w_hi)
+    assert e_hi - e_lo > 3.0, (e_lo, e_hi)
+
+
+def test_check_env(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    try:
+        check_env(env, skip_render_check=True)
+    finally:
+        env.close()
+
+
+def test_two_envs_with_different_weathers_step_alternately(tmp_path, no_leaks):
+    a = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "a")
+    b = EnergyPlusEnv(weather="FL", run_days=1, output_dir=tmp_path / "b")
+    try:
+        oa, _ = a.reset()
+        ob, _ = b.reset()
+        assert a.sim.pipes.dir != b.sim.pipes.dir
+        outdoor_a, outdoor_b = [], []
+        done = False
+        while not done:
+            oa, _, ta, _, ia = a.step(np.zeros(4))
+            ob, _, tb, _, ib = b.step(np.zeros(4))
+            assert ia["time"] == ib["time"] and ia["weather"] == "CA" and ib["weather"] == "FL"
+            outdoor_a.append(oa[0])
+            outdoor_b.append(ob[0])
+            assert ta == tb
+            done = ta
+        assert np.mean(outdoor_b) > np.mean(outdoor_a) + 3  # Tampa is warmer than San Francisco in January
+    finally:
+        a.close()
+        b.close()
+
+
+def test_reset_mid_episode_starts_a_fresh_simulation(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    try:
+        env.reset()
+        for _ in range(5):
+            env.step(np.zeros(4))
+        first = env.sim.proc.pid
+        obs, info = env.reset()
+        assert env.sim.proc.pid != first and info["time"].hour == 0
+        n, _, _ = run_episode(env, np.zeros(4))
+        assert n == STEPS_PER_DAY
+    finally:
+        env.close()
+    assert (tmp_path / "episode-000001-CA" / "summary.json").exists()  # the cut episode kept its record
+
+
+def test_nan_action_raises_value_error(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    try:
+        env.reset()
+        with pytest.raises(ValueError, match="element 1"):
+            env.step(np.array([0.0, np.nan, 0.0, 0.0]))
+        env.step(np.zeros(4))  # the simulation is unharmed
+    finally:
+        env.close()

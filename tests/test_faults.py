@@ -1,0 +1,74 @@
+"""When EnergyPlus fails: prompt, specific errors with the log tail, and nothing left behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from parallel_eplus import EnergyPlusEnv, EnergyPlusError
+from parallel_eplus.model import AGENT_IDF
+
+from .conftest import our_processes
+
+
+def test_killed_energyplus_raises_promptly_and_leaves_nothing(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather="CA", run_days=2, output_dir=tmp_path)
+    try:
+        env.reset()
+        for _ in range(10):
+            env.step(np.zeros(4))
+        os.kill(env.sim.proc.pid, signal.SIGKILL)
+        t0 = time.monotonic()
+        with pytest.raises(EnergyPlusError, match="died") as err:
+            for _ in range(5):
+                env.step(np.zeros(4))
+        assert time.monotonic() - t0 < 5
+        assert err.value.episode_dir == tmp_path / "episode-000001-CA"
+        assert our_processes() == []
+    finally:
+        env.close()
+
+
+def test_hung_energyplus_hits_the_timeout(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path, step_timeout_s=1.0)
+    try:
+        env.reset()
+        os.kill(env.sim.proc.pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        with pytest.raises(EnergyPlusError, match="within 1 s"):
+            env.step(np.zeros(4))
+        assert time.monotonic() - t0 < 4
+    finally:
+        env.close()
+
+
+def test_missing_files_are_reported_before_spawning(tmp_path):
+    with pytest.raises(FileNotFoundError, match="weather file not found"):
+        EnergyPlusEnv(weather=tmp_path / "nowhere.epw")
+    with pytest.raises(ValueError, match="unknown weather"):
+        EnergyPlusEnv(weather="XX")
+    with pytest.raises(FileNotFoundError, match="model file not found"):
+        EnergyPlusEnv(idf=tmp_path / "nowhere.idf")
+    with pytest.raises(ValueError, match="unknown model"):
+        EnergyPlusEnv(model="fan_only")
+    assert not any(tmp_path.iterdir())
+
+
+def test_broken_idf_raises_with_the_error_file_tail(tmp_path, no_leaks):
+    broken = tmp_path / "broken.idf"
+    text = AGENT_IDF.read_text(encoding="latin-1")
+    broken.write_text(text.replace("EnclosureAveraged,", "NoSuchMethod,"), encoding="latin-1")
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "out", idf=broken)
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(EnergyPlusError) as err:
+            env.reset()
+        assert time.monotonic() - t0 < 30
+        assert "Severe" in str(err.value) or "Fatal" in str(err.value)
+        assert "eplusout.err" in err.value.err_tail
+    finally:
+        env.close()
