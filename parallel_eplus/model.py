@@ -51,7 +51,9 @@ class ActionElement:
     low: float
     high: float
     actuators: tuple[Actuator, ...]
-    initial: float  # held from the first timestep until the first action arrives (also warmup/sizing)
+    # Held through sizing and warmup until the first action arrives. Without one the agent model's nodes
+    # have no setpoints and the zones start far from range; these keep both zones near 23 C at night.
+    initial: float
 
 
 # Observation in the paper's order and units (Section 4.2.1).
@@ -83,10 +85,10 @@ def _fan(zone: str) -> tuple[Actuator, ...]:
 
 # Action in the paper's order and ranges (Section 4.2.2).
 ACTIONS: tuple[ActionElement, ...] = (
-    ActionElement("west_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("West"), initial=20.0),
-    ActionElement("east_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("East"), initial=20.0),
-    ActionElement("west_fan_kg_s", "kg/s", 1.75, 7.0, _fan("West"), initial=4.0),
-    ActionElement("east_fan_kg_s", "kg/s", 1.75, 7.0, _fan("East"), initial=4.0),
+    ActionElement("west_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("West"), initial=15.0),
+    ActionElement("east_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("East"), initial=15.0),
+    ActionElement("west_fan_kg_s", "kg/s", 1.75, 7.0, _fan("West"), initial=6.0),
+    ActionElement("east_fan_kg_s", "kg/s", 1.75, 7.0, _fan("East"), initial=6.0),
 )
 
 

@@ -53,6 +53,7 @@ class SimulationConfig:
     start_timeout_s: float = 180.0  # sizing and warmup come before the first observation
     step_timeout_s: float = 60.0
     idf: str | None = None  # override the model's IDF (same sensors and actuators)
+    initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
 
 
 def _time(values: np.ndarray) -> dt.datetime:
@@ -93,7 +94,9 @@ class Simulation:
         self.output_dir.mkdir(parents=True, exist_ok=True)
         self.low = np.array([e.low for e in self.elements])
         self.high = np.array([e.high for e in self.elements])
-        self.initial_action = np.array([e.initial for e in self.elements])
+        self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
+        if self.initial_action.shape != self.low.shape:
+            raise ValueError(f"initial_action needs {len(self.low)} values in physical units")
         self.action_names = tuple(e.name for e in self.elements)
         self.pipes: pipe.PipePair | None = None
         self.proc: subprocess.Popen | None = None
