@@ -14,17 +14,17 @@ log = logging.getLogger("parallel_eplus")
 
 def _format_summary(summary: dict) -> str:
     lines = [
-        f"weather {summary.get('weather')}  model {summary.get('model')}  steps {int(summary.get('steps', 0))}",
+        f"weather {summary.get('weather')}  model {summary.get('model')}  steps {summary.get('steps', 0):.0f}",
         f"mean reward           {summary.get('reward_mean', float('nan')):10.3f}",
         f"mean power total      {summary.get('power_kw', float('nan')):10.1f} kW",
         f"           IT         {summary.get('it_power_kw', float('nan')):10.1f} kW",
         f"           HVAC       {summary.get('hvac_power_kw', float('nan')):10.1f} kW",
     ]
     for zone in ("west", "east"):
+        z = {k.removeprefix(zone + "_"): v for k, v in summary.items() if k.startswith(zone + "_")}
         lines.append(
-            f"{zone.title():5s} zone  mean {summary[f'{zone}_temp_mean']:5.2f} C  std {summary[f'{zone}_temp_std']:4.2f}"
-            f"  min {summary[f'{zone}_temp_min']:5.2f}  max {summary[f'{zone}_temp_max']:5.2f}"
-            f"  in 22-25 C {summary[f'{zone}_in_band_pct']:5.1f} %"
+            f"{zone.title():5s} zone  mean {z['temp_mean']:5.2f} C  std {z['temp_std']:4.2f}"
+            f"  min {z['temp_min']:5.2f}  max {z['temp_max']:5.2f}  in 22-25 C {z['in_band_pct']:5.1f} %"
         )
     lines.append(f"zone samples in 22-25 C {summary['in_band_pct']:8.2f} %")
     return "\n".join(lines)

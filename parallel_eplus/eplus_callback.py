@@ -18,6 +18,7 @@ observation was taken; EnergyPlus's own clock at this point is the last sub-time
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import traceback
@@ -163,10 +164,8 @@ def main(argv: list[str] | None = None) -> int:
     act_fd = os.open(args.act_pipe, os.O_RDONLY)
 
     def fail(status: float) -> int:
-        try:
+        with contextlib.suppress(OSError):  # if the env is gone, there is nobody to tell
             os.write(obs_fd, pipe.encode([status], pipe.ERROR))
-        except OSError:
-            pass  # the env is gone; nobody to tell
         return 1
 
     try:

@@ -48,7 +48,8 @@ def test_baseline_year_runs_without_severe_input_errors(tmp_path):
     write_episode_idf(BASELINE_IDF, idf, run_days=2)
     epw = ROOT / "weather" / "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw"
     code = (
-        "from pyenergyplus.api import EnergyPlusAPI; import sys; a = EnergyPlusAPI(); s = a.state_manager.new_state();"
+        "from pyenergyplus.api import EnergyPlusAPI; import sys;"
+        "a = EnergyPlusAPI(); s = a.state_manager.new_state();"
         "a.runtime.set_console_output_status(s, False);"
         f"sys.exit(a.runtime.run_energyplus(s, ['-d', r'{tmp_path}', '-w', r'{epw}', r'{idf}']))"
     )
