@@ -19,9 +19,7 @@ class EnergyPlusError(RuntimeError):
         if episode_dir is not None:
             text += f"\n  episode directory: {episode_dir}"
         if err_tail:
-            text += "\n  tail of the EnergyPlus log:\n" + "\n".join(
-                "    " + ln for ln in err_tail.splitlines()
-            )
+            text += "\n  tail of the EnergyPlus log:\n" + "\n".join("    " + ln for ln in err_tail.splitlines())
         super().__init__(text)
 
 

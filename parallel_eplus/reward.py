@@ -46,9 +46,7 @@ class RewardConfig:
         return asdict(self)
 
 
-def reward(
-    zone_temps_c: tuple[float, ...], power_w: float, cfg: RewardConfig
-) -> tuple[float, dict[str, float]]:
+def reward(zone_temps_c: tuple[float, ...], power_w: float, cfg: RewardConfig) -> tuple[float, dict[str, float]]:
     """Reward and its components (they sum to it), as they appear in `info` and the episode records."""
     comfort = 0.0
     band = 0.0

@@ -207,9 +207,7 @@ class Simulation:
     def _error(self, message: str, kind: type[EnergyPlusError] = EnergyPlusError) -> EnergyPlusError:
         """Stop the process first, so the error file is complete and nothing is left running."""
         self._kill()
-        return kind(
-            f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir)
-        )
+        return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))
 
     def _finish(self) -> None:
         """The run period is over: let EnergyPlus finish its files, then write the records."""

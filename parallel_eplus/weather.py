@@ -26,9 +26,7 @@ def resolve_weather(weather: str | Path) -> Path:
     elif text.lower().endswith(".epw"):
         path = Path(text).expanduser()
     else:
-        raise ValueError(
-            f"unknown weather {text!r}: use a code ({', '.join(WEATHER_FILES)}) or a path to an .epw file"
-        )
+        raise ValueError(f"unknown weather {text!r}: use a code ({', '.join(WEATHER_FILES)}) or a path to an .epw file")
     if not path.is_file():
         raise FileNotFoundError(f"weather file not found: {path}")
     return path.resolve()

@@ -37,9 +37,7 @@ def test_registered_and_two_day_episode_steps_exactly(tmp_path, no_leaks):
         assert n == 2 * STEPS_PER_DAY
         assert np.all(np.isfinite(rewards))
         assert INFO_KEYS | {"reward_comfort", "reward_band", "reward_power"} <= set(info)
-        assert info["reward_comfort"] + info["reward_band"] + info["reward_power"] == pytest.approx(
-            rewards[-1]
-        )
+        assert info["reward_comfort"] + info["reward_band"] + info["reward_power"] == pytest.approx(rewards[-1])
         # The last observation is a real one, taken at the end of the run period.
         assert (info["time"].month, info["time"].day, info["time"].hour) == (1, 3, 0)
         assert info["power_w"] > info["it_power_w"] > 0
@@ -54,9 +52,7 @@ def test_episode_records(tmp_path, no_leaks):
     finally:
         env.close()
     ep = tmp_path / "episode-000001-FL"
-    assert {"model.idf", "steps.csv", "summary.json", "eplusout.err", "eplusout.csv"} <= {
-        p.name for p in ep.iterdir()
-    }
+    assert {"model.idf", "steps.csv", "summary.json", "eplusout.err", "eplusout.csv"} <= {p.name for p in ep.iterdir()}
     assert any(p.suffix == ".epw" for p in ep.iterdir())
     steps = read_steps(ep)
     assert len(steps) == n == STEPS_PER_DAY
