@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -63,6 +64,40 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    from .reward import RewardConfig
+    from .train import TrainConfig, train
+    from .weather import parse_weathers
+
+    cfg = TrainConfig(
+        workers=args.workers,
+        weathers=parse_weathers(args.weathers),
+        model=args.model,
+        timesteps=args.timesteps,
+        run_days=args.run_days,
+        batch_size=args.batch_size,
+        seed=args.seed,
+        run_name=args.run_name,
+        checkpoint_every=args.checkpoint_every,
+        keep_episodes=args.keep_episodes,
+        backend=args.backend,
+        ray_address=args.ray_address,
+        workers_per_actor=args.workers_per_actor,
+        reward=RewardConfig.from_any(args.reward),
+    )
+    if args.resume and "--timesteps" not in sys.argv:
+        cfg.timesteps = 0  # 0: keep the resumed run's own total
+    try:
+        final = train(cfg, resume=args.resume, progress=not args.quiet)
+    except KeyboardInterrupt:
+        return 130
+    run_dir = final.parent
+    print(f"model: {final} (observation statistics: {run_dir / 'vecnormalize.pkl'})")
+    print(f"episode records: {run_dir / 'episodes.csv'}")
+    print(f"TensorBoard: tensorboard --logdir {cfg.tensorboard_dir}   (then open http://localhost:6006)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="parallel-eplus", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -79,6 +114,25 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=int, default=0)
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     sim.set_defaults(func=cmd_simulate)
+
+    tr = sub.add_parser("train", help="train TRPO on parallel EnergyPlus workers (paper settings by default)")
+    tr.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="EnergyPlus processes (default: cores)")
+    tr.add_argument("--weathers", default="CA", help="comma-separated, e.g. CA,CO,FL (default CA)")
+    tr.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
+    tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
+    tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--run-name", help="default: trpo-<weathers>-<time>")
+    tr.add_argument("--resume", help="a checkpoint .zip or a run directory to continue")
+    tr.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
+    tr.add_argument("--keep-episodes", type=int, default=2, help="full episode directories kept per worker")
+    tr.add_argument("--backend", default="local", choices=["local", "ray"])
+    tr.add_argument("--ray-address", help="an existing Ray cluster (default: start Ray locally)")
+    tr.add_argument("--workers-per-actor", type=int, help="Ray: EnergyPlus workers hosted by each actor")
+    tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar")
+    tr.set_defaults(func=cmd_train)
     return parser
 
 

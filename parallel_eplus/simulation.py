@@ -103,6 +103,7 @@ class Simulation:
         self.episode = 0
         self.episode_dir: Path | None = None
         self.weather = self.weathers[0]
+        self.weather_index = 0
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.copy()
@@ -112,11 +113,20 @@ class Simulation:
     # -- episode lifecycle --------------------------------------------------------------------
     def start(self, weather_index: int | None = None) -> tuple[np.ndarray, dict]:
         """Stop any running process, start the next episode and return observation 0."""
+        self.launch(weather_index)
+        return self.first_observation()
+
+    def launch(self, weather_index: int | None = None) -> None:
+        """Start the next episode's process without waiting for it (the vector env starts many at once).
+
+        Weathers cycle episode by episode unless `weather_index` picks one.
+        """
         self.stop()
         if self.pipes is None:
             self.pipes = pipe.PipePair()
         self.pipes.drain()
         i = self.episode % len(self.weathers) if weather_index is None else weather_index
+        self.weather_index = i
         self.episode += 1
         self.weather = self.weathers[i]
         epw = self.weather_paths[i]
@@ -144,6 +154,9 @@ class Simulation:
         self.records = StepRecorder(self.action_names, self.steps_per_episode)
         self._action = self.initial_action.copy()
         self.last_summary = None
+
+    def first_observation(self) -> tuple[np.ndarray, dict]:
+        """Wait through sizing and warmup for observation 0 of the launched episode."""
         code, values = self._recv(self.config.start_timeout_s, "the first observation")
         if code != pipe.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")

@@ -1,0 +1,336 @@
+"""The learner: sb3-contrib TRPO with the paper's settings over N EnergyPlus workers.
+
+Run output: `runs/<run-name>/` (config.json, checkpoints/, model.zip + vecnormalize.pkl, episodes.csv
+and the newest episode directories) and `tensorboard_logs/<run-name>/` (TensorBoard events).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import signal
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import VecNormalize
+from tqdm import tqdm
+
+from .model import STEPS_PER_DAY
+from .reward import RewardConfig
+from .sb3_adapter import SB3VecEnv
+from .simulation import SimulationConfig
+from .vector_env import EnergyPlusVectorEnv, weather_shares
+from .weather import parse_weathers
+
+log = logging.getLogger(__name__)
+
+MODEL_FILE = "model.zip"
+NORMALIZE_FILE = "vecnormalize.pkl"
+STEPS_PER_YEAR = 365 * STEPS_PER_DAY
+
+
+@dataclass
+class TRPOSettings:
+    """The paper's TRPO hyperparameters (Section 5.1.4), as sb3-contrib names them."""
+
+    net_arch: tuple[int, ...] = (32, 32)  # tanh MLP
+    target_kl: float = 0.01  # max_KL
+    cg_max_steps: int = 10  # cg_iters
+    cg_damping: float = 0.1
+    gamma: float = 0.99
+    gae_lambda: float = 0.98  # lam
+    n_critic_updates: int = 5  # vf_iters
+    learning_rate: float = 1e-3  # vf_stepsize
+    critic_batch_size: int = 64  # OpenAI Baselines' value-function minibatch
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run needs; saved as runs/<name>/config.json."""
+
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    weathers: list[str] = field(default_factory=lambda: ["CA"])
+    model: str = "temp_fan"
+    timesteps: int = 1_000_000
+    run_days: int = 365
+    batch_size: int = 16384  # the paper's timesteps_per_batch, split evenly across workers
+    seed: int = 0
+    run_name: str | None = None
+    runs_dir: str = "runs"
+    tensorboard_dir: str = "tensorboard_logs"
+    checkpoint_every: int = 100_000  # env steps
+    keep_episodes: int = 2  # full episode directories kept per worker
+    backend: str = "local"  # or "ray"
+    ray_address: str | None = None
+    workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
+    max_restarts: int = 3
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    trpo: TRPOSettings = field(default_factory=TRPOSettings)
+
+    def resolved(self) -> TrainConfig:
+        """Validate, and fill in the run name."""
+        parse_weathers(",".join(self.weathers))
+        if self.workers < 1:
+            raise ValueError("--workers must be at least 1")
+        if self.batch_size < self.workers:
+            raise ValueError("--batch-size must be at least the number of workers")
+        if self.backend not in ("local", "ray"):
+            raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
+        if self.run_name is None:
+            self.run_name = f"trpo-{'-'.join(self.weathers)}-{time.strftime('%Y%m%d-%H%M%S')}"
+        return self
+
+    @property
+    def run_dir(self) -> Path:
+        return Path(self.runs_dir) / str(self.run_name)
+
+    @property
+    def n_steps(self) -> int:
+        """Steps per worker per batch."""
+        return math.ceil(self.batch_size / self.workers)
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> TrainConfig:
+        raw = json.loads(text)
+        raw["reward"] = RewardConfig(**raw["reward"])
+        raw["trpo"] = TRPOSettings(**{**raw["trpo"], "net_arch": tuple(raw["trpo"]["net_arch"])})
+        return cls(**raw)
+
+
+def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
+    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
+    sim = SimulationConfig(
+        weather=cfg.weathers[0],
+        model=cfg.model,
+        run_days=cfg.run_days,
+        output_dir=str(cfg.run_dir / "episodes"),
+        keep_episodes=cfg.keep_episodes,
+        reward=cfg.reward,
+    )
+    shares = weather_shares(cfg.weathers, cfg.workers)
+    if cfg.backend == "ray":
+        from .ray_backend import RayVectorEnv
+
+        per_actor = cfg.workers_per_actor or cfg.workers
+        venv = RayVectorEnv(sim, shares, per_actor, cfg.ray_address, cfg.max_restarts)
+    else:
+        venv = EnergyPlusVectorEnv(sim, shares, max_restarts=cfg.max_restarts)
+    return SB3VecEnv(venv)
+
+
+class EpisodeMetrics(BaseCallback):
+    """Per finished episode, tagged by weather: reward, power, zone temperatures, share in range.
+
+    Also appends every episode's summary to runs/<name>/episodes.csv and logs throughput.
+    """
+
+    KEYS = {
+        "reward_mean": "reward_per_step",
+        "power_kw": "power_kw",
+        "it_power_kw": "it_power_kw",
+        "hvac_power_kw": "hvac_power_kw",
+        "west_temp_mean": "west_temp_mean",
+        "west_temp_std": "west_temp_std",
+        "east_temp_mean": "east_temp_mean",
+        "east_temp_std": "east_temp_std",
+        "in_band_pct": "in_22_25_pct",
+    }
+
+    def __init__(self, episodes_csv: Path, progress: tqdm | None):
+        super().__init__()
+        self.episodes_csv = episodes_csv
+        self.progress = progress
+        self.episodes = 0
+        self._t0 = time.monotonic()
+        self._steps0 = 0
+
+    def _on_training_start(self) -> None:
+        self._t0 = time.monotonic()
+        self._steps0 = self.num_timesteps
+
+    def _on_step(self) -> bool:
+        for info in self.locals["infos"]:
+            final = info.get("final_info")
+            if final and "episode_summary" in final:
+                self._record(final["episode_summary"], info.get("episode", {}).get("r"))
+        if self.progress is not None:
+            self.progress.update(self.training_env.num_envs)
+        return True
+
+    def _record(self, summary: dict, episode_return: float | None) -> None:
+        self.episodes += 1
+        weather = summary.get("weather", "?")
+        for key, tag in self.KEYS.items():
+            if key in summary:
+                self.logger.record_mean(f"episode/{weather}/{tag}", summary[key])
+        if episode_return is not None:
+            self.logger.record_mean(f"episode/{weather}/return", episode_return)
+        row = {"timesteps": self.num_timesteps, **summary}
+        pd.DataFrame([row]).to_csv(
+            self.episodes_csv, mode="a", header=not self.episodes_csv.exists(), index=False
+        )
+        if self.progress is not None:
+            self.progress.set_postfix(episodes=self.episodes, last=f"{weather} {summary.get('power_kw', 0):.0f} kW")
+
+    def _on_rollout_end(self) -> None:
+        elapsed = time.monotonic() - self._t0
+        if elapsed > 0:
+            rate = (self.num_timesteps - self._steps0) / elapsed
+            self.logger.record("throughput/env_steps_per_s", rate)
+            self.logger.record("throughput/sim_years_per_hour", rate * 3600 / STEPS_PER_YEAR)
+        self.logger.record("throughput/episodes", self.episodes)
+
+
+def _latest_checkpoint(path: Path) -> Path:
+    """A checkpoint .zip, or the newest checkpoint (else the final model) in a run directory."""
+    if path.is_file():
+        return path
+    checkpoints = sorted(
+        (path / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1])
+    )
+    if checkpoints:
+        return checkpoints[-1]
+    if (path / MODEL_FILE).is_file():
+        return path / MODEL_FILE
+    raise FileNotFoundError(f"no checkpoint or {MODEL_FILE} in {path}")
+
+
+def normalization_file(model_zip: Path) -> Path:
+    """The VecNormalize statistics saved beside a model or checkpoint."""
+    if model_zip.name == MODEL_FILE:
+        return model_zip.with_name(NORMALIZE_FILE)
+    steps = model_zip.stem.split("_")[1]
+    return model_zip.with_name(f"model_vecnormalize_{steps}_steps.pkl")
+
+
+def _run_dir_of(checkpoint: Path) -> Path:
+    return checkpoint.parent.parent if checkpoint.parent.name == "checkpoints" else checkpoint.parent
+
+
+class _Interrupt:
+    """Turns SIGTERM into KeyboardInterrupt for the duration of training, like Ctrl-C."""
+
+    def __enter__(self):
+        self._old = signal.signal(signal.SIGTERM, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    def __exit__(self, *exc):
+        signal.signal(signal.SIGTERM, self._old)
+        return False
+
+
+def train(cfg: TrainConfig, resume: str | Path | None = None, progress: bool = True) -> Path:
+    """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first."""
+    from sb3_contrib import TRPO
+
+    checkpoint = None
+    if resume is not None:
+        checkpoint = _latest_checkpoint(Path(resume))
+        saved = TrainConfig.from_json((_run_dir_of(checkpoint) / "config.json").read_text())
+        # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
+        saved.timesteps = cfg.timesteps or saved.timesteps
+        saved.backend, saved.ray_address = cfg.backend, cfg.ray_address
+        cfg = saved
+    cfg = cfg.resolved()
+    run_dir = cfg.run_dir
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.json").write_text(cfg.to_json())
+    th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
+
+    venv = make_vec_env(cfg)
+    bar = None
+    try:
+        if checkpoint is not None:
+            env = VecNormalize.load(str(normalization_file(checkpoint)), venv)
+            model = TRPO.load(checkpoint, env=env, device="cpu")
+            log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
+        else:
+            env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
+            t = cfg.trpo
+            model = TRPO(
+                "MlpPolicy",
+                env,
+                learning_rate=t.learning_rate,
+                n_steps=cfg.n_steps,
+                batch_size=t.critic_batch_size,
+                gamma=t.gamma,
+                cg_max_steps=t.cg_max_steps,
+                cg_damping=t.cg_damping,
+                n_critic_updates=t.n_critic_updates,
+                gae_lambda=t.gae_lambda,
+                target_kl=t.target_kl,
+                policy_kwargs={"net_arch": list(t.net_arch), "activation_fn": th.nn.Tanh},
+                seed=cfg.seed,
+                device="cpu",
+            )
+        model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
+        remaining = max(cfg.timesteps - model.num_timesteps, 0)
+        bar = tqdm(total=cfg.timesteps, initial=model.num_timesteps, unit="step", disable=not progress,
+                   desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
+        callbacks = CallbackList([
+            EpisodeMetrics(run_dir / "episodes.csv", bar),
+            CheckpointCallback(
+                save_freq=max(cfg.checkpoint_every // cfg.workers, 1),
+                save_path=str(run_dir / "checkpoints"),
+                name_prefix="model",
+                save_vecnormalize=True,
+            ),
+        ])  # fmt: skip
+        try:
+            with _Interrupt():
+                model.learn(remaining, callback=callbacks, reset_num_timesteps=False, log_interval=1)
+        except KeyboardInterrupt:
+            path = run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            model.save(path)
+            env.save(str(normalization_file(path)))
+            log.warning("interrupted at step %d; checkpoint saved: %s", model.num_timesteps, path)
+            log.warning("resume with: parallel-eplus train --resume %s", path)
+            raise
+        final = run_dir / MODEL_FILE
+        model.save(final)
+        env.save(str(run_dir / NORMALIZE_FILE))
+        return final
+    finally:
+        if bar is not None:
+            bar.close()
+        venv.close()
+
+
+def load_policy(model_zip: str | Path):
+    """A trained policy and its observation normalizer, ready to act deterministically."""
+    from sb3_contrib import TRPO
+
+    model_zip = Path(model_zip)
+    if not model_zip.is_file():
+        raise FileNotFoundError(f"policy not found: {model_zip}")
+    stats = normalization_file(model_zip)
+    if not stats.is_file():
+        raise FileNotFoundError(f"normalization statistics not found beside the policy: {stats}")
+    model = TRPO.load(model_zip, device="cpu")
+    import pickle
+
+    with open(stats, "rb") as f:
+        norm: VecNormalize = pickle.load(f)
+    norm.training = False
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        action, _ = model.predict(norm.normalize_obs(obs), deterministic=True)
+        return action
+
+    return act

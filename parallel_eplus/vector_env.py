@@ -1,0 +1,158 @@
+"""Many EnergyPlus processes as one Gymnasium vector env, with no process in between.
+
+A vector step writes every worker's action, then reads every observation: one pipe round trip per
+worker, all EnergyPlus processes computing at once. Finished episodes restart in the same step
+(Gymnasium's SAME_STEP autoreset: the final observation and info are in `final_obs` / `final_info`).
+A worker whose EnergyPlus crashes restarts its episode (the cut episode ends as truncated) up to
+`max_restarts` times in a row, then the run fails with the worker's error.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from .env import action_space, observation_space
+from .errors import EnergyPlusError
+from .simulation import Simulation, SimulationConfig
+
+log = logging.getLogger(__name__)
+
+
+def weather_shares(weathers: list[str], num_workers: int) -> list[list[str]]:
+    """Worker i starts on weathers[i % len]; with more weathers than workers each cycles its share."""
+    if len(weathers) <= num_workers:
+        return [[weathers[i % len(weathers)]] for i in range(num_workers)]
+    return [weathers[i::num_workers] for i in range(num_workers)]
+
+
+class EnergyPlusVectorEnv(gym.vector.VectorEnv):
+    """N `Simulation`s stepped together; each keeps its own pipes, process and episode directory."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP}
+
+    def __init__(
+        self,
+        config: SimulationConfig,
+        shares: list[list[str]],
+        max_restarts: int = 3,
+        first_worker: int = 0,
+    ):
+        """One worker per entry of `shares`: the weathers it cycles through (see `weather_shares`)."""
+        self.num_envs = num_envs = len(shares)
+        self.max_restarts = max_restarts
+        self.sims: list[Simulation] = []
+        try:
+            for i, share in enumerate(shares):
+                worker = first_worker + i
+                out = None if config.output_dir is None else str(Path(config.output_dir) / f"worker-{worker}")
+                self.sims.append(Simulation(replace(config, output_dir=out), share, name=str(worker)))
+        except BaseException:
+            self.close()
+            raise
+        n_actions = len(self.sims[0].elements)
+        self.single_observation_space = observation_space()
+        self.single_action_space = action_space(n_actions)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._failures = [0] * num_envs
+        self._obs = np.zeros((num_envs, *self.single_observation_space.shape), dtype=np.float32)
+
+    # -- Gymnasium API ------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            self.action_space.seed(seed)
+        infos = self.start_all(range(self.num_envs))
+        return self._obs.copy(), self._as_dict(infos)
+
+    def step(self, actions):
+        obs, rewards, terminated, truncated, infos = self.step_lists(actions)
+        return obs, rewards, terminated, truncated, self._as_dict(infos)
+
+    def observations(self) -> np.ndarray:
+        return self._obs.copy()
+
+    # -- list-of-dicts variants, used by the SB3 adapter and the Ray actors ------------------------
+    def start_all(self, indices) -> list[dict]:
+        """(Re)start the given workers' episodes at once; returns their first infos."""
+        indices = list(indices)
+        infos: list[dict] = [{} for _ in range(self.num_envs)]
+        for i in indices:
+            self.sims[i].launch()
+        for i in indices:
+            self._obs[i], infos[i] = self._first_observation(i)
+        return infos
+
+    def step_lists(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+        actions = np.asarray(actions)
+        n = self.num_envs
+        rewards = np.zeros(n)
+        terminated = np.zeros(n, dtype=bool)
+        truncated = np.zeros(n, dtype=bool)
+        infos: list[dict] = [{} for _ in range(n)]
+        failed: dict[int, EnergyPlusError] = {}
+        for i, sim in enumerate(self.sims):
+            try:
+                sim.send(actions[i])
+            except EnergyPlusError as e:
+                failed[i] = e
+        for i, sim in enumerate(self.sims):
+            if i in failed:
+                continue
+            try:
+                self._obs[i], rewards[i], terminated[i], infos[i] = sim.receive()
+            except EnergyPlusError as e:
+                failed[i] = e
+        done = [i for i in range(n) if terminated[i]]
+        for i in done:
+            infos[i] = {"final_obs": self._obs[i].copy(), "final_info": infos[i]}
+            self._failures[i] = 0
+            self.sims[i].launch()
+        for i, error in failed.items():
+            infos[i] = {"final_obs": self._obs[i].copy(), "final_info": {}, "energyplus_error": str(error)}
+            truncated[i] = True
+            self._restart(i, error)
+        for i in [*done, *failed]:
+            self._obs[i], first = self._first_observation(i)
+            infos[i].update(first)
+        return self._obs.copy(), rewards, terminated, truncated, infos
+
+    # -- internals ----------------------------------------------------------------------------
+    def _first_observation(self, i: int) -> tuple[np.ndarray, dict]:
+        while True:
+            try:
+                return self.sims[i].first_observation()
+            except EnergyPlusError as e:
+                self._restart(i, e)
+
+    def _restart(self, i: int, error: EnergyPlusError) -> None:
+        """Relaunch worker i's episode on the same weather, or fail the run after too many tries."""
+        self._failures[i] += 1
+        sim = self.sims[i]
+        if self._failures[i] > self.max_restarts:
+            raise EnergyPlusError(
+                f"worker {sim.name} failed {self._failures[i]} times in a row on weather {sim.weather}; "
+                f"giving up. Last error: {error}",
+                error.episode_dir,
+            ) from error
+        log.warning(
+            "worker %s: EnergyPlus failed (%s); restarting its episode (%d/%d)",
+            sim.name, str(error).splitlines()[0], self._failures[i], self.max_restarts,
+        )  # fmt: skip
+        sim.launch(sim.weather_index)
+
+    def _as_dict(self, infos: list[dict]) -> dict:
+        out: dict = {}
+        for i, info in enumerate(infos):
+            out = self._add_info(out, info, i)
+        return out
+
+    def close_extras(self, **kwargs) -> None:
+        for sim in self.sims:
+            sim.close()
