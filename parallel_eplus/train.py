@@ -86,6 +86,9 @@ class TrainConfig:
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
         if self.run_name is None:
             self.run_name = f"trpo-{'-'.join(self.weathers)}-{time.strftime('%Y%m%d-%H%M%S')}"
+        # Absolute, so a resumed run writes to the same places from any working directory.
+        self.runs_dir = str(Path(self.runs_dir).resolve())
+        self.tensorboard_dir = str(Path(self.tensorboard_dir).resolve())
         return self
 
     @property
@@ -177,9 +180,7 @@ class EpisodeMetrics(BaseCallback):
         if episode_return is not None:
             self.logger.record_mean(f"episode/{weather}/return", episode_return)
         row = {"timesteps": self.num_timesteps, **summary}
-        pd.DataFrame([row]).to_csv(
-            self.episodes_csv, mode="a", header=not self.episodes_csv.exists(), index=False
-        )
+        pd.DataFrame([row]).to_csv(self.episodes_csv, mode="a", header=not self.episodes_csv.exists(), index=False)
         if self.progress is not None:
             self.progress.set_postfix(episodes=self.episodes, last=f"{weather} {summary.get('power_kw', 0):.0f} kW")
 
@@ -196,9 +197,7 @@ def _latest_checkpoint(path: Path) -> Path:
     """A checkpoint .zip, or the newest checkpoint (else the final model) in a run directory."""
     if path.is_file():
         return path
-    checkpoints = sorted(
-        (path / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1])
-    )
+    checkpoints = sorted((path / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
     if checkpoints:
         return checkpoints[-1]
     if (path / MODEL_FILE).is_file():

@@ -1,0 +1,95 @@
+"""Short real training runs: 2 EnergyPlus workers, 2-day episodes, small batches."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from parallel_eplus.train import TrainConfig, load_policy, train
+
+from .conftest import our_pipe_dirs, our_processes
+
+
+def small_config(tmp_path: Path, name: str, **overrides) -> TrainConfig:
+    base = dict(
+        workers=2, weathers=["CA", "CO", "FL"], run_days=2, timesteps=1536, batch_size=768,
+        run_name=name, runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"), checkpoint_every=768,
+    )  # fmt: skip
+    base.update(overrides)
+    return TrainConfig(**base)
+
+
+def scalars(tb_dir: Path) -> dict[str, list]:
+    ea = EventAccumulator(str(tb_dir), size_guidance={"scalars": 0})
+    ea.Reload()
+    return {tag: ea.Scalars(tag) for tag in ea.Tags()["scalars"]}
+
+
+def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path, no_leaks):
+    cfg = small_config(tmp_path, "short")
+    final = train(cfg, progress=False)
+    run = tmp_path / "runs" / "short"
+    assert final == run / "model.zip" and (run / "vecnormalize.pkl").is_file()
+    assert (run / "config.json").is_file() and (run / "episodes.csv").is_file()
+    assert sorted((run / "checkpoints").glob("model_*_steps.zip"))
+    tags = scalars(tmp_path / "tb" / "short")
+    for weather in ("CA", "CO", "FL"):  # worker 0 cycles CA, FL; worker 1 runs CO
+        for metric in ("power_kw", "it_power_kw", "hvac_power_kw", "west_temp_mean", "in_22_25_pct", "return"):
+            assert f"episode/{weather}/{metric}" in tags, (weather, metric)
+    assert "throughput/env_steps_per_s" in tags and "train/value_loss" in tags
+
+    act = load_policy(final)
+    obs = np.array([[12.0, 23.0, 24.0, 120e3, 110e3, 10e3]], dtype=np.float32)
+    a1, a2 = act(obs), act(obs)
+    np.testing.assert_array_equal(a1, a2)
+    assert a1.shape == (1, 4) and np.all(np.abs(a1) <= 1)
+
+
+def test_ray_backend_trains_locally(tmp_path, no_leaks):
+    pytest.importorskip("ray")
+    cfg = small_config(tmp_path, "ray", weathers=["CA"], timesteps=768, backend="ray", workers_per_actor=1)
+    final = train(cfg, progress=False)
+    assert final.is_file()
+    tags = scalars(tmp_path / "tb" / "ray")
+    assert "episode/CA/power_kw" in tags
+
+
+def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path):
+    pipes_before = our_pipe_dirs()
+    cmd = [
+        sys.executable, "-m", "parallel_eplus.cli", "train", "--workers", "2", "--weathers", "CA",
+        "--run-days", "2", "--timesteps", "100000", "--batch-size", "512", "--run-name", "cut", "--quiet",
+    ]  # fmt: skip
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    episodes = tmp_path / "runs" / "cut" / "episodes.csv"
+    deadline = time.monotonic() + 120
+    while not episodes.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.5)
+    assert episodes.exists(), proc.communicate()[0] if proc.poll() is not None else "no episode within 120 s"
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 130, out
+    assert "checkpoint saved" in out
+    assert our_processes() == []
+    assert our_pipe_dirs() - pipes_before == set()
+    checkpoints = sorted((tmp_path / "runs" / "cut" / "checkpoints").glob("model_*_steps.zip"))
+    assert checkpoints
+    cut_at = int(checkpoints[-1].stem.split("_")[1])
+    assert cut_at > 0
+
+    resumed = train(TrainConfig(timesteps=cut_at + 512), resume=tmp_path / "runs" / "cut", progress=False)
+    from sb3_contrib import TRPO
+
+    model = TRPO.load(resumed, device="cpu")
+    assert model.num_timesteps >= cut_at + 512
+    steps = [e.step for e in scalars(tmp_path / "tensorboard_logs" / "cut")["time/fps"]]
+    assert max(steps) > cut_at  # TensorBoard curves continue past the cut, not from zero
