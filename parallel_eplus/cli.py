@@ -98,6 +98,37 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluate import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller, run_sweep, write_results
+    from .reward import RewardConfig
+    from .weather import parse_weathers
+
+    weathers = parse_weathers(args.weathers)  # bad input fails here, before anything runs
+    controllers = []
+    if args.baseline:
+        controllers.append(Controller(BASELINE_LABEL, "baseline"))
+    if args.rbc:
+        controllers.append(Controller(RBC_LABEL, "rbc"))
+    controllers += [policy_controller(p) for p in args.policy or []]
+    if not controllers:
+        raise ValueError("nothing to evaluate: give --baseline, --rbc and/or --policy PATH")
+    histogram = tuple(args.histogram.split(",", 1)) if args.histogram else None
+    df = run_sweep(
+        controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward), not args.quiet
+    )
+    files = write_results(df, args.out, histogram)
+    print((args.out / "results.md").read_text())
+    print("written: " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from .plots import plot_path
+
+    print(f"written: {plot_path(args.path)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="parallel-eplus", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -133,6 +164,23 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=cmd_train)
+
+    ev = sub.add_parser("evaluate", help="controllers x weathers sweep: the paper's table and figures")
+    ev.add_argument("--policy", action="append", help="a trained model.zip (or run dir); PATH=LABEL sets the label")
+    ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
+    ev.add_argument("--rbc", action="store_true", help="include the rule-based controller")
+    ev.add_argument("--weathers", default="CA,CO,FL,IL,VA")
+    ev.add_argument("--run-days", type=int, default=365)
+    ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
+    ev.add_argument("--out", type=Path, default=Path("results") / "latest")
+    ev.add_argument("--histogram", help="CONTROLLER,WEATHER for the West-zone histogram (default: last, VA)")
+    ev.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    ev.set_defaults(func=cmd_evaluate)
+
+    pl = sub.add_parser("plot", help="RUN_DIR: training convergence; EPISODE_DIR: one episode's time series")
+    pl.add_argument("path", type=Path)
+    pl.set_defaults(func=cmd_plot)
     return parser
 
 

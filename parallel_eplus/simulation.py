@@ -107,7 +107,6 @@ class Simulation:
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.copy()
-        self._awaiting = False  # an action was sent and its observation not yet read
         self._closed = False
 
     # -- episode lifecycle --------------------------------------------------------------------
@@ -172,12 +171,10 @@ class Simulation:
             self.pipes.send(pipe.encode(self._action))
         except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
             raise self._error(f"cannot send the action: {e}") from e
-        self._awaiting = True
 
     def receive(self) -> tuple[np.ndarray, float, bool, dict]:
         """(observation, reward, terminated, info) for the action last sent."""
         code, values = self._recv(self.config.step_timeout_s, "an observation")
-        self._awaiting = False
         obs, info = self._observation(values)
         r, parts = reward((info["west_temp_c"], info["east_temp_c"]), info["power_w"], self.config.reward)
         info.update(parts)
@@ -220,6 +217,8 @@ class Simulation:
     def _error(self, message: str, kind: type[EnergyPlusError] = EnergyPlusError) -> EnergyPlusError:
         """Stop the process first, so the error file is complete and nothing is left running."""
         self._kill()
+        if self.records is not None and not self.records.n:
+            self.records = None  # keep the failed episode's directory for the user to inspect
         return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))
 
     def _finish(self) -> None:
@@ -259,10 +258,12 @@ class Simulation:
         """End a running episode early: kill EnergyPlus and keep the partial record."""
         if self.proc is not None:
             self._kill()
-        if self.records is not None and self.records.n:
-            self._write_records(complete=False)
+        if self.records is not None:
+            if self.records.n:
+                self._write_records(complete=False)
+            elif self.episode_dir is not None:  # started but never stepped: nothing worth keeping
+                shutil.rmtree(self.episode_dir, ignore_errors=True)
         self.records = None
-        self._awaiting = False
 
     def close(self) -> None:
         if self._closed:

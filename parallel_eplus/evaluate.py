@@ -1,0 +1,226 @@
+"""The evaluation sweep: controllers x weathers, one full episode each, run in parallel.
+
+Controllers: the built-in one (the baseline model, no agent), trained policies (deterministic, with
+their saved observation statistics) and the rule-based controller. Every episode's reward comes from
+the same reward function on the same signals, so rewards compare across controllers.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from .model import STEPS_PER_DAY
+from .rbc import RuleBasedController
+from .reward import RewardConfig
+from .simulation import Simulation, SimulationConfig
+from .weather import parse_weathers, weather_label
+
+log = logging.getLogger(__name__)
+
+BASELINE_LABEL = "Baseline"
+RBC_LABEL = "Rule-based"
+
+
+@dataclass
+class Controller:
+    """One column of the paper's table: a label and how it acts."""
+
+    label: str
+    kind: str  # "baseline", "policy" or "rbc"
+    path: Path | None = None
+
+    @property
+    def model(self) -> str:
+        return "baseline" if self.kind == "baseline" else "temp_fan"
+
+    def make(self) -> Callable[[np.ndarray, dict], np.ndarray]:
+        """A fresh actor for one episode: (observation, info) -> action."""
+        if self.kind == "baseline":
+            empty = np.zeros(0, dtype=np.float32)
+            return lambda obs, info: empty
+        if self.kind == "rbc":
+            return RuleBasedController()
+        from .train import load_policy
+
+        act = load_policy(self.path)
+        return lambda obs, info: act(obs[None, :])[0]
+
+
+def policy_controller(spec: str) -> Controller:
+    """'runs/A/model.zip' or 'runs/A/model.zip=LABEL'; the label defaults to 'TRPO (<training weathers>)'."""
+    path_text, _, label = spec.partition("=")
+    path = Path(path_text)
+    if path.is_dir():
+        path = path / "model.zip"
+    from .train import normalization_file
+
+    if not path.is_file():
+        raise FileNotFoundError(f"policy not found: {path}")
+    if not normalization_file(path).is_file():
+        raise FileNotFoundError(f"observation statistics missing beside the policy: {normalization_file(path)}")
+    if not label:
+        config = path.parent / "config.json"
+        if config.is_file():
+            label = f"TRPO ({'-'.join(json.loads(config.read_text())['weathers'])})"
+        else:
+            label = path.parent.name
+    return Controller(label, "policy", path)
+
+
+def unique_labels(controllers: list[Controller]) -> list[Controller]:
+    seen: dict[str, int] = {}
+    for c in controllers:
+        if c.label in seen:
+            seen[c.label] += 1
+            c.label = f"{c.label} [{c.path.parent.name if c.path else seen[c.label]}]"
+        else:
+            seen[c.label] = 1
+    return controllers
+
+
+def slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "-", text).strip("-").lower()
+
+
+def run_sweep(
+    controllers: list[Controller],
+    weathers: list[str],
+    run_days: int,
+    workers: int,
+    out_dir: Path,
+    reward: RewardConfig | None = None,
+    progress: bool = True,
+) -> pd.DataFrame:
+    """One episode per (controller, weather), up to `workers` at once; returns results.csv's table."""
+    weathers = parse_weathers(",".join(weathers))  # fail before anything runs
+    controllers = unique_labels(controllers)
+    jobs = deque((c, w) for c in controllers for w in weathers)
+    total_steps = len(jobs) * run_days * STEPS_PER_DAY
+    rows: list[dict] = []
+    active: list[dict] = []
+    bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
+    try:
+        while jobs or active:
+            started = []
+            while jobs and len(active) < workers:
+                controller, weather = jobs.popleft()
+                cfg = SimulationConfig(
+                    weather=weather, model=controller.model, run_days=run_days, reward=reward or RewardConfig(),
+                    output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
+                )  # fmt: skip
+                sim = Simulation(cfg, name=controller.label)
+                sim.launch()
+                job = {"controller": controller, "sim": sim, "act": controller.make()}
+                active.append(job)
+                started.append(job)
+            for job in started:
+                job["obs"], job["info"] = job["sim"].first_observation()
+            for job in active:
+                job["sim"].send(job["act"](job["obs"], job["info"]))
+            finished = []
+            for job in active:
+                job["obs"], _, terminated, job["info"] = job["sim"].receive()
+                if terminated:
+                    finished.append(job)
+            bar.update(len(active))
+            for job in finished:
+                active.remove(job)
+                summary = job["info"]["episode_summary"]
+                rows.append(
+                    {"controller": job["controller"].label, **summary, "episode_dir": job["info"]["episode_dir"]}
+                )
+                job["sim"].close()
+                bar.set_postfix(done=len(rows), last=f"{job['controller'].label} {summary['weather']}")
+    finally:
+        bar.close()
+        for job in active:
+            job["sim"].close()
+    order = {c.label: i for i, c in enumerate(controllers)}
+    worder = {weather_label(w): i for i, w in enumerate(weathers)}
+    df = pd.DataFrame(rows)
+    df = df.sort_values(by=["controller", "weather"], key=lambda s: s.map({**order, **worder}))
+    return df.reset_index(drop=True)
+
+
+RESULT_COLUMNS = [
+    "controller", "weather", "reward_mean", "power_kw", "it_power_kw", "hvac_power_kw",
+    "west_temp_mean", "west_temp_std", "west_temp_min", "west_temp_max",
+    "east_temp_mean", "east_temp_std", "east_temp_min", "east_temp_max",
+    "west_in_band_pct", "east_in_band_pct", "in_band_pct", "steps", "episode_dir",
+]  # fmt: skip
+
+
+def table_markdown(df: pd.DataFrame) -> str:
+    """The paper's Table 1 layout: weathers down, controllers across (reward, power), then averages."""
+    controllers = list(dict.fromkeys(df["controller"]))
+    weathers = list(dict.fromkeys(df["weather"]))
+    by = df.set_index(["controller", "weather"])
+    head = "| Test weather | " + " | ".join(f"{c}: reward | {c}: power (kW)" for c in controllers) + " |"
+    lines = [head, "|" + "---|" * (1 + 2 * len(controllers))]
+    for w in weathers:
+        cells = []
+        for c in controllers:
+            r = by.loc[(c, w)] if (c, w) in by.index else None
+            cells += ["–", "–"] if r is None else [f"{r.reward_mean:.2f}", f"{r.power_kw:.1f}"]
+        lines.append(f"| {w} | " + " | ".join(cells) + " |")
+    avg = df.groupby("controller", sort=False)["power_kw"].mean()
+    base = avg.get(BASELINE_LABEL)
+    cells = []
+    for c in controllers:
+        change = "" if base is None or c == BASELINE_LABEL else f" ({100 * (avg[c] / base - 1):+.1f} %)"
+        reward_avg = df[df.controller == c]["reward_mean"].mean()
+        cells += [f"{reward_avg:.2f}", f"**{avg[c]:.1f}**{change}"]
+    lines.append("| **Average** | " + " | ".join(cells) + " |")
+
+    lines += ["", "Zone temperatures (°C) and share of zone samples within 22–25 °C:", ""]
+    lines.append("| Controller | Weather | West mean ± std [min, max] | East mean ± std [min, max] | in 22–25 °C |")
+    lines.append("|---|---|---|---|---|")
+    for _, r in df.iterrows():
+        lines.append(
+            f"| {r.controller} | {r.weather} "
+            f"| {r.west_temp_mean:.2f} ± {r.west_temp_std:.2f} [{r.west_temp_min:.1f}, {r.west_temp_max:.1f}] "
+            f"| {r.east_temp_mean:.2f} ± {r.east_temp_std:.2f} [{r.east_temp_min:.1f}, {r.east_temp_max:.1f}] "
+            f"| {r.in_band_pct:.2f} % |"
+        )
+    share = df.groupby("controller", sort=False)["in_band_pct"].mean()
+    lines += [
+        "",
+        "| Controller | mean power (kW) | change vs baseline | zone samples in 22–25 °C |",
+        "|---|---|---|---|",
+    ]
+    for c in controllers:
+        change = "–" if base is None or c == BASELINE_LABEL else f"{100 * (avg[c] / base - 1):+.1f} %"
+        lines.append(f"| {c} | {avg[c]:.1f} | {change} | {share[c]:.2f} % |")
+    return "\n".join(lines) + "\n"
+
+
+def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
+    """results.csv, results.md and the figures; returns the files written."""
+    from . import plots
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(out_dir / "results.csv", index=False)
+    (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df))
+    files = [out_dir / "results.csv", out_dir / "results.md"]
+    files.append(plots.temperature_comparison(df, out_dir / "temperatures.png"))
+    files.append(plots.power_comparison(df, out_dir / "power.png"))
+    if histogram is None:
+        controller = df["controller"].iloc[-1]
+        weathers = list(df[df.controller == controller]["weather"])
+        histogram = (controller, "VA" if "VA" in weathers else weathers[-1])
+    row = df[(df.controller == histogram[0]) & (df.weather == histogram[1])]
+    if not row.empty:
+        files.append(
+            plots.west_zone_histogram(Path(row.iloc[0]["episode_dir"]), histogram, out_dir / "west_zone_histogram.png")
+        )
+    return files

@@ -1,0 +1,77 @@
+"""A rule-based controller: the reference a learned policy must beat.
+
+Per zone: supply air at its 10 C floor (colder inlet air cuts IT power more than it costs in
+cooling); fan flow from feed-forward on the model's daily IT-load schedule plus an integral loop that
+holds the zone just above the band's lower edge; when the flow sits at its floor and the zone is still
+too cold, the setpoint rises instead. It acts through the same env as a policy (`temp_fan` model).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .model import ACTIONS, AGENT_IDF, ZONE_TEMP_NAMES
+
+IT_SCHEDULE = "Data Center CPU Loading Schedule"
+
+
+def it_load_schedule(idf=AGENT_IDF, name: str = IT_SCHEDULE) -> list[tuple[float, float]]:
+    """(until hour, load fraction) pairs of the model's ordinary-day IT loading, read from the IDF."""
+    text = idf.read_text(encoding="latin-1")
+    m = re.search(rf"Schedule:Compact,\s*{re.escape(name)},(.*?);", text, re.S | re.I)
+    if not m:
+        raise ValueError(f"schedule {name!r} not found in {idf}")
+    body = re.sub(r"!.*", "", m.group(1))
+    days = body.split("For:")
+    ordinary = next(d for d in days if "AllOtherDays" in d or "AllDays" in d)
+    pairs = re.findall(r"Until:\s*(\d+):(\d+)\s*,\s*([-\d.]+)", ordinary)
+    return [(int(h) + int(mi) / 60, float(v)) for h, mi, v in pairs]
+
+
+@dataclass
+class RBCConfig:
+    """The controller's parameters, in one place."""
+
+    target_c: float = 22.6  # just above the 22 C lower edge of the 22-25 C band
+    setpoint_floor_c: float = 10.0
+    flow_per_load_kg_s: tuple[float, float] = (3.7, 4.1)  # West, East feed-forward at full IT load
+    gain_kg_s_per_k: float = 0.15  # integral gain: flow demand added per K of zone error each step
+    setpoint_k_per_kg_s: float = 6.0  # below the flow floor, demand turns into a warmer setpoint
+    schedule: list[tuple[float, float]] = field(default_factory=it_load_schedule)
+
+
+class RuleBasedController:
+    """Callable (observation, info) -> normalized action; a split-range integral loop per zone.
+
+    One integral "flow demand" per zone: above the fan's floor it is the fan flow (setpoint at its
+    floor); below it, the shortfall raises the setpoint instead.
+    """
+
+    def __init__(self, cfg: RBCConfig | None = None):
+        self.cfg = cfg or RBCConfig()
+        self.trim = np.zeros(2)  # integral part of the flow demand, kg/s
+        self.low = np.array([a.low for a in ACTIONS])
+        self.high = np.array([a.high for a in ACTIONS])
+
+    def load(self, t: dt.datetime) -> float:
+        hour = t.hour + t.minute / 60
+        return next((v for until, v in self.cfg.schedule if hour < until), self.cfg.schedule[-1][1])
+
+    def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:
+        c = self.cfg
+        fan_lo, fan_hi = self.low[2], self.high[2]
+        error = np.array([info[name] for name in ZONE_TEMP_NAMES]) - c.target_c  # > 0: too warm
+        feed_forward = np.array(c.flow_per_load_kg_s) * self.load(info["time"])
+        max_shortfall = (self.high[0] - c.setpoint_floor_c) / c.setpoint_k_per_kg_s
+        self.trim = np.clip(
+            self.trim + c.gain_kg_s_per_k * error, fan_lo - max_shortfall - feed_forward, fan_hi - feed_forward
+        )
+        demand = feed_forward + self.trim
+        flow = np.clip(demand, fan_lo, fan_hi)
+        setpoint = c.setpoint_floor_c + c.setpoint_k_per_kg_s * np.maximum(fan_lo - demand, 0.0)
+        physical = np.concatenate([setpoint, flow])
+        return (2 * (physical - self.low) / (self.high - self.low) - 1).astype(np.float32)
