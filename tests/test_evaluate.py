@@ -36,7 +36,7 @@ def test_sweep_writes_table_and_figures(tmp_path, policy, no_leaks):
     files = write_results(df, tmp_path)
 
     results = pd.read_csv(tmp_path / "results.csv")
-    assert list(zip(results.controller, results.weather)) == [
+    assert list(zip(results.controller, results.weather, strict=True)) == [
         (c, w) for c in (BASELINE_LABEL, RBC_LABEL, "TRPO (CA)") for w in ("CA", "VA")
     ]
     for col in ("reward_mean", "power_kw", "it_power_kw", "hvac_power_kw", "west_temp_std", "east_temp_max"):
