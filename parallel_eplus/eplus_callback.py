@@ -32,7 +32,9 @@ KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file ru
 class Bridge:
     """Holds the handles and the current action; its two methods are the EnergyPlus callbacks."""
 
-    def __init__(self, api, act_fd: int, obs_fd: int, model: str, steps: int, initial: list[float]):
+    def __init__(
+        self, api, act_fd: int, obs_fd: int, model: str, steps: int, initial: list[float], spin_s: float = 0.0
+    ):
         self.api = api
         self.x = api.exchange
         self.act_fd = act_fd
@@ -50,7 +52,8 @@ class Bridge:
         self.sensor_handles: list[int] = []
         self.actuator_handles: list[tuple[int, int]] = []  # (handle, action index)
         self.last_obs: list[float] = [0.0] * len(SENSORS)
-        self._act_size = 4 + 8 * len(self.elements)
+        self._wait = pipe.wait_readable(act_fd)
+        self.spin_s = spin_s
 
     # -- setup --------------------------------------------------------------------------------
     def _handles_ready(self, state) -> bool:
@@ -91,7 +94,7 @@ class Bridge:
 
     def _exchange(self, values: list[float]) -> None:
         os.write(self.obs_fd, pipe.encode(values))
-        code, action = pipe.decode(lambda n: pipe.read_exact_blocking(self.act_fd, n))
+        code, action = pipe.decode(lambda n: pipe.read_exact(self.act_fd, n, self._wait, self.spin_s))
         if code != pipe.DATA or len(action) != len(self.elements):
             raise pipe.ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
         self.action = action.tolist()
@@ -154,6 +157,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--model", default="temp_fan")
     p.add_argument("--steps", type=int, required=True, help="zone timesteps in the run period")
     p.add_argument("--initial-action", type=float, nargs="*", default=[])
+    p.add_argument("--spin-us", type=float, default=0.0, help="poll this long for an action before blocking")
     return p.parse_args(argv)
 
 
@@ -161,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     # Open our ends first: the env holds both FIFOs open, so neither open blocks.
     obs_fd = os.open(args.obs_pipe, os.O_WRONLY)
-    act_fd = os.open(args.act_pipe, os.O_RDONLY)
+    act_fd = os.open(args.act_pipe, os.O_RDONLY | os.O_NONBLOCK)
 
     def fail(status: float) -> int:
         with contextlib.suppress(OSError):  # if the env is gone, there is nobody to tell
@@ -174,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         api = EnergyPlusAPI()
         state = api.state_manager.new_state()
         api.runtime.set_console_output_status(state, False)
-        bridge = Bridge(api, act_fd, obs_fd, args.model, args.steps, args.initial_action)
+        bridge = Bridge(api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6)
         api.runtime.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
         api.runtime.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
         status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])

@@ -54,6 +54,7 @@ class SimulationConfig:
     step_timeout_s: float = 60.0
     idf: str | None = None  # override the model's IDF (same sensors and actuators)
     initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
+    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: only if cores are spare
 
 
 def _time(values: np.ndarray) -> dt.datetime:
@@ -76,8 +77,10 @@ def scale_action(action, low: np.ndarray, high: np.ndarray, names: tuple[str, ..
 class Simulation:
     """Spawns, steps and stops EnergyPlus processes for consecutive episodes."""
 
-    def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0"):
+    def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0", siblings: int = 1):
+        """`siblings`: how many Simulations one process steps together (sets the default spin)."""
         self.config = config
+        self.spin_s = pipe.default_spin_s(siblings + 1) if config.spin_s is None else config.spin_s
         self.name = name
         self.model = control_model(config.model)
         self.elements = self.model.actions
@@ -142,7 +145,7 @@ class Simulation:
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
             "--output-dir", str(self.episode_dir), "--model", self.model.name,
             "--steps", str(self.steps_per_episode),
-            "--initial-action", *map(str, self.initial_action),
+            "--initial-action", *map(str, self.initial_action), "--spin-us", str(self.spin_s * 1e6),
         ]  # fmt: skip
         with open(self.episode_dir / "energyplus.log", "wb") as logf:
             self.proc = subprocess.Popen(
@@ -203,7 +206,7 @@ class Simulation:
 
     def _recv(self, timeout: float, what: str) -> tuple[int, np.ndarray]:
         try:
-            code, values = self.pipes.recv(timeout)
+            code, values = self.pipes.recv(timeout, self.spin_s)
         except TimeoutError as e:
             raise self._error(f"EnergyPlus sent no {what} within {timeout:.0f} s (hung?)") from e
         except ChildProcessError as e:

@@ -52,7 +52,8 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             for i, share in enumerate(shares):
                 worker = first_worker + i
                 out = None if config.output_dir is None else str(Path(config.output_dir) / f"worker-{worker}")
-                self.sims.append(Simulation(replace(config, output_dir=out), share, name=str(worker)))
+                sim = Simulation(replace(config, output_dir=out), share, name=str(worker), siblings=len(shares))
+                self.sims.append(sim)
         except BaseException:
             self.close()
             raise
