@@ -1,14 +1,30 @@
-"""Reinforcement-learning control of a data center's cooling against parallel EnergyPlus simulations."""
+"""Reinforcement-learning control of a data center's cooling against parallel EnergyPlus simulations.
+
+Importing the package registers `parallel_eplus/DataCenter-v0`; everything else loads on first use,
+so the EnergyPlus-side process (which imports `parallel_eplus.model`) stays small and starts fast.
+"""
 
 from gymnasium.envs.registration import register, registry
-
-from .env import EnergyPlusEnv
-from .errors import EnergyPlusError, ProtocolError
-from .reward import RewardConfig
 
 ENV_ID = "parallel_eplus/DataCenter-v0"
 
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="parallel_eplus.env:EnergyPlusEnv", disable_env_checker=True)
 
-__all__ = ["ENV_ID", "EnergyPlusEnv", "EnergyPlusError", "ProtocolError", "RewardConfig"]
+_LAZY = {
+    "EnergyPlusEnv": "env",
+    "EnergyPlusError": "errors",
+    "ProtocolError": "errors",
+    "RewardConfig": "reward",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["ENV_ID", *_LAZY]

@@ -129,6 +129,19 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from .bench import BenchConfig, format_table, run
+
+    cfg = BenchConfig(
+        weather=args.weather, raw_days=args.days, vector_steps=args.vector_steps, train_steps=args.train_steps,
+        workers=args.workers, repeats=args.repeats,
+    )  # fmt: skip
+    results = run(cfg, args.out)
+    print(format_table(results))
+    print(f"written: {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="parallel-eplus", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -177,6 +190,16 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     ev.set_defaults(func=cmd_evaluate)
+
+    be = sub.add_parser("bench", help="measure our overhead against raw EnergyPlus on this machine")
+    be.add_argument("--weather", default="CA")
+    be.add_argument("--days", type=int, default=365, help="period for the raw and env runs (default a year)")
+    be.add_argument("--vector-steps", type=int, default=4000, help="vector steps per worker")
+    be.add_argument("--train-steps", type=int, default=3 * 16384, help="env steps of TRPO learn")
+    be.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    be.add_argument("--repeats", type=int, default=3, help="repetitions; medians are reported")
+    be.add_argument("--out", type=Path, default=Path("results") / "bench.json")
+    be.set_defaults(func=cmd_bench)
 
     pl = sub.add_parser("plot", help="RUN_DIR: training convergence; EPISODE_DIR: one episode's time series")
     pl.add_argument("path", type=Path)

@@ -33,8 +33,16 @@ class Bridge:
     """Holds the handles and the current action; its two methods are the EnergyPlus callbacks."""
 
     def __init__(
-        self, api, act_fd: int, obs_fd: int, model: str, steps: int, initial: list[float], spin_s: float = 0.0
+        self,
+        api,
+        act_fd: int | None,
+        obs_fd: int | None,
+        model: str,
+        steps: int,
+        initial: list[float],
+        spin_s: float = 0.0,
     ):
+        """With no pipes (`--raw`) the initial action is held all run: EnergyPlus alone, for benchmarks."""
         self.api = api
         self.x = api.exchange
         self.act_fd = act_fd
@@ -52,7 +60,8 @@ class Bridge:
         self.sensor_handles: list[int] = []
         self.actuator_handles: list[tuple[int, int]] = []  # (handle, action index)
         self.last_obs: list[float] = [0.0] * len(SENSORS)
-        self._wait = pipe.wait_readable(act_fd)
+        self.raw = obs_fd is None
+        self._wait = None if act_fd is None else pipe.wait_readable(act_fd)
         self.spin_s = spin_s
 
     # -- setup --------------------------------------------------------------------------------
@@ -93,6 +102,8 @@ class Bridge:
         return [x.calendar_year(state), x.day_of_year(state), x.hour(state), minute]
 
     def _exchange(self, values: list[float]) -> None:
+        if self.raw:
+            return
         os.write(self.obs_fd, pipe.encode(values))
         code, action = pipe.decode(lambda n: pipe.read_exact(self.act_fd, n, self._wait, self.spin_s))
         if code != pipe.DATA or len(action) != len(self.elements):
@@ -141,7 +152,8 @@ class Bridge:
         self.step += 1
         values = self._time(state) + sensors
         if self.step >= self.steps:
-            os.write(self.obs_fd, pipe.encode(values, pipe.END))
+            if not self.raw:
+                os.write(self.obs_fd, pipe.encode(values, pipe.END))
             self.done = True
             return
         self._exchange(values)
@@ -149,8 +161,8 @@ class Bridge:
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description="Run one EnergyPlus simulation driven over named pipes.")
-    p.add_argument("--act-pipe", required=True)
-    p.add_argument("--obs-pipe", required=True)
+    p.add_argument("--act-pipe", help="omit both pipes to hold the initial action with no exchange (--raw)")
+    p.add_argument("--obs-pipe")
     p.add_argument("--idf", required=True)
     p.add_argument("--epw", required=True)
     p.add_argument("--output-dir", required=True)
@@ -164,12 +176,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     # Open our ends first: the env holds both FIFOs open, so neither open blocks.
-    obs_fd = os.open(args.obs_pipe, os.O_WRONLY)
-    act_fd = os.open(args.act_pipe, os.O_RDONLY | os.O_NONBLOCK)
+    obs_fd = act_fd = None
+    if args.obs_pipe and args.act_pipe:
+        obs_fd = os.open(args.obs_pipe, os.O_WRONLY)
+        act_fd = os.open(args.act_pipe, os.O_RDONLY | os.O_NONBLOCK)
 
     def fail(status: float) -> int:
-        with contextlib.suppress(OSError):  # if the env is gone, there is nobody to tell
-            os.write(obs_fd, pipe.encode([status], pipe.ERROR))
+        if obs_fd is not None:
+            with contextlib.suppress(OSError):  # if the env is gone, there is nobody to tell
+                os.write(obs_fd, pipe.encode([status], pipe.ERROR))
         return 1
 
     try:

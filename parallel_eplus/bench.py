@@ -1,0 +1,166 @@
+"""`parallel-eplus bench`: our overhead against raw EnergyPlus, measured in one run on this machine.
+
+1. raw: EnergyPlus alone (the agent model, a constant action held by the EnergyPlus-side callback with
+   no pipe exchange), wall seconds from process start to exit;
+2. env: the same period and action stepped through `EnergyPlusEnv` (reset + steps, wall seconds);
+3. vector env: aggregate steps/s with 1 and N workers, and the scaling efficiency;
+4. training: env steps/s inside TRPO `learn` with N workers, against the vector env's rate;
+5. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
+
+Random actions in 3 are drawn like an untrained TRPO policy's (N(0, 1) clipped to [-1, 1]), so 3 and
+4 ask EnergyPlus for the same kind of work: control changes EnergyPlus's own cost several-fold.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .env import EnergyPlusEnv
+from .episode import MODEL_FILE, write_episode_idf
+from .model import AGENT_IDF, STEPS_PER_DAY, control_model
+from .simulation import SimulationConfig
+from .vector_env import EnergyPlusVectorEnv, weather_shares
+from .weather import resolve_weather
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class BenchConfig:
+    weather: str = "CA"
+    raw_days: int = 365  # period for raw and env
+    vector_steps: int = 4000  # vector steps per worker for the vector-env rate
+    train_steps: int = 3 * 16384  # env steps of TRPO learn
+    workers: int = os.cpu_count() or 1
+    repeats: int = 3
+    action: float = 0.0  # the constant normalized action for raw and env
+
+
+def _constant_physical(action: float) -> list[float]:
+    return [e.low + (action + 1) / 2 * (e.high - e.low) for e in control_model("temp_fan").actions]
+
+
+def raw_seconds(cfg: BenchConfig, workdir: Path) -> float:
+    """EnergyPlus alone, holding the constant action in its callback, no pipes."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    idf = workdir / MODEL_FILE
+    write_episode_idf(AGENT_IDF, idf, cfg.raw_days)
+    cmd = [
+        sys.executable, "-m", "parallel_eplus.eplus_callback", "--idf", str(idf),
+        "--epw", str(resolve_weather(cfg.weather)), "--output-dir", str(workdir),
+        "--steps", str(cfg.raw_days * STEPS_PER_DAY), "--initial-action", *map(str, _constant_physical(cfg.action)),
+    ]  # fmt: skip
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def env_run(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
+    env = EnergyPlusEnv(weather=cfg.weather, run_days=cfg.raw_days, output_dir=workdir, keep_episodes=0)
+    action = np.full(4, cfg.action, dtype=np.float32)
+    try:
+        t0 = time.perf_counter()
+        env.reset()
+        t_first = time.perf_counter() - t0
+        steps, terminated = 0, False
+        while not terminated:
+            _, _, terminated, _, _ = env.step(action)
+            steps += 1
+        total = time.perf_counter() - t0
+    finally:
+        env.close()
+    return {"seconds": total, "first_obs_s": t_first, "steps": steps, "steps_per_s": steps / (total - t_first)}
+
+
+def vector_rate(cfg: BenchConfig, workers: int, workdir: Path) -> float:
+    """Aggregate env steps/s of the vector env over `vector_steps` steps, after the first observations."""
+    sim = SimulationConfig(weather=cfg.weather, run_days=365, output_dir=str(workdir), keep_episodes=0)
+    venv = EnergyPlusVectorEnv(sim, weather_shares([cfg.weather], workers))
+    rng = np.random.default_rng(0)
+    actions = np.clip(rng.normal(size=(cfg.vector_steps, workers, 4)), -1, 1).astype(np.float32)
+    try:
+        venv.start_all(range(workers))
+        t0 = time.perf_counter()
+        for a in actions:
+            venv.step_lists(a)
+        return workers * cfg.vector_steps / (time.perf_counter() - t0)
+    finally:
+        venv.close()
+
+
+def training_rate(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
+    """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded."""
+    from .train import TrainConfig, train
+
+    tc = TrainConfig(
+        workers=cfg.workers, weathers=[cfg.weather], timesteps=cfg.train_steps, run_name="bench",
+        runs_dir=str(workdir / "runs"), tensorboard_dir=str(workdir / "tb"), checkpoint_every=10**9, keep_episodes=0,
+    )  # fmt: skip
+    t0 = time.perf_counter()
+    train(tc, progress=False)
+    seconds = time.perf_counter() - t0
+    return {"seconds": seconds, "steps_per_s": cfg.train_steps / seconds}
+
+
+def run(cfg: BenchConfig, out: Path | None = None) -> dict:
+    results: dict = {"config": asdict(cfg), "machine": {"cores": os.cpu_count()}}
+    with tempfile.TemporaryDirectory(prefix="parallel-eplus-bench-") as tmp:
+        tmp = Path(tmp)
+        raw = [raw_seconds(cfg, tmp / f"raw{i}") for i in range(cfg.repeats)]
+        envs = [env_run(cfg, tmp / f"env{i}") for i in range(cfg.repeats)]
+        worker_rss_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        results["raw_s"] = statistics.median(raw)
+        results["env_s"] = statistics.median(e["seconds"] for e in envs)
+        results["env_steps_per_s"] = statistics.median(e["steps_per_s"] for e in envs)
+        results["env_over_raw"] = results["env_s"] / results["raw_s"]
+        results["first_obs_s"] = statistics.median(e["first_obs_s"] for e in envs)
+        one = [vector_rate(cfg, 1, tmp / f"v1_{i}") for i in range(cfg.repeats)]
+        many = [vector_rate(cfg, cfg.workers, tmp / f"vN_{i}") for i in range(cfg.repeats)]
+        results["vector_1_steps_per_s"] = statistics.median(one)
+        results["vector_n_steps_per_s"] = statistics.median(many)
+        results["scaling_efficiency"] = results["vector_n_steps_per_s"] / (
+            cfg.workers * results["vector_1_steps_per_s"]
+        )
+        tr = training_rate(cfg, tmp / "train")
+        results["train_steps_per_s"] = tr["steps_per_s"]
+        results["train_over_vector"] = tr["steps_per_s"] / results["vector_n_steps_per_s"]
+        results["million_steps_minutes"] = 1e6 / tr["steps_per_s"] / 60
+        results["worker_peak_rss_mb"] = worker_rss_mb
+        results["learner_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(results, indent=2))
+    return results
+
+
+def format_table(r: dict) -> str:
+    c = r["config"]
+    n = c["workers"]
+    rows = [
+        ("raw EnergyPlus, constant action", f"{r['raw_s']:.2f} s for {c['raw_days']} days", ""),
+        ("EnergyPlusEnv, same action", f"{r['env_s']:.2f} s ({r['env_steps_per_s']:.0f} steps/s)",
+         f"env/raw {r['env_over_raw']:.2f} (target <= 1.25)"),
+        ("vector env, 1 worker", f"{r['vector_1_steps_per_s']:.0f} steps/s", ""),
+        (f"vector env, {n} workers", f"{r['vector_n_steps_per_s']:.0f} steps/s",
+         f"scaling {r['scaling_efficiency']:.2f} (target >= 0.90)"),
+        (f"TRPO learn, {n} workers", f"{r['train_steps_per_s']:.0f} steps/s",
+         f"train/vector {r['train_over_vector']:.2f} (target >= 0.75)"),
+        ("1M TRPO steps", f"{r['million_steps_minutes']:.1f} min", "target <= 15 min"),
+        ("time to first observation", f"{r['first_obs_s']:.2f} s", "target <= 2 s"),
+        ("peak RSS: EnergyPlus worker / learner", f"{r['worker_peak_rss_mb']:.0f} / {r['learner_peak_rss_mb']:.0f} MB",
+         "worker target <= 300 MB"),
+    ]  # fmt: skip
+    width = max(len(a) for a, _, _ in rows)
+    return "\n".join(f"{a:<{width}}  {b:<28} {t}" for a, b, t in rows)
