@@ -14,7 +14,7 @@ import pandas as pd
 
 from .model import COMFORT_BAND_C, SENSOR_NAMES, TIMESTEPS_PER_HOUR, ZONE_TEMP_NAMES
 
-STEPS_FILE = "steps.csv"
+STEPS_FILE = "steps.parquet"  # binary: a year writes in ~0.1 s where CSV takes ~0.8 s
 SUMMARY_FILE = "summary.json"
 MODEL_FILE = "model.idf"
 REWARD_PARTS = ("reward_comfort", "reward_band", "reward_power")
@@ -95,7 +95,7 @@ class StepRecorder:
 
 def read_steps(episode_dir: str | Path) -> pd.DataFrame:
     """An episode's step table, as written at its end."""
-    return pd.read_csv(Path(episode_dir) / STEPS_FILE, parse_dates=["time"])
+    return pd.read_parquet(Path(episode_dir) / STEPS_FILE)
 
 
 def summarize(steps: pd.DataFrame) -> dict[str, float]:
@@ -125,7 +125,7 @@ def summarize(steps: pd.DataFrame) -> dict[str, float]:
 
 def write_records(episode_dir: Path, steps: pd.DataFrame, extra: dict) -> dict:
     """Write the step table and summary.json; returns the summary."""
-    steps.to_csv(episode_dir / STEPS_FILE, index=False, float_format="%.10g")
+    steps.to_parquet(episode_dir / STEPS_FILE, index=False)
     summary = {**extra, **summarize(steps)}
     (episode_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str))
     return summary

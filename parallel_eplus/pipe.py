@@ -166,6 +166,13 @@ class PipePair:
                 where = f" mid-frame ({got} of {want} bytes)" if got else ""
                 raise ChildProcessError(f"EnergyPlus process exited{where}")
 
+    def wait_exit(self, timeout: float) -> bool | None:
+        """Wait for the watched process to exit (no sleep-polling); False on timeout, None without pidfd."""
+        if self._pidfd is None:
+            return None
+        ready, _, _ = select.select([self._pidfd], [], [], timeout)
+        return bool(ready)
+
     def _has_data(self) -> bool:
         ready, _, _ = select.select([self.obs_fd], [], [], 0)
         return bool(ready)

@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from .episode import SUMMARY_FILE, read_steps, summarize  # noqa: E402
+from .episode import STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
 from .model import COMFORT_BAND_C  # noqa: E402
 
 
@@ -134,8 +134,8 @@ def plot_path(path: Path) -> Path:
     """A run directory draws its convergence; an episode directory its time series."""
     if (path / "episodes.csv").is_file():
         return convergence(path)
-    if (path / "steps.csv").is_file():
+    if (path / STEPS_FILE).is_file():
         return episode(path)
     if (path / SUMMARY_FILE).is_file():
         raise FileNotFoundError(f"{path} kept only its summary (older episodes are pruned); pick a newer one")
-    raise FileNotFoundError(f"{path} is neither a run directory (episodes.csv) nor an episode directory (steps.csv)")
+    raise FileNotFoundError(f"{path} is neither a run directory (episodes.csv) nor an episode directory ({STEPS_FILE})")

@@ -7,6 +7,7 @@ the vector env drives several, writing every action before reading any observati
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import logging
 import shutil
@@ -227,10 +228,12 @@ class Simulation:
     def _finish(self) -> None:
         """The run period is over: let EnergyPlus finish its files, then write the records."""
         if self.proc is not None:
-            try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                log.warning("EnergyPlus did not exit after the last step; killing it")
+            exited = self.pipes.wait_exit(30)
+            if exited is None:
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    exited = self.proc.wait(timeout=30) is not None
+            if not exited:
+                log.warning("EnergyPlus did not exit within 30 s of the last step; killing it")
             self._kill()
         self._write_records(complete=True)
 

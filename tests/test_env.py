@@ -52,7 +52,9 @@ def test_episode_records(tmp_path, no_leaks):
     finally:
         env.close()
     ep = tmp_path / "episode-000001-FL"
-    assert {"model.idf", "steps.csv", "summary.json", "eplusout.err", "eplusout.csv"} <= {p.name for p in ep.iterdir()}
+    assert {"model.idf", "steps.parquet", "summary.json", "eplusout.err", "eplusout.csv"} <= {
+        p.name for p in ep.iterdir()
+    }
     assert any(p.suffix == ".epw" for p in ep.iterdir())
     steps = read_steps(ep)
     assert len(steps) == n == STEPS_PER_DAY
