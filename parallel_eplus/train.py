@@ -233,7 +233,32 @@ class _Interrupt:
         return False
 
 
-def train(cfg: TrainConfig, resume: str | Path | None = None, progress: bool = True) -> Path:
+class UpdateTimer(BaseCallback):
+    """Wall time of each TRPO update (between rollouts): the learner's share of a batch."""
+
+    def __init__(self):
+        super().__init__()
+        self.updates: list[float] = []
+        self._t: float | None = None
+
+    def _on_rollout_end(self) -> None:
+        self._t = time.perf_counter()
+
+    def _on_rollout_start(self) -> None:
+        if self._t is not None:
+            self.updates.append(time.perf_counter() - self._t)
+            self.logger.record("throughput/update_s", self.updates[-1])
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def train(
+    cfg: TrainConfig,
+    resume: str | Path | None = None,
+    progress: bool = True,
+    timer: UpdateTimer | None = None,
+) -> Path:
     """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first."""
     from sb3_contrib import TRPO
 
@@ -282,6 +307,7 @@ def train(cfg: TrainConfig, resume: str | Path | None = None, progress: bool = T
         bar = tqdm(total=cfg.timesteps, initial=model.num_timesteps, unit="step", disable=not progress,
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
         callbacks = CallbackList([
+            timer or UpdateTimer(),
             EpisodeMetrics(run_dir / "episodes.csv", bar),
             CheckpointCallback(
                 save_freq=max(cfg.checkpoint_every // cfg.workers, 1),
