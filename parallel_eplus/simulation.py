@@ -55,7 +55,7 @@ class SimulationConfig:
     step_timeout_s: float = 60.0
     idf: str | None = None  # override the model's IDF (same sensors and actuators)
     initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
-    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: only if cores are spare
+    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
 
 
 def _time(values: np.ndarray) -> dt.datetime:
@@ -81,7 +81,9 @@ class Simulation:
     def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0", siblings: int = 1):
         """`siblings`: how many Simulations one process steps together (sets the default spin)."""
         self.config = config
-        self.spin_s = pipe.default_spin_s(siblings + 1) if config.spin_s is None else config.spin_s
+        auto = config.spin_s is None
+        self.spin_s = pipe.default_spin_s(siblings + 1) if auto else config.spin_s
+        self.child_spin_s = pipe.SPIN_S if auto else config.spin_s
         self.name = name
         self.model = control_model(config.model)
         self.elements = self.model.actions
@@ -146,7 +148,7 @@ class Simulation:
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
             "--output-dir", str(self.episode_dir), "--model", self.model.name,
             "--steps", str(self.steps_per_episode),
-            "--initial-action", *map(str, self.initial_action), "--spin-us", str(self.spin_s * 1e6),
+            "--initial-action", *map(str, self.initial_action), "--spin-us", str(self.child_spin_s * 1e6),
         ]  # fmt: skip
         with open(self.episode_dir / "energyplus.log", "wb") as logf:
             self.proc = subprocess.Popen(
