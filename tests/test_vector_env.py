@@ -29,7 +29,7 @@ def test_vector_env_autoresets_and_cycles_weathers(tmp_path, no_leaks):
             obs, rewards, terminated, truncated, info = venv.step(np.zeros((2, 4), dtype=np.float32))
             assert np.isfinite(rewards).all() and not truncated.any()
         assert terminated.all()  # the day ended on both workers in the same step...
-        assert info["final_info"]["episode_summary"][0]["weather"] == "CA"
+        assert info["final_info"]["episode_summary"]["weather"][0] == "CA"
         assert list(info["weather"]) == ["FL", "CO"]  # ...and the next episodes began: worker 0 cycles
         assert venv.observation_space.contains(obs)
     finally:
