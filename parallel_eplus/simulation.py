@@ -93,16 +93,16 @@ class Simulation:
         self.weathers = weathers or [config.weather]
         self.weather_paths = [resolve_weather(w) for w in self.weathers]  # fail before spawning
         self.steps_per_episode = config.run_days * STEPS_PER_DAY
-        self._tmp = None
-        if config.output_dir is None:
-            self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
-        self.output_dir = Path(config.output_dir or self._tmp)
-        self.output_dir.mkdir(parents=True, exist_ok=True)
         self.low = np.array([e.low for e in self.elements])
         self.high = np.array([e.high for e in self.elements])
         self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
         if self.initial_action.shape != self.low.shape:
             raise ValueError(f"initial_action needs {len(self.low)} values in physical units")
+        self._tmp = None
+        if config.output_dir is None:
+            self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
+        self.output_dir = Path(config.output_dir or self._tmp)
+        self.output_dir.mkdir(parents=True, exist_ok=True)
         self.action_names = tuple(e.name for e in self.elements)
         self.pipes: pipe.PipePair | None = None
         self.proc: subprocess.Popen | None = None
