@@ -94,7 +94,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     run_dir = final.parent
     print(f"model: {final} (observation statistics: {run_dir / 'vecnormalize.pkl'})")
     print(f"episode records: {run_dir / 'episodes.csv'}")
-    print(f"TensorBoard: tensorboard --logdir {cfg.tensorboard_dir}   (then open http://localhost:6006)")
+    tensorboard = Path(sys.executable).parent / "tensorboard"
+    print(f"TensorBoard: {tensorboard} --logdir {cfg.tensorboard_dir}   (then open http://localhost:6006)")
     return 0
 
 
