@@ -83,6 +83,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         backend=args.backend,
         ray_address=args.ray_address,
         workers_per_actor=args.workers_per_actor,
+        time_features=args.time_features,
         reward=RewardConfig.from_any(args.reward),
     )
     if args.resume and "--timesteps" not in sys.argv:
@@ -164,6 +165,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="EnergyPlus processes (default: cores)")
     tr.add_argument("--weathers", default="CA", help="comma-separated, e.g. CA,CO,FL (default CA)")
     tr.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    tr.add_argument(
+        "--time-features", action="store_true",
+        help="add hour and day of week (sine/cosine) to the paper's six observations",
+    )  # fmt: skip
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")

@@ -9,12 +9,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from .model import observation_bounds
 from .reward import RewardConfig
-from .simulation import OBS_HIGH, OBS_LOW, Simulation, SimulationConfig
+from .simulation import Simulation, SimulationConfig
 
 
-def observation_space() -> gym.spaces.Box:
-    return gym.spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
+def observation_space(time_features: bool = False) -> gym.spaces.Box:
+    low, high = observation_bounds(time_features)
+    return gym.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
 
 
 def action_space(n: int) -> gym.spaces.Box:
@@ -23,6 +25,8 @@ def action_space(n: int) -> gym.spaces.Box:
 
 class EnergyPlusEnv(gym.Env):
     """The paper's environment: 6 observations, 2 or 4 normalized actions, its reward.
+
+    `time_features=True` appends hour and day of week as sine/cosine pairs (`model.TIME_FEATURES`).
 
     `reset()` starts a new EnergyPlus process (stopping a running one) and returns the state at the
     start of the run period; each `step()` runs one 15-minute zone timestep under the given action.
@@ -42,6 +46,7 @@ class EnergyPlusEnv(gym.Env):
         step_timeout_s: float = 60.0,
         start_timeout_s: float = 180.0,
         idf: str | Path | None = None,
+        time_features: bool = False,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
         self.config = SimulationConfig(
@@ -54,11 +59,12 @@ class EnergyPlusEnv(gym.Env):
             start_timeout_s=start_timeout_s,
             step_timeout_s=step_timeout_s,
             idf=None if idf is None else str(idf),
+            time_features=time_features,
         )
         self.sim = Simulation(self.config, weathers)
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
-        self.observation_space = observation_space()
+        self.observation_space = observation_space(time_features)
         self.action_space = action_space(len(self.sim.elements))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):

@@ -38,6 +38,7 @@ class Controller:
     label: str
     kind: str  # "baseline", "policy" or "rbc"
     path: Path | None = None
+    time_features: bool = False  # the policy observes model.TIME_FEATURES
 
     @property
     def model(self) -> str:
@@ -62,7 +63,7 @@ def policy_controller(spec: str) -> Controller:
     path = Path(path_text)
     if path.is_dir():
         path = path / "model.zip"
-    from .train import normalization_file
+    from .train import normalization_file, policy_time_features
 
     if not path.is_file():
         raise FileNotFoundError(f"policy not found: {path}")
@@ -74,7 +75,7 @@ def policy_controller(spec: str) -> Controller:
             label = f"TRPO ({'-'.join(json.loads(config.read_text())['weathers'])})"
         else:
             label = path.parent.name
-    return Controller(label, "policy", path)
+    return Controller(label, "policy", path, policy_time_features(path))
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
@@ -116,6 +117,7 @@ def run_sweep(
                 controller, weather = jobs.popleft()
                 cfg = SimulationConfig(
                     weather=weather, model=controller.model, run_days=run_days, reward=reward or RewardConfig(),
+                    time_features=controller.time_features,
                     output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
                 )  # fmt: skip
                 sim = Simulation(cfg, name=controller.label)

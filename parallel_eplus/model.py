@@ -6,6 +6,8 @@ EnergyPlus-side callback looks up the same variable and actuator names.
 
 from __future__ import annotations
 
+import datetime as dt
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,6 +69,26 @@ SENSORS: tuple[Sensor, ...] = (
 )
 SENSOR_NAMES = tuple(s.name for s in SENSORS)
 ZONE_TEMP_NAMES = ("west_temp_c", "east_temp_c")
+
+# Opt-in observation features (off for the paper's reproduction): the IT load follows a fixed daily
+# schedule with steps at 00:00, 06:00, 08:00 and 18:00 that the six sensors cannot anticipate. They
+# describe the start of the 15 minutes the next action controls; all lie in [-1, 1].
+TIME_FEATURES = ("hour_sin", "hour_cos", "weekday_sin", "weekday_cos")
+
+
+def time_features(t: dt.datetime) -> tuple[float, ...]:
+    hour = 2 * math.pi * (t.hour + t.minute / 60) / 24
+    day = 2 * math.pi * t.weekday() / 7
+    return math.sin(hour), math.cos(hour), math.sin(day), math.cos(day)
+
+
+def observation_names(with_time: bool = False) -> tuple[str, ...]:
+    return SENSOR_NAMES + (TIME_FEATURES if with_time else ())
+
+
+def observation_bounds(with_time: bool = False) -> tuple[list[float], list[float]]:
+    extra = len(TIME_FEATURES) if with_time else 0
+    return [s.low for s in SENSORS] + [-1.0] * extra, [s.high for s in SENSORS] + [1.0] * extra
 
 
 def _setpoint_nodes(zone: str) -> tuple[Actuator, ...]:

@@ -30,7 +30,7 @@ from .episode import (
     write_records,
 )
 from .errors import EnergyPlusError, ProtocolError
-from .model import SENSORS, STEPS_PER_DAY, control_model
+from .model import SENSORS, STEPS_PER_DAY, control_model, time_features
 from .reward import RewardConfig, reward
 from .weather import resolve_weather, weather_label
 
@@ -56,6 +56,7 @@ class SimulationConfig:
     idf: str | None = None  # override the model's IDF (same sensors and actuators)
     initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
     spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
+    time_features: bool = False  # append model.TIME_FEATURES to the observation
 
 
 def _time(values: np.ndarray) -> dt.datetime:
@@ -205,6 +206,8 @@ class Simulation:
         if ((obs < OBS_LOW) | (obs > OBS_HIGH)).any():
             info["raw_observation"] = raw.copy()
             obs = np.clip(obs, OBS_LOW, OBS_HIGH)
+        if self.config.time_features:
+            obs = np.concatenate([obs, np.array(time_features(info["time"]), np.float32)])
         return obs, info
 
     def _recv(self, timeout: float, what: str) -> tuple[int, np.ndarray]:

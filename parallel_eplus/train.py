@@ -23,7 +23,7 @@ from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
-from .model import STEPS_PER_DAY
+from .model import STEPS_PER_DAY, observation_names
 from .reward import RewardConfig
 from .sb3_adapter import SB3VecEnv
 from .simulation import SimulationConfig
@@ -72,6 +72,7 @@ class TrainConfig:
     ray_address: str | None = None
     workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
     max_restarts: int = 3
+    time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     reward: RewardConfig = field(default_factory=RewardConfig)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
 
@@ -120,6 +121,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         output_dir=str(cfg.run_dir / "episodes"),
         keep_episodes=cfg.keep_episodes,
         reward=cfg.reward,
+        time_features=cfg.time_features,
     )
     shares = weather_shares(cfg.weathers, cfg.workers)
     if cfg.backend == "ray":
@@ -335,6 +337,18 @@ def train(
         if bar is not None:
             bar.close()
         venv.close()
+
+
+def policy_time_features(model_zip: str | Path) -> bool:
+    """Whether a saved policy observes `model.TIME_FEATURES`, read from its observation statistics."""
+    import pickle
+
+    with open(normalization_file(Path(model_zip)), "rb") as f:
+        norm: VecNormalize = pickle.load(f)
+    n = norm.observation_space.shape[0]
+    if n not in (len(observation_names(False)), len(observation_names(True))):
+        raise ValueError(f"{model_zip}: a policy over {n} observations does not fit this model")
+    return n == len(observation_names(True))
 
 
 def load_policy(model_zip: str | Path):

@@ -11,10 +11,10 @@ WORKERS=${WORKERS:-$(nproc)}
 PE=.venv/bin/parallel-eplus
 start=$(date +%s)
 
-$PE train --workers "$WORKERS" --weathers CA --timesteps "$TIMESTEPS" --run-name paper-ca \
-    ${RESUME_CA:+--resume runs/paper-ca}
 $PE train --workers "$WORKERS" --weathers CA,CO,FL --timesteps "$TIMESTEPS" --run-name paper-ca-co-fl \
     ${RESUME_CCF:+--resume runs/paper-ca-co-fl}
+$PE train --workers "$WORKERS" --weathers CA --timesteps "$TIMESTEPS" --run-name paper-ca \
+    ${RESUME_CA:+--resume runs/paper-ca}
 
 mkdir -p results/paper/models
 for run in paper-ca paper-ca-co-fl; do

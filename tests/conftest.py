@@ -21,7 +21,7 @@ def our_pipe_dirs(tmp: str = "/tmp") -> set[str]:
 @pytest.fixture
 def no_leaks():
     """Fails the test if it leaves an EnergyPlus process or a pipe directory behind."""
-    before = our_pipe_dirs()
+    before, running = our_pipe_dirs(), set(our_processes())  # a training run may share the machine
     yield
-    assert our_processes() == []
+    assert set(our_processes()) - running == set()
     assert our_pipe_dirs() - before == set()

@@ -147,3 +147,18 @@ def test_nan_action_raises_value_error(tmp_path, no_leaks):
         env.step(np.zeros(4))  # the simulation is unharmed
     finally:
         env.close()
+
+
+def test_time_features_follow_the_clock(no_leaks):
+    env = EnergyPlusEnv(weather="CO", run_days=1, time_features=True)
+    try:
+        obs, info = env.reset(seed=0)
+        assert obs.shape == (10,) and env.observation_space.contains(obs)
+        assert obs[6:8] == pytest.approx([0.0, 1.0], abs=1e-6)  # 00:00
+        for _ in range(6 * 4):  # six hours
+            obs, *_, info = env.step(np.zeros(4, dtype=np.float32))
+        assert info["time"].hour == 6 and env.observation_space.contains(obs)
+        assert obs[6:8] == pytest.approx([1.0, 0.0], abs=1e-6)  # 06:00: a quarter of the day
+        assert obs[:6] == pytest.approx([info[name] for name in SENSOR_NAMES], rel=1e-5)
+    finally:
+        env.close()

@@ -73,3 +73,14 @@ def test_bad_input_fails_before_anything_runs(tmp_path):
     r = cli("--policy", str(tmp_path / "missing.zip"))
     assert r.returncode == 2 and "policy not found" in r.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_policy_with_time_features_is_evaluated_with_them(tmp_path, no_leaks):
+    cfg = TrainConfig(
+        workers=1, weathers=["CO"], run_days=1, timesteps=96, batch_size=96, run_name="clock", time_features=True,
+        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
+    )  # fmt: skip
+    controller = policy_controller(str(train(cfg, progress=False)))
+    assert controller.time_features
+    df = run_sweep([controller], ["CO"], run_days=1, workers=1, out_dir=tmp_path / "eval", progress=False)
+    assert df.steps.tolist() == [96] and df.power_kw.gt(0).all()
