@@ -30,14 +30,13 @@ from .episode import (
     write_records,
 )
 from .errors import EnergyPlusError, ProtocolError
-from .model import SENSORS, STEPS_PER_DAY, control_model, time_features
+from .model import SENSORS, STEPS_PER_DAY, control_model, observation_bounds, time_features
 from .reward import RewardConfig, reward
 from .weather import resolve_weather, weather_label
 
 log = logging.getLogger(__name__)
 
-OBS_LOW = np.array([s.low for s in SENSORS], dtype=np.float32)
-OBS_HIGH = np.array([s.high for s in SENSORS], dtype=np.float32)
+OBS_LOW, OBS_HIGH = (np.array(b, dtype=np.float32) for b in observation_bounds(False))  # sensors only
 _WEST, _EAST, _POWER = 1, 2, 3  # sensor positions used by the reward
 
 
