@@ -196,15 +196,15 @@ class EpisodeMetrics(BaseCallback):
 
 
 def _latest_checkpoint(path: Path) -> Path:
-    """A checkpoint .zip, or the newest checkpoint (else the final model) in a run directory."""
+    """A checkpoint .zip, or the newest save in a run directory: the last checkpoint, or the final model
+    when the run finished after it (SB3 ends on a whole batch, past the last checkpoint)."""
     if path.is_file():
         return path
     checkpoints = sorted((path / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
-    if checkpoints:
-        return checkpoints[-1]
-    if (path / MODEL_FILE).is_file():
-        return path / MODEL_FILE
-    raise FileNotFoundError(f"no checkpoint or {MODEL_FILE} in {path}")
+    saves = checkpoints[-1:] + [p for p in [path / MODEL_FILE] if p.is_file()]
+    if not saves:
+        raise FileNotFoundError(f"no checkpoint or {MODEL_FILE} in {path}")
+    return max(saves, key=lambda p: p.stat().st_mtime_ns)
 
 
 def normalization_file(model_zip: Path) -> Path:
