@@ -220,10 +220,16 @@ def _run_dir_of(checkpoint: Path) -> Path:
 
 
 class _Interrupt:
-    """Turns SIGTERM into KeyboardInterrupt for the duration of training, like Ctrl-C."""
+    """SIGINT and SIGTERM raise KeyboardInterrupt for the duration of training.
+
+    SIGINT too, explicitly: a process started in the background by a shell (`cmd &`, nohup, CI
+    runners) inherits SIGINT as ignored, and `kill -INT` would then do nothing at all.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __enter__(self):
-        self._old = signal.signal(signal.SIGTERM, self._raise)
+        self._old = {s: signal.signal(s, self._raise) for s in self.SIGNALS}
         return self
 
     @staticmethod
@@ -231,7 +237,8 @@ class _Interrupt:
         raise KeyboardInterrupt(f"signal {signum}")
 
     def __exit__(self, *exc):
-        signal.signal(signal.SIGTERM, self._old)
+        for s, handler in self._old.items():
+            signal.signal(s, handler)
         return False
 
 
