@@ -114,7 +114,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     controllers += [policy_controller(p) for p in args.policy or []]
     if not controllers:
         raise ValueError("nothing to evaluate: give --baseline, --rbc and/or --policy PATH")
-    histogram = tuple(args.histogram.split(",", 1)) if args.histogram else None
+    histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward), not args.quiet
     )

@@ -221,7 +221,12 @@ def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | 
         weathers = list(df[df.controller == controller]["weather"])
         histogram = (controller, "VA" if "VA" in weathers else weathers[-1])
     row = df[(df.controller == histogram[0]) & (df.weather == histogram[1])]
-    if not row.empty:
+    if row.empty:
+        log.warning(
+            "no West-zone histogram: no episode of %r on %s (controllers: %s)",
+            histogram[0], histogram[1], ", ".join(df["controller"].unique()),
+        )  # fmt: skip
+    else:
         files.append(
             plots.west_zone_histogram(Path(row.iloc[0]["episode_dir"]), histogram, out_dir / "west_zone_histogram.png")
         )
