@@ -1,0 +1,144 @@
+"""The learner's side of a control step: SB3's rollout loop with the policy evaluated in numpy.
+
+Why: with two workers, SB3's loop spent ~2 ms of learner CPU per vector step (torch dispatch for a
+32x32 network, building a `Normal` distribution, tensor conversions) while every EnergyPlus worker
+waited for its action; on a 2-core machine that CPU is also taken from EnergyPlus. The same
+arithmetic on numpy arrays costs a few microseconds. Everything else is SB3's: the rollout buffer,
+the timeout bootstrap, the callbacks and TRPO's update, which still runs in torch.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from sb3_contrib import TRPO
+from stable_baselines3.common.buffers import RolloutBuffer
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.distributions import DiagGaussianDistribution
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.torch_layers import FlattenExtractor
+from stable_baselines3.common.vec_env import VecEnv
+
+_HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
+
+
+def _layers(module: th.nn.Module) -> list[tuple[np.ndarray, np.ndarray, bool]] | None:
+    """(weight.T, bias, tanh after?) per Linear of a Linear/Tanh stack; None for anything else."""
+    layers: list[tuple[np.ndarray, np.ndarray, bool]] = []
+    for m in module.modules() if isinstance(module, th.nn.Sequential) else [module]:
+        if isinstance(m, th.nn.Sequential):
+            continue
+        if isinstance(m, th.nn.Linear):
+            layers.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy(), False))
+        elif isinstance(m, th.nn.Tanh) and layers:
+            layers[-1] = (*layers[-1][:2], True)
+        else:
+            return None
+    return layers
+
+
+def _run(layers: list[tuple[np.ndarray, np.ndarray, bool]], x: np.ndarray) -> np.ndarray:
+    for w, b, tanh in layers:
+        x = x @ w + b
+        if tanh:
+            np.tanh(x, out=x)
+    return x
+
+
+class NumpyPolicy:
+    """A snapshot of an SB3 `MlpPolicy` (Box observations, diagonal Gaussian, tanh MLP) in numpy.
+
+    Take a new snapshot after every update; `supports(policy)` says whether a policy has this shape.
+    """
+
+    def __init__(self, policy: ActorCriticPolicy):
+        self.actor = _layers(policy.mlp_extractor.policy_net) + _layers(policy.action_net)
+        self.critic = _layers(policy.mlp_extractor.value_net) + _layers(policy.value_net)
+        log_std = policy.log_std.detach().numpy().astype(np.float64)
+        self.std = np.exp(log_std)
+        self._log_prob_const = -(log_std.sum() + _HALF_LOG_2PI * log_std.size)
+
+    @staticmethod
+    def supports(policy: ActorCriticPolicy) -> bool:
+        extractor = policy.mlp_extractor
+        return (
+            isinstance(policy.observation_space, spaces.Box)
+            and isinstance(policy.action_dist, DiagGaussianDistribution)
+            and not policy.squash_output
+            and not policy.use_sde
+            and isinstance(policy.pi_features_extractor, FlattenExtractor)
+            and isinstance(policy.vf_features_extractor, FlattenExtractor)
+            and all(_layers(m) is not None for m in (extractor.policy_net, extractor.value_net))
+            and all(_layers(m) is not None for m in (policy.action_net, policy.value_net))
+        )
+
+    def mean(self, obs: np.ndarray) -> np.ndarray:
+        return _run(self.actor, obs.reshape(len(obs), -1).astype(np.float64))
+
+    def value(self, obs: np.ndarray) -> np.ndarray:
+        return _run(self.critic, obs.reshape(len(obs), -1).astype(np.float64))[:, 0]
+
+    def log_prob(self, actions: np.ndarray, mean: np.ndarray) -> np.ndarray:
+        z = (actions - mean) / self.std
+        return self._log_prob_const - 0.5 * np.einsum("ij,ij->i", z, z)
+
+    def sample(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stochastic actions, the critic's values and the actions' log-probabilities."""
+        mean = self.mean(obs)
+        actions = mean + self.std * rng.standard_normal(mean.shape)
+        return actions, self.value(obs), self.log_prob(actions, mean)
+
+
+class FastTRPO(TRPO):
+    """sb3-contrib's TRPO, collecting rollouts with a `NumpyPolicy` when the policy has its shape.
+
+    Saved models are ordinary TRPO models: `sb3_contrib.TRPO.load` reads them.
+    """
+
+    def _setup_model(self) -> None:
+        super()._setup_model()
+        self._rng = np.random.default_rng(self.seed)
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "_rng"]
+
+    def collect_rollouts(
+        self, env: VecEnv, callback: BaseCallback, rollout_buffer: RolloutBuffer, n_rollout_steps: int
+    ) -> bool:
+        if not NumpyPolicy.supports(self.policy):
+            return super().collect_rollouts(env, callback, rollout_buffer, n_rollout_steps)
+        assert self._last_obs is not None, "No previous observation was provided"
+        self.policy.set_training_mode(False)
+        policy = NumpyPolicy(self.policy)
+        low, high = self.action_space.low, self.action_space.high
+        rollout_buffer.reset()
+        callback.on_rollout_start()
+        dones = self._last_episode_starts
+        for _ in range(n_rollout_steps):
+            actions, values, log_probs = policy.sample(self._last_obs, self._rng)
+            actions = actions.astype(np.float32)
+            new_obs, rewards, dones, infos = env.step(np.clip(actions, low, high))
+            self.num_timesteps += env.num_envs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return False
+            self._update_info_buffer(infos, dones)
+            # A cut (not finished) episode: bootstrap with the value of where it stopped (SB3 issue #633).
+            for i in np.flatnonzero(dones):
+                terminal = infos[i].get("terminal_observation")
+                if terminal is not None and infos[i].get("TimeLimit.truncated", False):
+                    rewards[i] += self.gamma * policy.value(terminal[None])[0]
+            rollout_buffer.add(
+                self._last_obs, actions, rewards, self._last_episode_starts,
+                th.from_numpy(values.astype(np.float32)), th.from_numpy(log_probs.astype(np.float32)),
+            )  # fmt: skip
+            self._last_obs = new_obs
+            self._last_episode_starts = dones
+        last_values = th.from_numpy(policy.value(new_obs).astype(np.float32))
+        rollout_buffer.compute_returns_and_advantage(last_values=last_values, dones=dones)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
