@@ -84,6 +84,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         workers_per_actor=args.workers_per_actor,
         time_features=args.time_features,
+        init_from=str(args.init_from) if args.init_from else None,
         reward=RewardConfig.from_any(args.reward),
     )
     if args.resume and "--timesteps" not in sys.argv:
@@ -175,6 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--run-name", help="default: trpo-<weathers>-<time>")
     tr.add_argument("--resume", help="a checkpoint .zip or a run directory to continue")
+    tr.add_argument(
+        "--init-from", type=Path,
+        help="start a new run from a saved model.zip's weights and observation statistics (fine-tuning)",
+    )  # fmt: skip
     tr.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
     tr.add_argument("--keep-episodes", type=int, default=2, help="full episode directories kept per worker")
     tr.add_argument("--backend", default="local", choices=["local", "ray"])

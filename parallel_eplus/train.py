@@ -73,6 +73,7 @@ class TrainConfig:
     workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
     max_restarts: int = 3
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
+    init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
     reward: RewardConfig = field(default_factory=RewardConfig)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
 
@@ -83,6 +84,8 @@ class TrainConfig:
             raise ValueError("--workers must be at least 1")
         if self.batch_size < self.workers:
             raise ValueError("--batch-size must be at least the number of workers")
+        if self.init_from is not None:
+            self.init_from = str(Path(self.init_from).resolve())
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
         if self.run_name is None:
@@ -269,9 +272,11 @@ def train(
     timer: UpdateTimer | None = None,
 ) -> Path:
     """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first."""
-    from sb3_contrib import TRPO
+    from .rollout import FastTRPO as TRPO
 
     checkpoint = None
+    if resume is not None and cfg.init_from is not None:
+        raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
     if resume is not None:
         checkpoint = _latest_checkpoint(Path(resume))
         saved = TrainConfig.from_json((_run_dir_of(checkpoint) / "config.json").read_text())
@@ -280,6 +285,8 @@ def train(
         saved.backend, saved.ray_address = cfg.backend, cfg.ray_address
         cfg = saved
     cfg = cfg.resolved()
+    if cfg.init_from is not None:
+        _check_init_from(Path(cfg.init_from), cfg.time_features)  # before any EnergyPlus starts
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.json").write_text(cfg.to_json())
@@ -293,7 +300,10 @@ def train(
             model = TRPO.load(checkpoint, env=env, device="cpu")
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
         else:
-            env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
+            if cfg.init_from is not None:
+                env = _warm_normalizer(Path(cfg.init_from), venv)
+            else:
+                env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
             t = cfg.trpo
             model = TRPO(
                 "MlpPolicy",
@@ -311,6 +321,12 @@ def train(
                 seed=cfg.seed,
                 device="cpu",
             )
+            if cfg.init_from is not None:
+                try:
+                    model.policy.load_state_dict(TRPO.load(cfg.init_from, device="cpu").policy.state_dict())
+                except RuntimeError as e:  # another network shape
+                    raise ValueError(f"--init-from {cfg.init_from}: its network does not fit this run's: {e}") from e
+                log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         bar = tqdm(total=cfg.timesteps, initial=model.num_timesteps, unit="step", disable=not progress,
@@ -346,6 +362,23 @@ def train(
         venv.close()
 
 
+def _check_init_from(model_zip: Path, time_features: bool) -> None:
+    if not model_zip.is_file():
+        raise FileNotFoundError(f"--init-from: policy not found: {model_zip}")
+    if not normalization_file(model_zip).is_file():
+        raise FileNotFoundError(f"--init-from: observation statistics missing: {normalization_file(model_zip)}")
+    if policy_time_features(model_zip) != time_features:
+        flag = "add" if not time_features else "drop"
+        raise ValueError(f"--init-from {model_zip}: that policy sees other observations; {flag} --time-features")
+
+
+def _warm_normalizer(model_zip: Path, venv: SB3VecEnv) -> VecNormalize:
+    """The observation statistics a warm-started run inherits; they keep updating."""
+    env = VecNormalize.load(str(normalization_file(model_zip)), venv)
+    env.training = True
+    return env
+
+
 def policy_time_features(model_zip: str | Path) -> bool:
     """Whether a saved policy observes `model.TIME_FEATURES`, read from its observation statistics."""
     import pickle
@@ -371,11 +404,17 @@ def load_policy(model_zip: str | Path):
     model = TRPO.load(model_zip, device="cpu")
     import pickle
 
+    from .rollout import NumpyPolicy
+
     with open(stats, "rb") as f:
         norm: VecNormalize = pickle.load(f)
     norm.training = False
+    low, high = model.action_space.low, model.action_space.high
+    policy = NumpyPolicy(model.policy) if NumpyPolicy.supports(model.policy) else None
 
     def act(obs: np.ndarray) -> np.ndarray:
+        if policy is not None:  # the Gaussian's mean, as SB3's deterministic predict, without torch
+            return np.clip(policy.mean(norm.normalize_obs(obs)), low, high).astype(np.float32)
         action, _ = model.predict(norm.normalize_obs(obs), deterministic=True)
         return action
 

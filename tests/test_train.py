@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+from parallel_eplus.reward import RewardConfig
 from parallel_eplus.train import TrainConfig, _latest_checkpoint, load_policy, train
 
 from .conftest import our_pipe_dirs, our_processes
@@ -95,3 +96,22 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
     assert max(steps) > cut_at  # TensorBoard curves continue past the cut, not from zero
     # A finished run resumes from its final model, which is newer than its last checkpoint.
     assert _latest_checkpoint(tmp_path / "runs" / "cut") == resumed
+
+
+def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
+    import pickle
+
+    base = train(small_config(tmp_path, "base", weathers=["CA"], timesteps=768), progress=False)
+    with pytest.raises(ValueError, match="--time-features"):  # another observation: refused before EnergyPlus starts
+        train(small_config(tmp_path, "wrong", init_from=str(base), time_features=True), progress=False)
+    reward = RewardConfig(center_c=23.0, lower_c=22.5, upper_c=23.5)
+    tuned = small_config(tmp_path, "tuned", weathers=["CO"], timesteps=512, batch_size=512, reward=reward)
+    tuned.init_from = str(base)
+    final = train(tuned, progress=False)
+    counts = []
+    for model in (base, final):
+        with open(model.parent / "vecnormalize.pkl", "rb") as f:
+            counts.append(pickle.load(f).obs_rms.count)
+    assert counts[1] > counts[0] + 500  # inherited the statistics, then kept updating them
+    saved = TrainConfig.from_json((final.parent / "config.json").read_text())
+    assert saved.init_from == str(base) and saved.reward == reward and saved.batch_size == 512
