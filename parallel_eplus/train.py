@@ -329,7 +329,9 @@ def train(
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
-        bar = tqdm(total=cfg.timesteps, initial=model.num_timesteps, unit="step", disable=not progress,
+        batch = cfg.n_steps * cfg.workers
+        end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
+        bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
         callbacks = CallbackList([
             timer or UpdateTimer(),
