@@ -246,12 +246,21 @@ class _Interrupt:
 
 
 class UpdateTimer(BaseCallback):
-    """Wall time of each TRPO update (between rollouts): the learner's share of a batch."""
+    """Wall time of each TRPO update (between rollouts), and of `learn` from the first observations on."""
 
     def __init__(self):
         super().__init__()
         self.updates: list[float] = []
         self._t: float | None = None
+        self.learn_s = 0.0
+        self.learn_steps = 0
+
+    def _on_training_start(self) -> None:  # SB3 has reset the env: every worker has its first observation
+        self._t0, self._steps0 = time.perf_counter(), self.num_timesteps
+
+    def _on_training_end(self) -> None:
+        self.learn_s = time.perf_counter() - self._t0
+        self.learn_steps = self.num_timesteps - self._steps0
 
     def _on_rollout_end(self) -> None:
         self._t = time.perf_counter()
