@@ -101,6 +101,13 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _temperatures(text: str, flag: str) -> list[float]:
+    try:
+        return [float(t) for t in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{flag} takes zone temperatures in °C, comma-separated (e.g. 22.7,23.5): {text!r}") from None
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluate import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller, run_sweep, write_results
     from .reward import RewardConfig
@@ -112,9 +119,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(BASELINE_LABEL, "baseline"))
     if args.rbc:
         controllers.append(Controller(RBC_LABEL, "rbc"))
+    for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
+        controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
     controllers += [policy_controller(p) for p in args.policy or []]
     if not controllers:
-        raise ValueError("nothing to evaluate: give --baseline, --rbc and/or --policy PATH")
+        raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward), not args.quiet
@@ -193,6 +202,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--policy", action="append", help="a trained model.zip (or run dir); PATH=LABEL sets the label")
     ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
     ev.add_argument("--rbc", action="store_true", help="include the rule-based controller")
+    ev.add_argument(
+        "--rbc-targets", metavar="C,C,...",
+        help="the rule-based controller once per zone target (°C), e.g. 22.7,23.5: what the reward pays for each",
+    )  # fmt: skip
     ev.add_argument("--weathers", default="CA,CO,FL,IL,VA")
     ev.add_argument("--run-days", type=int, default=365)
     ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")

@@ -20,7 +20,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from .model import STEPS_PER_DAY
-from .rbc import RuleBasedController
+from .rbc import RBCConfig, RuleBasedController
 from .reward import RewardConfig
 from .simulation import Simulation, SimulationConfig
 from .weather import parse_weathers, weather_label
@@ -39,6 +39,7 @@ class Controller:
     kind: str  # "baseline", "policy" or "rbc"
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
+    rbc_target_c: float | None = None  # the rule-based controller's zone target; None: RBCConfig's
 
     @property
     def model(self) -> str:
@@ -50,7 +51,8 @@ class Controller:
             empty = np.zeros(0, dtype=np.float32)
             return lambda obs, info: empty
         if self.kind == "rbc":
-            return RuleBasedController()
+            target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
+            return RuleBasedController(RBCConfig(**target))
         from .train import load_policy
 
         act = load_policy(self.path)

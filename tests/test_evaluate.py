@@ -72,6 +72,8 @@ def test_bad_input_fails_before_anything_runs(tmp_path):
     assert r.returncode == 2 and "unknown weather 'XX'" in r.stderr
     r = cli("--policy", str(tmp_path / "missing.zip"))
     assert r.returncode == 2 and "policy not found" in r.stderr
+    r = cli("--rbc-targets", "22.7,warm")
+    assert r.returncode == 2 and "--rbc-targets takes zone temperatures" in r.stderr
     assert not any(tmp_path.iterdir())
 
 
@@ -84,3 +86,11 @@ def test_policy_with_time_features_is_evaluated_with_them(tmp_path, no_leaks):
     assert controller.time_features
     df = run_sweep([controller], ["CO"], run_days=1, workers=1, out_dir=tmp_path / "eval", progress=False)
     assert df.steps.tolist() == [96] and df.power_kw.gt(0).all()
+
+
+def test_rule_based_controller_holds_the_target_it_is_given(tmp_path, no_leaks):
+    controllers = [Controller(f"RBC {t}", "rbc", rbc_target_c=t) for t in (22.7, 23.7)]
+    df = run_sweep(controllers, ["CO"], 3, 2, tmp_path, progress=False).set_index("controller")
+    cold, warm = df.loc["RBC 22.7"], df.loc["RBC 23.7"]
+    for zone in ("west", "east"):
+        assert warm[f"{zone}_temp_mean"] - cold[f"{zone}_temp_mean"] > 0.6, zone
