@@ -19,7 +19,8 @@ from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.distributions import DiagGaussianDistribution
 from stable_baselines3.common.policies import ActorCriticPolicy
-from stable_baselines3.common.torch_layers import FlattenExtractor
+from stable_baselines3.common.preprocessing import is_image_space
+from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
 from stable_baselines3.common.vec_env import VecEnv
 
 _HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
@@ -31,9 +32,9 @@ def _layers(module: th.nn.Module) -> list[tuple[np.ndarray, np.ndarray, bool]] |
     for m in module.modules() if isinstance(module, th.nn.Sequential) else [module]:
         if isinstance(m, th.nn.Sequential):
             continue
-        if isinstance(m, th.nn.Linear):
+        if type(m) is th.nn.Linear and m.bias is not None:
             layers.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy(), False))
-        elif isinstance(m, th.nn.Tanh) and layers:
+        elif type(m) is th.nn.Tanh and layers and not layers[-1][2]:
             layers[-1] = (*layers[-1][:2], True)
         else:
             return None
@@ -63,33 +64,52 @@ class NumpyPolicy:
 
     @staticmethod
     def supports(policy: ActorCriticPolicy) -> bool:
-        extractor = policy.mlp_extractor
+        """Exactly SB3's own classes (a subclass may override any step), on the CPU, flat spaces."""
+        if type(policy) is not ActorCriticPolicy or policy.device.type != "cpu":
+            return False
+        obs_space, act_space = policy.observation_space, policy.action_space
         return (
-            isinstance(policy.observation_space, spaces.Box)
-            and isinstance(policy.action_dist, DiagGaussianDistribution)
+            isinstance(obs_space, spaces.Box)
+            and not (policy.normalize_images and is_image_space(obs_space))
+            and isinstance(act_space, spaces.Box)
+            and len(act_space.shape) == 1
+            and type(policy.action_dist) is DiagGaussianDistribution
             and not policy.squash_output
             and not policy.use_sde
-            and isinstance(policy.pi_features_extractor, FlattenExtractor)
-            and isinstance(policy.vf_features_extractor, FlattenExtractor)
-            and all(_layers(m) is not None for m in (extractor.policy_net, extractor.value_net))
-            and all(_layers(m) is not None for m in (policy.action_net, policy.value_net))
+            and type(policy.mlp_extractor) is MlpExtractor
+            and type(policy.pi_features_extractor) is FlattenExtractor
+            and type(policy.vf_features_extractor) is FlattenExtractor
+            and all(
+                _layers(m) is not None
+                for m in (
+                    policy.mlp_extractor.policy_net,
+                    policy.mlp_extractor.value_net,
+                    policy.action_net,
+                    policy.value_net,
+                )
+            )
         )
 
+    @staticmethod
+    def _flat(obs: np.ndarray) -> np.ndarray:
+        return obs.reshape(len(obs), -1).astype(np.float64)
+
     def mean(self, obs: np.ndarray) -> np.ndarray:
-        return _run(self.actor, obs.reshape(len(obs), -1).astype(np.float64))
+        return _run(self.actor, self._flat(obs))
 
     def value(self, obs: np.ndarray) -> np.ndarray:
-        return _run(self.critic, obs.reshape(len(obs), -1).astype(np.float64))[:, 0]
+        return _run(self.critic, self._flat(obs))[:, 0]
 
     def log_prob(self, actions: np.ndarray, mean: np.ndarray) -> np.ndarray:
         z = (actions - mean) / self.std
-        return self._log_prob_const - 0.5 * np.einsum("ij,ij->i", z, z)
+        return self._log_prob_const - 0.5 * (z * z).sum(axis=1)
 
     def sample(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Stochastic actions, the critic's values and the actions' log-probabilities."""
-        mean = self.mean(obs)
-        actions = mean + self.std * rng.standard_normal(mean.shape)
-        return actions, self.value(obs), self.log_prob(actions, mean)
+        """Stochastic float32 actions (as the buffer stores them), the critic's values, their log-probabilities."""
+        x = self._flat(obs)
+        mean = _run(self.actor, x)
+        actions = (mean + self.std * rng.standard_normal(mean.shape)).astype(np.float32)
+        return actions, _run(self.critic, x)[:, 0], self.log_prob(actions, mean)
 
 
 class FastTRPO(TRPO):
@@ -98,9 +118,9 @@ class FastTRPO(TRPO):
     Saved models are ordinary TRPO models: `sb3_contrib.TRPO.load` reads them.
     """
 
-    def _setup_model(self) -> None:
-        super()._setup_model()
-        self._rng = np.random.default_rng(self.seed)
+    def set_random_seed(self, seed: int | None = None) -> None:
+        super().set_random_seed(seed)  # SB3 calls this while setting the model up, seed or not
+        self._rng = np.random.default_rng(seed)
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_rng"]
@@ -116,11 +136,10 @@ class FastTRPO(TRPO):
         low, high = self.action_space.low, self.action_space.high
         rollout_buffer.reset()
         callback.on_rollout_start()
-        dones = self._last_episode_starts
         for _ in range(n_rollout_steps):
             actions, values, log_probs = policy.sample(self._last_obs, self._rng)
-            actions = actions.astype(np.float32)
-            new_obs, rewards, dones, infos = env.step(np.clip(actions, low, high))
+            clipped_actions = np.clip(actions, low, high)  # the buffer keeps the unclipped ones, as in SB3
+            new_obs, rewards, dones, infos = env.step(clipped_actions)
             self.num_timesteps += env.num_envs
             callback.update_locals(locals())
             if not callback.on_step():
@@ -133,12 +152,12 @@ class FastTRPO(TRPO):
                     rewards[i] += self.gamma * policy.value(terminal[None])[0]
             rollout_buffer.add(
                 self._last_obs, actions, rewards, self._last_episode_starts,
-                th.from_numpy(values.astype(np.float32)), th.from_numpy(log_probs.astype(np.float32)),
+                th.from_numpy(values), th.from_numpy(log_probs),
             )  # fmt: skip
             self._last_obs = new_obs
             self._last_episode_starts = dones
-        last_values = th.from_numpy(policy.value(new_obs).astype(np.float32))
-        rollout_buffer.compute_returns_and_advantage(last_values=last_values, dones=dones)
+        values = th.from_numpy(policy.value(new_obs))
+        rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)
         callback.update_locals(locals())
         callback.on_rollout_end()
         return True

@@ -1,5 +1,6 @@
 """The learner's numpy policy computes what SB3's torch policy computes."""
 
+import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
@@ -47,5 +48,12 @@ def test_numpy_policy_samples_with_the_policys_spread():
 
 
 def test_other_policy_shapes_fall_back_to_sb3():
-    policy = ActorCriticPolicy(observation_space(False), action_space(4), lambda _: 1e-3, activation_fn=th.nn.ReLU)
-    assert not NumpyPolicy.supports(policy)
+    def policy(obs=None, act=None, **kwargs):
+        obs, act = obs or observation_space(False), act or action_space(4)
+        return ActorCriticPolicy(obs, act, lambda _: 1e-3, **{"activation_fn": th.nn.Tanh, **kwargs})
+
+    assert NumpyPolicy.supports(policy())
+    assert not NumpyPolicy.supports(policy(activation_fn=th.nn.ReLU))
+    assert not NumpyPolicy.supports(policy(act=gym.spaces.Box(-1, 1, (2, 3), np.float32)))  # not flat
+    image = gym.spaces.Box(0, 255, (3, 36, 36), np.uint8)  # SB3 scales images by 1/255 first
+    assert not NumpyPolicy.supports(policy(obs=image))
