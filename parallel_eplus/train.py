@@ -294,7 +294,7 @@ def train(
         saved.backend, saved.ray_address = cfg.backend, cfg.ray_address
         cfg = saved
     cfg = cfg.resolved()
-    if cfg.init_from is not None:
+    if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
         _check_init_from(Path(cfg.init_from), cfg.time_features)  # before any EnergyPlus starts
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
