@@ -85,6 +85,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         workers_per_actor=args.workers_per_actor,
         time_features=args.time_features,
         init_from=str(args.init_from) if args.init_from else None,
+        algorithm=args.algorithm,
         reward=RewardConfig.from_any(args.reward),
     )
     if args.resume and "--timesteps" not in sys.argv:
@@ -171,13 +172,17 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     sim.set_defaults(func=cmd_simulate)
 
-    tr = sub.add_parser("train", help="train TRPO on parallel EnergyPlus workers (paper settings by default)")
+    tr = sub.add_parser("train", help="train TRPO (or PPO) on parallel EnergyPlus workers (paper settings by default)")
     tr.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="EnergyPlus processes (default: cores)")
     tr.add_argument("--weathers", default="CA", help="comma-separated, e.g. CA,CO,FL (default CA)")
     tr.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
     tr.add_argument(
         "--time-features", action="store_true",
         help="add hour and day of week (sine/cosine) to the paper's six observations",
+    )  # fmt: skip
+    tr.add_argument(
+        "--algorithm", default="trpo", choices=["trpo", "ppo"],
+        help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting",
     )  # fmt: skip
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")

@@ -74,7 +74,8 @@ def policy_controller(spec: str) -> Controller:
     if not label:
         config = path.parent / "config.json"
         if config.is_file():
-            label = f"TRPO ({'-'.join(json.loads(config.read_text())['weathers'])})"
+            saved = json.loads(config.read_text())
+            label = f"{saved.get('algorithm', 'trpo').upper()} ({'-'.join(saved['weathers'])})"
         else:
             label = path.parent.name
     return Controller(label, "policy", path, policy_time_features(path))

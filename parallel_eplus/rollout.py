@@ -15,6 +15,7 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 from sb3_contrib import TRPO
+from stable_baselines3 import PPO
 from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.distributions import DiagGaussianDistribution
@@ -112,10 +113,10 @@ class NumpyPolicy:
         return actions, _run(self.critic, x)[:, 0], self.log_prob(actions, mean)
 
 
-class FastTRPO(TRPO):
-    """sb3-contrib's TRPO, collecting rollouts with a `NumpyPolicy` when the policy has its shape.
+class NumpyRollouts:
+    """For SB3's on-policy algorithms: collect rollouts with a `NumpyPolicy` when the policy has its shape.
 
-    Saved models are ordinary TRPO models: `sb3_contrib.TRPO.load` reads them.
+    Saved models are the algorithm's ordinary models: `sb3_contrib.TRPO.load` (or `PPO.load`) reads them.
     """
 
     def set_random_seed(self, seed: int | None = None) -> None:
@@ -161,3 +162,14 @@ class FastTRPO(TRPO):
         callback.update_locals(locals())
         callback.on_rollout_end()
         return True
+
+
+class FastTRPO(NumpyRollouts, TRPO):
+    """sb3-contrib's TRPO (the paper's algorithm) with the numpy rollout loop."""
+
+
+class FastPPO(NumpyRollouts, PPO):
+    """Stable-Baselines3's PPO with the numpy rollout loop: the comparison the paper did not run."""
+
+
+ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO}

@@ -53,6 +53,16 @@ class TRPOSettings:
 
 
 @dataclass
+class PPOSettings:
+    """Stable-Baselines3's PPO for comparison runs; network, gamma and GAE lambda come from TRPOSettings."""
+
+    learning_rate: float = 3e-4
+    n_epochs: int = 10
+    batch_size: int = 256  # minibatch
+    clip_range: float = 0.2
+
+
+@dataclass
 class TrainConfig:
     """Everything a training run needs; saved as runs/<name>/config.json."""
 
@@ -74,8 +84,10 @@ class TrainConfig:
     max_restarts: int = 3
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
+    algorithm: str = "trpo"  # the paper's; or "ppo"
     reward: RewardConfig = field(default_factory=RewardConfig)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
+    ppo: PPOSettings = field(default_factory=PPOSettings)
 
     def resolved(self) -> TrainConfig:
         """Validate, and fill in the run name."""
@@ -86,10 +98,12 @@ class TrainConfig:
             raise ValueError("--batch-size must be at least the number of workers")
         if self.init_from is not None:
             self.init_from = str(Path(self.init_from).resolve())
+        if self.algorithm not in ("trpo", "ppo"):
+            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo or ppo")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
         if self.run_name is None:
-            self.run_name = f"trpo-{'-'.join(self.weathers)}-{time.strftime('%Y%m%d-%H%M%S')}"
+            self.run_name = f"{self.algorithm}-{'-'.join(self.weathers)}-{time.strftime('%Y%m%d-%H%M%S')}"
         # Absolute, so a resumed run writes to the same places from any working directory.
         self.runs_dir = str(Path(self.runs_dir).resolve())
         self.tensorboard_dir = str(Path(self.tensorboard_dir).resolve())
@@ -112,6 +126,7 @@ class TrainConfig:
         raw = json.loads(text)
         raw["reward"] = RewardConfig(**raw["reward"])
         raw["trpo"] = TRPOSettings(**{**raw["trpo"], "net_arch": tuple(raw["trpo"]["net_arch"])})
+        raw["ppo"] = PPOSettings(**raw.get("ppo", {}))  # runs from before PPO have none
         return cls(**raw)
 
 
@@ -281,7 +296,7 @@ def train(
     timer: UpdateTimer | None = None,
 ) -> Path:
     """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first."""
-    from .rollout import FastTRPO as TRPO
+    from .rollout import ALGORITHMS
 
     checkpoint = None
     if resume is not None and cfg.init_from is not None:
@@ -306,33 +321,17 @@ def train(
     try:
         if checkpoint is not None:
             env = VecNormalize.load(str(normalization_file(checkpoint)), venv)
-            model = TRPO.load(checkpoint, env=env, device="cpu")
+            model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu")
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
         else:
             if cfg.init_from is not None:
                 env = _warm_normalizer(Path(cfg.init_from), venv)
             else:
                 env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
-            t = cfg.trpo
-            model = TRPO(
-                "MlpPolicy",
-                env,
-                learning_rate=t.learning_rate,
-                n_steps=cfg.n_steps,
-                batch_size=t.critic_batch_size,
-                gamma=t.gamma,
-                cg_max_steps=t.cg_max_steps,
-                cg_damping=t.cg_damping,
-                n_critic_updates=t.n_critic_updates,
-                gae_lambda=t.gae_lambda,
-                target_kl=t.target_kl,
-                policy_kwargs={"net_arch": list(t.net_arch), "activation_fn": th.nn.Tanh},
-                seed=cfg.seed,
-                device="cpu",
-            )
+            model = _new_model(cfg, env)
             if cfg.init_from is not None:
                 try:
-                    model.policy.load_state_dict(TRPO.load(cfg.init_from, device="cpu").policy.state_dict())
+                    model.policy.load_state_dict(_saved_policy(Path(cfg.init_from)).state_dict())
                 except RuntimeError as e:  # another network shape
                     raise ValueError(f"--init-from {cfg.init_from}: its network does not fit this run's: {e}") from e
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
@@ -373,6 +372,39 @@ def train(
         venv.close()
 
 
+def _new_model(cfg: TrainConfig, env: VecNormalize):
+    from .rollout import ALGORITHMS
+
+    t = cfg.trpo
+    common = dict(
+        n_steps=cfg.n_steps, gamma=t.gamma, gae_lambda=t.gae_lambda, seed=cfg.seed, device="cpu",
+        policy_kwargs={"net_arch": list(t.net_arch), "activation_fn": th.nn.Tanh},
+    )  # fmt: skip
+    if cfg.algorithm == "ppo":
+        p = cfg.ppo
+        return ALGORITHMS["ppo"](
+            "MlpPolicy", env, learning_rate=p.learning_rate, n_epochs=p.n_epochs, batch_size=p.batch_size,
+            clip_range=p.clip_range, **common,
+        )  # fmt: skip
+    return ALGORITHMS["trpo"](
+        "MlpPolicy", env, learning_rate=t.learning_rate, batch_size=t.critic_batch_size, cg_max_steps=t.cg_max_steps,
+        cg_damping=t.cg_damping, n_critic_updates=t.n_critic_updates, target_kl=t.target_kl, **common,
+    )  # fmt: skip
+
+
+def _saved_policy(model_zip: Path):
+    """The policy network of a saved model, whichever on-policy algorithm trained it."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    data, params, _ = load_from_zip_file(model_zip, device="cpu")
+    policy = data["policy_class"](
+        data["observation_space"], data["action_space"], lambda _: 0.0, **data["policy_kwargs"]
+    )
+    policy.load_state_dict(params["policy"])
+    policy.set_training_mode(False)
+    return policy
+
+
 def _check_init_from(model_zip: Path, time_features: bool) -> None:
     if not model_zip.is_file():
         raise FileNotFoundError(f"--init-from: policy not found: {model_zip}")
@@ -404,15 +436,13 @@ def policy_time_features(model_zip: str | Path) -> bool:
 
 def load_policy(model_zip: str | Path):
     """A trained policy and its observation normalizer, ready to act deterministically."""
-    from sb3_contrib import TRPO
-
     model_zip = Path(model_zip)
     if not model_zip.is_file():
         raise FileNotFoundError(f"policy not found: {model_zip}")
     stats = normalization_file(model_zip)
     if not stats.is_file():
         raise FileNotFoundError(f"normalization statistics not found beside the policy: {stats}")
-    model = TRPO.load(model_zip, device="cpu")
+    saved = _saved_policy(model_zip)
     import pickle
 
     from .rollout import NumpyPolicy
@@ -420,13 +450,13 @@ def load_policy(model_zip: str | Path):
     with open(stats, "rb") as f:
         norm: VecNormalize = pickle.load(f)
     norm.training = False
-    low, high = model.action_space.low, model.action_space.high
-    policy = NumpyPolicy(model.policy) if NumpyPolicy.supports(model.policy) else None
+    low, high = saved.action_space.low, saved.action_space.high
+    fast = NumpyPolicy(saved) if NumpyPolicy.supports(saved) else None
 
     def act(obs: np.ndarray) -> np.ndarray:
-        if policy is not None:  # the Gaussian's mean, as SB3's deterministic predict, without torch
-            return np.clip(policy.mean(norm.normalize_obs(obs)), low, high).astype(np.float32)
-        action, _ = model.predict(norm.normalize_obs(obs), deterministic=True)
+        if fast is not None:  # the Gaussian's mean, as SB3's deterministic predict, without torch
+            return np.clip(fast.mean(norm.normalize_obs(obs)), low, high).astype(np.float32)
+        action, _ = saved.predict(norm.normalize_obs(obs), deterministic=True)
         return action
 
     return act

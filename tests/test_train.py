@@ -115,3 +115,17 @@ def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
     assert counts[1] > counts[0] + 500  # inherited the statistics, then kept updating them
     saved = TrainConfig.from_json((final.parent / "config.json").read_text())
     assert saved.init_from == str(base) and saved.reward == reward and saved.batch_size == 512
+
+
+def test_ppo_trains_the_same_way_and_its_policy_acts(tmp_path, no_leaks):
+    from parallel_eplus.evaluate import policy_controller
+
+    final = train(small_config(tmp_path, "ppo", weathers=["CA"], timesteps=768, algorithm="ppo"), progress=False)
+    assert TrainConfig.from_json((final.parent / "config.json").read_text()).algorithm == "ppo"
+    act = load_policy(final)
+    obs = np.array([[12.0, 23.0, 24.0, 120e3, 110e3, 10e3]], dtype=np.float32)
+    a = act(obs)
+    assert a.shape == (1, 4) and np.all(np.abs(a) <= 1)
+    assert policy_controller(str(final)).label == "PPO (CA)"
+    with pytest.raises(ValueError, match="unknown algorithm"):
+        train(small_config(tmp_path, "bad", algorithm="sac"), progress=False)
