@@ -1,10 +1,10 @@
 """The learner's side of a control step: SB3's rollout loop with the policy evaluated in numpy.
 
-Why: with two workers, SB3's loop spent ~2 ms of learner CPU per vector step (torch dispatch for a
-32x32 network, building a `Normal` distribution, tensor conversions) while every EnergyPlus worker
-waited for its action; on a 2-core machine that CPU is also taken from EnergyPlus. The same
-arithmetic on numpy arrays costs a few microseconds. Everything else is SB3's: the rollout buffer,
-the timeout bootstrap, the callbacks and TRPO's update, which still runs in torch.
+Why: with two workers, SB3's loop cost 0.93 ms of learner CPU per vector step, most of it torch
+dispatch for a 32x32 network, a `Normal` per step and tensor conversions, while every EnergyPlus
+worker waited for its action; on a 2-core machine that CPU is also taken from EnergyPlus. With the
+same arithmetic on numpy arrays the loop costs 0.36 ms. Everything else is SB3's: the rollout
+buffer, the timeout bootstrap, the callbacks and the algorithm's update, which still runs in torch.
 """
 
 from __future__ import annotations
