@@ -65,12 +65,9 @@ def policy_controller(spec: str) -> Controller:
     path = Path(path_text)
     if path.is_dir():
         path = path / "model.zip"
-    from .train import normalization_file, policy_time_features
+    from .train import policy_time_features, require_policy_files
 
-    if not path.is_file():
-        raise FileNotFoundError(f"policy not found: {path}")
-    if not normalization_file(path).is_file():
-        raise FileNotFoundError(f"observation statistics missing beside the policy: {normalization_file(path)}")
+    require_policy_files(path)
     if not label:
         config = path.parent / "config.json"
         if config.is_file():

@@ -405,11 +405,18 @@ def _saved_policy(model_zip: Path):
     return policy
 
 
-def _check_init_from(model_zip: Path, time_features: bool) -> None:
+def require_policy_files(model_zip: Path, context: str = "") -> Path:
+    """A saved policy is two files: the model and its observation statistics; returns the latter."""
     if not model_zip.is_file():
-        raise FileNotFoundError(f"--init-from: policy not found: {model_zip}")
-    if not normalization_file(model_zip).is_file():
-        raise FileNotFoundError(f"--init-from: observation statistics missing: {normalization_file(model_zip)}")
+        raise FileNotFoundError(f"{context}policy not found: {model_zip}")
+    stats = normalization_file(model_zip)
+    if not stats.is_file():
+        raise FileNotFoundError(f"{context}observation statistics missing beside the policy: {stats}")
+    return stats
+
+
+def _check_init_from(model_zip: Path, time_features: bool) -> None:
+    require_policy_files(model_zip, "--init-from: ")
     if policy_time_features(model_zip) != time_features:
         flag = "add" if not time_features else "drop"
         raise ValueError(f"--init-from {model_zip}: that policy sees other observations; {flag} --time-features")
@@ -437,11 +444,7 @@ def policy_time_features(model_zip: str | Path) -> bool:
 def load_policy(model_zip: str | Path):
     """A trained policy and its observation normalizer, ready to act deterministically."""
     model_zip = Path(model_zip)
-    if not model_zip.is_file():
-        raise FileNotFoundError(f"policy not found: {model_zip}")
-    stats = normalization_file(model_zip)
-    if not stats.is_file():
-        raise FileNotFoundError(f"normalization statistics not found beside the policy: {stats}")
+    stats = require_policy_files(model_zip)
     saved = _saved_policy(model_zip)
     import pickle
 
