@@ -85,6 +85,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         workers_per_actor=args.workers_per_actor,
         time_features=args.time_features,
         init_from=str(args.init_from) if args.init_from else None,
+        residual_scale=args.residual,
+        rbc_target_c=args.rbc_target,
         algorithm=args.algorithm,
         reward=RewardConfig.from_any(args.reward),
     )
@@ -184,6 +186,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--algorithm", default="trpo", choices=["trpo", "ppo"],
         help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting",
     )  # fmt: skip
+    tr.add_argument(
+        "--residual", type=float, default=0.0, metavar="SCALE",
+        help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting alone",
+    )  # fmt: skip
+    tr.add_argument("--rbc-target", type=float, help="with --residual: the rule-based controller's zone target, C")
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")

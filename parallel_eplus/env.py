@@ -27,6 +27,7 @@ class EnergyPlusEnv(gym.Env):
     """The paper's environment: 6 observations, 2 or 4 normalized actions, its reward.
 
     `time_features=True` appends hour and day of week as sine/cosine pairs (`model.TIME_FEATURES`).
+    `residual_scale > 0`: the action corrects the rule-based controller's by up to that much (rbc.py).
 
     `reset()` starts a new EnergyPlus process (stopping a running one) and returns the state at the
     start of the run period; each `step()` runs one 15-minute zone timestep under the given action.
@@ -47,6 +48,8 @@ class EnergyPlusEnv(gym.Env):
         start_timeout_s: float = 180.0,
         idf: str | Path | None = None,
         time_features: bool = False,
+        residual_scale: float = 0.0,
+        rbc_target_c: float | None = None,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
         self.config = SimulationConfig(
@@ -60,6 +63,8 @@ class EnergyPlusEnv(gym.Env):
             step_timeout_s=step_timeout_s,
             idf=None if idf is None else str(idf),
             time_features=time_features,
+            residual_scale=residual_scale,
+            rbc_target_c=rbc_target_c,
         )
         self.sim = Simulation(self.config, weathers)
         if not self.sim.elements:

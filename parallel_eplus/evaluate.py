@@ -40,6 +40,7 @@ class Controller:
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
     rbc_target_c: float | None = None  # the rule-based controller's zone target; None: RBCConfig's
+    residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
 
     @property
     def model(self) -> str:
@@ -65,17 +66,20 @@ def policy_controller(spec: str) -> Controller:
     path = Path(path_text)
     if path.is_dir():
         path = path / "model.zip"
-    from .train import policy_time_features, require_policy_files
+    from .train import policy_time_features, require_policy_files, run_dir_of
 
     require_policy_files(path)
+    config = run_dir_of(path) / "config.json"
+    saved = json.loads(config.read_text()) if config.is_file() else {}
+    residual = float(saved.get("residual_scale", 0.0))
     if not label:
-        config = path.parent / "config.json"
-        if config.is_file():
-            saved = json.loads(config.read_text())
-            label = f"{saved.get('algorithm', 'trpo').upper()} ({'-'.join(saved['weathers'])})"
+        if saved:
+            label = f"{saved.get('algorithm', 'trpo').upper()}{'+RBC' if residual else ''} ({'-'.join(saved['weathers'])})"
         else:
             label = path.parent.name
-    return Controller(label, "policy", path, policy_time_features(path))
+    return Controller(
+        label, "policy", path, policy_time_features(path), rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual
+    )
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
@@ -117,7 +121,8 @@ def run_sweep(
                 controller, weather = jobs.popleft()
                 cfg = SimulationConfig(
                     weather=weather, model=controller.model, run_days=run_days, reward=reward or RewardConfig(),
-                    time_features=controller.time_features,
+                    time_features=controller.time_features, residual_scale=controller.residual_scale,
+                    rbc_target_c=controller.rbc_target_c,
                     output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
                 )  # fmt: skip
                 sim = Simulation(cfg, name=controller.label)

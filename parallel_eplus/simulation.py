@@ -30,7 +30,8 @@ from .episode import (
     write_records,
 )
 from .errors import EnergyPlusError, ProtocolError
-from .model import SENSORS, STEPS_PER_DAY, control_model, observation_bounds, time_features
+from .model import ACTIONS, SENSORS, STEPS_PER_DAY, control_model, observation_bounds, time_features
+from .rbc import RBCConfig, RuleBasedController
 from .reward import RewardConfig, reward
 from .weather import resolve_weather, weather_label
 
@@ -56,6 +57,10 @@ class SimulationConfig:
     initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
     spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
     time_features: bool = False  # append model.TIME_FEATURES to the observation
+    # > 0: the action, times this, corrects the rule-based controller's (rbc.py) instead of acting
+    # alone (residual control: learning starts from the hand-tuned loop, not from scratch).
+    residual_scale: float = 0.0
+    rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
 
 
 def _time(values: np.ndarray) -> dt.datetime:
@@ -63,16 +68,21 @@ def _time(values: np.ndarray) -> dt.datetime:
     return dt.datetime(year, 1, 1) + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)
 
 
-def scale_action(action, low: np.ndarray, high: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
-    """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
+def check_action(action, names: tuple[str, ...]) -> np.ndarray:
+    """The action as a flat float64 array, clipped to [-1, 1]; NaN or inf is a ValueError naming the element."""
     a = np.asarray(action, dtype=np.float64).reshape(-1)
-    if a.shape != low.shape:
-        raise ValueError(f"action must have {len(low)} elements, got shape {np.shape(action)}")
+    if a.shape != (len(names),):
+        raise ValueError(f"action must have {len(names)} elements, got shape {np.shape(action)}")
     bad = ~np.isfinite(a)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(f"action element {i} ({names[i]}) is {a[i]}; actions must be finite")
-    return low + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (high - low)
+    return np.clip(a, -1.0, 1.0)
+
+
+def scale_action(action, low: np.ndarray, high: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+    """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
+    return low + (check_action(action, names) + 1.0) * 0.5 * (high - low)
 
 
 class Simulation:
@@ -104,6 +114,12 @@ class Simulation:
         self.output_dir = Path(config.output_dir or self._tmp)
         self.output_dir.mkdir(parents=True, exist_ok=True)
         self.action_names = tuple(e.name for e in self.elements)
+        if config.residual_scale < 0:
+            raise ValueError("residual_scale must be >= 0")
+        if config.residual_scale and self.elements != ACTIONS:
+            raise ValueError(f"residual control corrects all four actions; model {config.model!r} has not got them")
+        self.base: RuleBasedController | None = None  # the controller a residual action corrects
+        self._info: dict = {}
         self.pipes: pipe.PipePair | None = None
         self.proc: subprocess.Popen | None = None
         self.episode = 0
@@ -159,6 +175,9 @@ class Simulation:
         self.records = StepRecorder(self.action_names, self.steps_per_episode)
         self._action = self.initial_action.copy()
         self.last_summary = None
+        if self.config.residual_scale:  # a fresh integral state per episode
+            target = self.config.rbc_target_c
+            self.base = RuleBasedController(RBCConfig() if target is None else RBCConfig(target_c=target))
 
     def first_observation(self) -> tuple[np.ndarray, dict]:
         """Wait through sizing and warmup for observation 0 of the launched episode."""
@@ -172,7 +191,11 @@ class Simulation:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
         if self.proc is None:
             raise RuntimeError("no simulation running: call reset() first")
-        self._action = scale_action(action, self.low, self.high, self.action_names)
+        if self.base is None:
+            self._action = scale_action(action, self.low, self.high, self.action_names)
+        else:
+            a = self.base(None, self._info) + self.config.residual_scale * check_action(action, self.action_names)
+            self._action = scale_action(a, self.low, self.high, self.action_names)
         try:
             self.pipes.send(pipe.encode(self._action))
         except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
@@ -207,6 +230,7 @@ class Simulation:
             obs = np.clip(obs, OBS_LOW, OBS_HIGH)
         if self.config.time_features:
             obs = np.concatenate([obs, np.array(time_features(info["time"]), np.float32)])
+        self._info = info
         return obs, info
 
     def _recv(self, timeout: float, what: str) -> tuple[int, np.ndarray]:

@@ -85,6 +85,8 @@ class TrainConfig:
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
     algorithm: str = "trpo"  # the paper's; or "ppo"
+    residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
+    rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
     ppo: PPOSettings = field(default_factory=PPOSettings)
@@ -100,6 +102,8 @@ class TrainConfig:
             self.init_from = str(Path(self.init_from).resolve())
         if self.algorithm not in ("trpo", "ppo"):
             raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo or ppo")
+        if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
+            raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
         if self.run_name is None:
@@ -140,6 +144,8 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         keep_episodes=cfg.keep_episodes,
         reward=cfg.reward,
         time_features=cfg.time_features,
+        residual_scale=cfg.residual_scale,
+        rbc_target_c=cfg.rbc_target_c,
     )
     shares = weather_shares(cfg.weathers, cfg.workers)
     if cfg.backend == "ray":
@@ -233,7 +239,7 @@ def normalization_file(model_zip: Path) -> Path:
     return model_zip.with_name(f"model_vecnormalize_{steps}_steps.pkl")
 
 
-def _run_dir_of(checkpoint: Path) -> Path:
+def run_dir_of(checkpoint: Path) -> Path:
     return checkpoint.parent.parent if checkpoint.parent.name == "checkpoints" else checkpoint.parent
 
 
@@ -303,7 +309,7 @@ def train(
         raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
     if resume is not None:
         checkpoint = _latest_checkpoint(Path(resume))
-        saved = TrainConfig.from_json((_run_dir_of(checkpoint) / "config.json").read_text())
+        saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
         saved.backend, saved.ray_address = cfg.backend, cfg.ray_address

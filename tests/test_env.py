@@ -162,3 +162,28 @@ def test_time_features_follow_the_clock(no_leaks):
         assert obs[:6] == pytest.approx([info[name] for name in SENSOR_NAMES], rel=1e-5)
     finally:
         env.close()
+
+
+def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
+    from parallel_eplus.rbc import RBCConfig, RuleBasedController
+
+    def records(name: str, residual: float, act) -> pd.DataFrame:
+        env = EnergyPlusEnv(weather="CO", run_days=1, output_dir=tmp_path / name, residual_scale=residual,
+                            rbc_target_c=23.2)  # fmt: skip
+        try:
+            obs, info = env.reset(seed=0)
+            terminated = False
+            while not terminated:
+                obs, _, terminated, _, info = env.step(act(obs, info))
+            return read_steps(info["episode_dir"])
+        finally:
+            env.close()
+
+    rbc = records("rbc", 0.0, RuleBasedController(RBCConfig(target_c=23.2)))
+    zero = records("zero", 0.2, lambda obs, info: np.zeros(4, np.float32))
+    warmer = records("warmer", 0.2, lambda obs, info: np.array([1, 1, 0, 0], np.float32))
+    pd.testing.assert_frame_equal(zero, rbc)  # no correction: exactly the rule-based controller
+    # +1 on the setpoints adds 0.2 of their half-range (3 C) to whatever the controller asks, never below 10 C
+    assert warmer.west_setpoint_c.min() >= 13.0 - 1e-9 and warmer.east_setpoint_c.min() >= 13.0 - 1e-9
+    with pytest.raises(ValueError, match="four actions"):
+        EnergyPlusEnv(model="temp", residual_scale=0.2)
