@@ -72,14 +72,13 @@ def policy_controller(spec: str) -> Controller:
     config = run_dir_of(path) / "config.json"
     saved = json.loads(config.read_text()) if config.is_file() else {}
     residual = float(saved.get("residual_scale", 0.0))
-    if not label:
-        if saved:
-            label = f"{saved.get('algorithm', 'trpo').upper()}{'+RBC' if residual else ''} ({'-'.join(saved['weathers'])})"
-        else:
-            label = path.parent.name
+    if not label and saved:
+        algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
+        label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     return Controller(
-        label, "policy", path, policy_time_features(path), rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual
-    )
+        label or path.parent.name, "policy", path, policy_time_features(path),
+        rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
+    )  # fmt: skip
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
