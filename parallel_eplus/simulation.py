@@ -30,7 +30,7 @@ from .episode import (
     write_records,
 )
 from .errors import EnergyPlusError, ProtocolError
-from .model import ACTIONS, SENSORS, STEPS_PER_DAY, control_model, observation_bounds, time_features
+from .model import ACTIONS, SENSOR_NAMES, SENSORS, STEPS_PER_DAY, control_model, observation_bounds, time_features
 from .rbc import RBCConfig, RuleBasedController
 from .reward import RewardConfig, reward
 from .weather import resolve_weather, weather_label
@@ -38,6 +38,7 @@ from .weather import resolve_weather, weather_label
 log = logging.getLogger(__name__)
 
 OBS_LOW, OBS_HIGH = (np.array(b, dtype=np.float32) for b in observation_bounds(False))  # sensors only
+_LOWS, _HIGHS = (tuple(b.tolist()) for b in (OBS_LOW, OBS_HIGH))  # the same float32 bounds, as floats
 _WEST, _EAST, _POWER = 1, 2, 3  # sensor positions used by the reward
 
 
@@ -63,26 +64,39 @@ class SimulationConfig:
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
 
 
+_YEAR_STARTS: dict[float, dt.datetime] = {}
+
+
 def _time(values: np.ndarray) -> dt.datetime:
-    year, day_of_year, hour, minute = (int(v) for v in values[: pipe.TIME_FIELDS])
-    return dt.datetime(year, 1, 1) + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)
+    year, day_of_year, hour, minute = values[: pipe.TIME_FIELDS].tolist()  # floats: cheaper than numpy scalars
+    start = _YEAR_STARTS.get(year)
+    if start is None:
+        start = _YEAR_STARTS[year] = dt.datetime(int(year), 1, 1)
+    return start + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)
 
 
 def check_action(action, names: tuple[str, ...]) -> np.ndarray:
-    """The action as a flat float64 array, clipped to [-1, 1]; NaN or inf is a ValueError naming the element."""
-    a = np.asarray(action, dtype=np.float64).reshape(-1)
+    """A new flat float64 copy of the action, clipped to [-1, 1]; NaN or inf is a ValueError naming the element.
+
+    Per step: np.minimum/np.maximum in place cost a third of np.clip on 4 values.
+    """
+    a = np.array(action, dtype=np.float64).reshape(-1)
     if a.shape != (len(names),):
         raise ValueError(f"action must have {len(names)} elements, got shape {np.shape(action)}")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
+    if not np.isfinite(a).all():
+        i = int(np.flatnonzero(~np.isfinite(a))[0])
         raise ValueError(f"action element {i} ({names[i]}) is {a[i]}; actions must be finite")
-    return np.clip(a, -1.0, 1.0)
+    np.minimum(a, 1.0, out=a)
+    return np.maximum(a, -1.0, out=a)
 
 
 def scale_action(action, low: np.ndarray, high: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
     """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
-    return low + (check_action(action, names) + 1.0) * 0.5 * (high - low)
+    a = check_action(action, names)
+    a += 1.0
+    a *= 0.5 * (high - low)
+    a += low
+    return a
 
 
 class Simulation:
@@ -221,11 +235,12 @@ class Simulation:
         if len(values) != pipe.TIME_FIELDS + len(SENSORS):
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
         raw = values[pipe.TIME_FIELDS :]
-        info = {s.name: float(v) for s, v in zip(SENSORS, raw, strict=False)}
+        sensed = raw.tolist()  # per step, Python floats are cheaper than numpy scalars and small-array ops
+        info = dict(zip(SENSOR_NAMES, sensed, strict=True))
         info["time"] = _time(values)
         info["weather"] = self.weather
         obs = raw.astype(np.float32)
-        if ((obs < OBS_LOW) | (obs > OBS_HIGH)).any():
+        if not all(lo <= v <= hi for lo, v, hi in zip(_LOWS, sensed, _HIGHS, strict=True)):
             info["raw_observation"] = raw.copy()
             obs = np.clip(obs, OBS_LOW, OBS_HIGH)
         if self.config.time_features:
