@@ -7,6 +7,7 @@ import json
 import os
 import re
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -79,7 +80,7 @@ class StepRecorder:
         self.times: list[dt.datetime] = [None] * capacity  # type: ignore[list-item]
         self.n = 0
 
-    def add(self, time: dt.datetime, row: np.ndarray) -> None:
+    def add(self, time: dt.datetime, row: Sequence[float]) -> None:
         if self.n == len(self.times):  # episodes never exceed their run period, but stay safe
             self.values = np.concatenate([self.values, np.empty_like(self.values)])
             self.times.extend([None] * len(self.times))  # type: ignore[list-item]

@@ -63,6 +63,7 @@ class Bridge:
         self.last_obs: list[float] = [0.0] * len(SENSORS)
         self.raw = obs_fd is None
         self._wait = None if act_fd is None else pipe.wait_readable(act_fd)
+        self._actions = None if act_fd is None else pipe.FrameReader(act_fd)
         self.spin_s = spin_s
 
     # -- setup --------------------------------------------------------------------------------
@@ -108,7 +109,7 @@ class Bridge:
         if self.raw:
             return
         os.write(self.obs_fd, pipe.encode(values))
-        code, action = pipe.decode(lambda n: pipe.read_exact(self.act_fd, n, self._wait, self.spin_s))
+        code, action = self._actions.read(self._wait, self.spin_s)
         if code != pipe.DATA or len(action) != len(self.elements):
             raise pipe.ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
         self.action = action.tolist()

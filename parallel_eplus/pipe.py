@@ -11,6 +11,7 @@ its end; child death is noticed through a pidfd (or a short poll) instead of wai
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import select
 import shutil
@@ -30,7 +31,7 @@ ERROR = -2
 CONTROL_CODES = (END, ERROR)
 TIME_FIELDS = 4  # observation frames start with year, day of year, hour, minute; sensors follow
 MAX_VALUES = 4096  # far above any real frame; a larger count means a corrupt stream
-SPIN_S = 0.002  # see read_exact
+SPIN_S = 0.002  # see FrameReader
 
 
 def default_spin_s(processes: int) -> float:
@@ -45,62 +46,100 @@ def default_spin_s(processes: int) -> float:
 _INT = struct.Struct("<i")
 
 
+@functools.lru_cache(maxsize=16)
+def _data_struct(n: int) -> struct.Struct:
+    return struct.Struct(f"<i{n}d")
+
+
 def encode(values, code: int = DATA) -> bytes:
     """One frame as bytes: written with a single write, so it arrives whole (frames < PIPE_BUF)."""
-    payload = np.ascontiguousarray(values, dtype="<f8").tobytes()
-    n = len(payload) // 8
+    if isinstance(values, np.ndarray):
+        values = values.ravel().tolist()
     if code == DATA:
-        return _INT.pack(n) + payload
+        values = list(values)
+        return _data_struct(len(values)).pack(len(values), *values)
     if code not in CONTROL_CODES:
         raise ValueError(f"unknown control code {code}")
-    return _INT.pack(code) + _INT.pack(n) + payload
+    payload = np.ascontiguousarray(values, dtype="<f8").tobytes()
+    return _INT.pack(code) + _INT.pack(len(payload) // 8) + payload
 
 
-def decode(read_exact: Callable[[int], bytes]) -> tuple[int, np.ndarray]:
-    """Read one frame through `read_exact(n) -> bytes`; returns (code, values)."""
-    (count,) = _INT.unpack(read_exact(4))
-    code = DATA
+def parse(buf: bytes | bytearray) -> tuple[int, np.ndarray, int] | None:
+    """The first whole frame in `buf` as (code, values, its length in bytes); None until all of it is there.
+
+    A bad header is a ProtocolError as soon as it has arrived.
+    """
+    if len(buf) < 4:
+        return None
+    (count,) = _INT.unpack_from(buf)
+    code, header = DATA, 4
     if count < 0:
         code = count
         if code not in CONTROL_CODES:
             raise ProtocolError(f"malformed frame: unknown control code {code}")
-        (count,) = _INT.unpack(read_exact(4))
+        if len(buf) < 8:
+            return None
+        (count,) = _INT.unpack_from(buf, 4)
+        header = 8
     if not 0 <= count <= MAX_VALUES:
         raise ProtocolError(f"malformed frame: value count {count} outside 0..{MAX_VALUES}")
-    return code, np.frombuffer(read_exact(8 * count), dtype="<f8")
+    end = header + 8 * count
+    if len(buf) < end:
+        return None
+    return code, np.frombuffer(bytes(buf[header:end]), dtype="<f8"), end
 
 
-def read_exact(fd: int, n: int, wait: Callable[[int, int], None], spin_s: float = SPIN_S) -> bytes:
-    """Read n bytes from a non-blocking fd: poll for `spin_s`, then `wait(got, want)` until readable.
+def decode(data: bytes) -> tuple[int, np.ndarray]:
+    """Exactly one frame from bytes; a frame cut short is a ProtocolError."""
+    frame = parse(data)
+    if frame is None or frame[2] != len(data):
+        raise ProtocolError(f"malformed frame: {len(data)} bytes are not one whole frame")
+    return frame[0], frame[1]
 
-    Why spin: a process that sleeps in read() is woken through the scheduler, which costs ~25 us per
-    hand-off across cores on these machines (two per step), more than the exchange itself. A short
-    spin sees the other side's write at once; past it we block, so an idle peer costs no CPU.
-    EOF (the writer is gone) mid-frame or before it is a ProtocolError.
+
+class FrameReader:
+    """Frames from a non-blocking fd. Each read takes whatever has arrived, so a frame written whole
+    (ours are) costs one read, and the rare split frame is reassembled.
+
+    Why spin: a process that sleeps in read() is woken through the scheduler, which costs ~25-125 us
+    per hand-off across cores on these machines (two per step), more than the exchange itself. A
+    short spin sees the other side's write at once; past it we block in `wait(bytes_so_far)`, so an
+    idle peer costs no CPU. EOF (the writer is gone) is a ProtocolError.
     """
-    buf = b""
-    if n == 0:
-        return buf
-    spin_until = time.perf_counter() + spin_s
-    while True:
-        try:
-            chunk = os.read(fd, n - len(buf))
-        except BlockingIOError:
-            if time.perf_counter() > spin_until:
-                wait(len(buf), n)
-            else:
-                os.sched_yield()  # let a runnable EnergyPlus on this core go first
-            continue
-        if not chunk:
-            raise ProtocolError(f"pipe closed after {len(buf)} of {n} bytes")
-        buf += chunk
-        if len(buf) == n:
-            return buf
+
+    def __init__(self, fd: int):
+        self.fd = fd
+        self.buf = bytearray()
+
+    def read(self, wait: Callable[[int], None], spin_s: float = SPIN_S) -> tuple[int, np.ndarray]:
+        spin_until = None
+        while True:
+            frame = parse(self.buf)
+            if frame is not None:
+                del self.buf[: frame[2]]
+                return frame[0], frame[1]
+            try:
+                chunk = os.read(self.fd, 65536)
+            except BlockingIOError:
+                now = time.perf_counter()
+                if spin_until is None:
+                    spin_until = now + spin_s
+                if now > spin_until:
+                    wait(len(self.buf))
+                else:
+                    os.sched_yield()  # let a runnable process on this core go first
+                continue
+            if not chunk:
+                raise ProtocolError(f"pipe closed after {len(self.buf)} bytes of a frame")
+            self.buf += chunk
+
+    def clear(self) -> None:
+        self.buf.clear()
 
 
-def wait_readable(fd: int) -> Callable[[int, int], None]:
+def wait_readable(fd: int) -> Callable[[int], None]:
     """The EnergyPlus side's wait: block until the env writes (or goes away)."""
-    return lambda got, want: select.select([fd], [], [])
+    return lambda got: select.select([fd], [], [])
 
 
 class PipePair:
@@ -119,6 +158,7 @@ class PipePair:
         os.mkfifo(self.obs_path, 0o600)
         self.act_fd = os.open(self.act_path, os.O_RDWR)
         self.obs_fd = os.open(self.obs_path, os.O_RDWR | os.O_NONBLOCK)
+        self._obs = FrameReader(self.obs_fd)
         self._pidfd: int | None = None
         self._alive: Callable[[], bool] = lambda: True
 
@@ -133,6 +173,7 @@ class PipePair:
 
     def drain(self) -> None:
         """Discard bytes left by a previous simulation, so a new one starts on a clean stream."""
+        self._obs.clear()
         for fd in (self.obs_fd, self.act_fd):
             blocking = os.get_blocking(fd)
             os.set_blocking(fd, False)
@@ -151,15 +192,15 @@ class PipePair:
         """Next frame from EnergyPlus. Raises TimeoutError or ChildProcessError, never returns zeros."""
         deadline = time.monotonic() + timeout
         # The obs FIFO is held open for writing by us too, so it never reads EOF; death comes via pidfd.
-        wait = lambda got, want: self._wait_readable(deadline, got, want)  # noqa: E731
-        return decode(lambda n: read_exact(self.obs_fd, n, wait, spin_s))
+        return self._obs.read(lambda got: self._wait_readable(deadline, got), spin_s)
 
-    def _wait_readable(self, deadline: float, got: int, want: int) -> None:
+    def _wait_readable(self, deadline: float, got: int) -> None:
         fds = [self.obs_fd] if self._pidfd is None else [self.obs_fd, self._pidfd]
         while True:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise TimeoutError(f"no data from EnergyPlus (had {got} of {want} bytes)")
+                cut = f" ({got} bytes of a frame so far)" if got else ""
+                raise TimeoutError(f"no data from EnergyPlus{cut}")
             slice_s = remaining if self._pidfd is not None else min(remaining, 0.2)
             ready, _, _ = select.select(fds, [], [], slice_s)
             if self.obs_fd in ready:
@@ -167,7 +208,7 @@ class PipePair:
             if ready or not self._alive():
                 if self._has_data():  # a last frame written just before the exit
                     return
-                where = f" mid-frame ({got} of {want} bytes)" if got else ""
+                where = f" mid-frame ({got} bytes in)" if got else ""
                 raise ChildProcessError(f"EnergyPlus process exited{where}")
 
     def wait_exit(self, timeout: float) -> bool | None:

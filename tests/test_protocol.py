@@ -13,52 +13,38 @@ from parallel_eplus import pipe
 from parallel_eplus.errors import ProtocolError
 
 
-def reader(data: bytes):
-    pos = 0
-
-    def read_exact(n: int) -> bytes:
-        nonlocal pos
-        if pos + n > len(data):
-            raise ProtocolError("truncated")
-        chunk = data[pos : pos + n]
-        pos += n
-        return chunk
-
-    return read_exact
-
-
 @pytest.mark.parametrize("values", [[], [1.5], [23.5, -20.0, 1e9, 0.1, 7.0, 3.25]])
 def test_data_frame_round_trip(values):
     frame = pipe.encode(values)
     assert frame[:4] == struct.pack("<i", len(values))
-    code, out = pipe.decode(reader(frame))
+    code, out = pipe.decode(frame)
     assert code == pipe.DATA
     np.testing.assert_array_equal(out, values)
 
 
 @pytest.mark.parametrize("code", [pipe.END, pipe.ERROR])
 def test_control_frame_round_trip(code):
-    code_out, out = pipe.decode(reader(pipe.encode([1.0, 2.0], code)))
+    code_out, out = pipe.decode(pipe.encode([1.0, 2.0], code))
     assert code_out == code
     np.testing.assert_array_equal(out, [1.0, 2.0])
 
 
 def test_unknown_control_code_is_rejected():
     with pytest.raises(ProtocolError, match="control code"):
-        pipe.decode(reader(struct.pack("<ii", -7, 0)))
+        pipe.decode(struct.pack("<ii", -7, 0))
     with pytest.raises(ValueError):
         pipe.encode([1.0], code=-7)
 
 
 def test_absurd_count_is_rejected():
     with pytest.raises(ProtocolError, match="count"):
-        pipe.decode(reader(struct.pack("<i", pipe.MAX_VALUES + 1)))
+        pipe.decode(struct.pack("<i", pipe.MAX_VALUES + 1))
 
 
 def test_truncated_frame_is_an_error_not_zeros():
     frame = pipe.encode([1.0, 2.0, 3.0])
     with pytest.raises(ProtocolError):
-        pipe.decode(reader(frame[:-3]))
+        pipe.decode(frame[:-3])
 
 
 def test_pipe_pair_is_private_unique_and_removed():
@@ -82,8 +68,13 @@ def test_pipe_pair_times_out_and_reads_truncation():
         # A writer on the other end sends half a frame: the reader waits, then times out.
         fd = os.open(pp.obs_path, os.O_WRONLY)
         os.write(fd, pipe.encode([1.0, 2.0])[:7])
-        with pytest.raises(TimeoutError, match="3 of 16"):
+        with pytest.raises(TimeoutError, match="7 bytes of a frame"):
             pp.recv(timeout=0.05)
+        os.write(fd, pipe.encode([1.0, 2.0])[7:] + pipe.encode([3.0], pipe.END))  # the rest, then one more
+        assert [(c, v.tolist()) for c, v in (pp.recv(1.0), pp.recv(1.0))] == [
+            (pipe.DATA, [1.0, 2.0]),
+            (pipe.END, [3.0]),
+        ]
         os.close(fd)
     finally:
         pp.close()
