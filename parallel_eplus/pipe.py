@@ -124,7 +124,7 @@ class FrameReader:
                 now = time.perf_counter()
                 if spin_until is None:
                     spin_until = now + spin_s
-                if now > spin_until:
+                if now >= spin_until:  # with no spin, block at once: a yield could cost a whole time slice
                     wait(len(self.buf))
                 else:
                     os.sched_yield()  # let a runnable process on this core go first
