@@ -41,7 +41,6 @@ log = logging.getLogger(__name__)
 
 OBS_LOW, OBS_HIGH = (np.array(b, dtype=np.float32) for b in observation_bounds(False))  # sensors only
 _LOWS, _HIGHS = (tuple(b.tolist()) for b in (OBS_LOW, OBS_HIGH))  # the same float32 bounds, as floats
-_WEST, _EAST, _POWER = 1, 2, 3  # sensor positions used by the reward
 
 
 @dataclass
@@ -132,7 +131,8 @@ class Simulation:
         if config.residual_scale < 0:
             raise ValueError("residual_scale must be >= 0")
         if config.residual_scale and self.elements != ACTIONS:
-            raise ValueError(f"residual control corrects all four actions; model {config.model!r} has not got them")
+            n = len(self.elements)
+            raise ValueError(f"residual control corrects all four actions; model {config.model!r} has {n}")
         self.base: RuleBasedController | None = None  # the controller a residual action corrects
         self._info: dict = {}
         self.pipes: pipe.PipePair | None = None
