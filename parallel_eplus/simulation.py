@@ -122,17 +122,17 @@ class Simulation:
         self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
         if len(self.initial_action) != len(self.low):
             raise ValueError(f"initial_action needs {len(self.low)} values in physical units")
+        if config.residual_scale < 0:
+            raise ValueError("residual_scale must be >= 0")
+        if config.residual_scale and self.elements != ACTIONS:
+            n = len(self.elements)
+            raise ValueError(f"residual control corrects all four actions; model {config.model!r} has {n}")
         self._tmp = None
         if config.output_dir is None:
             self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
         self.output_dir = Path(config.output_dir or self._tmp)
         self.output_dir.mkdir(parents=True, exist_ok=True)
         self.action_names = tuple(e.name for e in self.elements)
-        if config.residual_scale < 0:
-            raise ValueError("residual_scale must be >= 0")
-        if config.residual_scale and self.elements != ACTIONS:
-            n = len(self.elements)
-            raise ValueError(f"residual control corrects all four actions; model {config.model!r} has {n}")
         self.base: RuleBasedController | None = None  # the controller a residual action corrects
         self._info: dict = {}
         self.pipes: pipe.PipePair | None = None

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import tempfile
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pandas as pd
@@ -185,5 +188,7 @@ def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
     pd.testing.assert_frame_equal(zero, rbc)  # no correction: exactly the rule-based controller
     # +1 on the setpoints adds 0.2 of their half-range (3 C) to whatever the controller asks, never below 10 C
     assert warmer.west_setpoint_c.min() >= 13.0 - 1e-9 and warmer.east_setpoint_c.min() >= 13.0 - 1e-9
+    temp_dirs = set(Path(tempfile.gettempdir()).glob("parallel-eplus-episodes-*"))
     with pytest.raises(ValueError, match="four actions"):
         EnergyPlusEnv(model="temp", residual_scale=0.2)
+    assert set(Path(tempfile.gettempdir()).glob("parallel-eplus-episodes-*")) == temp_dirs  # refused before any
