@@ -53,10 +53,8 @@ def _data_struct(n: int) -> struct.Struct:
 
 def encode(values, code: int = DATA) -> bytes:
     """One frame as bytes: written with a single write, so it arrives whole (frames < PIPE_BUF)."""
-    if isinstance(values, np.ndarray):
-        values = values.ravel().tolist()
+    values = values.ravel().tolist() if isinstance(values, np.ndarray) else list(values)
     if code == DATA:
-        values = list(values)
         return _data_struct(len(values)).pack(len(values), *values)
     if code not in CONTROL_CODES:
         raise ValueError(f"unknown control code {code}")
