@@ -1,0 +1,23 @@
+"""The benchmark itself, end to end on a tiny size: every measurement runs and the table reads it."""
+
+from __future__ import annotations
+
+import json
+
+from parallel_eplus.bench import BenchConfig, format_table, run
+
+
+def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
+    cfg = BenchConfig(raw_days=1, vector_steps=40, train_steps=256, batch_size=128, workers=2, repeats=1)
+    out = tmp_path / "bench.json"
+    results = run(cfg, out)
+    assert json.loads(out.read_text()) == results
+    assert results["env_steps_per_s"] > 0 and results["env_over_raw"] == results["env_s"] / results["raw_s"]
+    # Two raw runs at once take at least about as long as one (not half: each does a whole run).
+    assert results["raw_scaling"] == results["raw_s"] / results["raw_n_s"] and 0.2 < results["raw_scaling"] < 1.5
+    for n in ("1", "n"):
+        assert results[f"vector_{n}_steps_per_s"] > 0
+        assert 0 < results[f"vector_{n}_cores_busy"] <= cfg.workers + 0.5
+    assert results["update_s"] > 0 and results["train_steps_per_s"] > 0
+    table = format_table(results)
+    assert "2 runs at once" in table and "cores busy" in table
