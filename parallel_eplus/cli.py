@@ -250,10 +250,11 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
-    from .errors import EnergyPlusError
+    from .errors import EnergyPlusError, Interrupts
 
     try:
-        return args.func(args)
+        with Interrupts():  # every command cleans up on Ctrl-C or SIGTERM, started in the background or not
+            return args.func(args)
     except (EnergyPlusError, ValueError, FileNotFoundError) as e:
         log.error("%s", e)
         return 2

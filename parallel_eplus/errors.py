@@ -1,7 +1,8 @@
-"""The exceptions users catch."""
+"""The exceptions users catch, and the signals that become one."""
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 
@@ -25,3 +26,27 @@ class EnergyPlusError(RuntimeError):
 
 class ProtocolError(EnergyPlusError):
     """A malformed or truncated frame on the pipe."""
+
+
+class Interrupts:
+    """SIGINT and SIGTERM raise KeyboardInterrupt inside the block, so `finally` clauses stop
+    EnergyPlus and remove the pipes.
+
+    SIGINT too, explicitly: a process started in the background by a shell (`cmd &`, nohup, CI
+    runners) inherits SIGINT as ignored, and `kill -INT` would then do nothing at all.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __enter__(self):
+        self._old = {s: signal.signal(s, self._raise) for s in self.SIGNALS}
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    def __exit__(self, *exc):
+        for s, handler in self._old.items():
+            signal.signal(s, handler)
+        return False

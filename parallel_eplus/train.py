@@ -10,7 +10,6 @@ import json
 import logging
 import math
 import os
-import signal
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -23,6 +22,7 @@ from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
+from .errors import Interrupts
 from .model import STEPS_PER_DAY, observation_names
 from .reward import RewardConfig
 from .sb3_adapter import SB3VecEnv
@@ -243,29 +243,6 @@ def run_dir_of(checkpoint: Path) -> Path:
     return checkpoint.parent.parent if checkpoint.parent.name == "checkpoints" else checkpoint.parent
 
 
-class _Interrupt:
-    """SIGINT and SIGTERM raise KeyboardInterrupt for the duration of training.
-
-    SIGINT too, explicitly: a process started in the background by a shell (`cmd &`, nohup, CI
-    runners) inherits SIGINT as ignored, and `kill -INT` would then do nothing at all.
-    """
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __enter__(self):
-        self._old = {s: signal.signal(s, self._raise) for s in self.SIGNALS}
-        return self
-
-    @staticmethod
-    def _raise(signum, frame):
-        raise KeyboardInterrupt(f"signal {signum}")
-
-    def __exit__(self, *exc):
-        for s, handler in self._old.items():
-            signal.signal(s, handler)
-        return False
-
-
 class UpdateTimer(BaseCallback):
     """Wall time of each TRPO update (between rollouts), and of `learn` from the first observations on."""
 
@@ -358,7 +335,7 @@ def train(
             ),
         ])  # fmt: skip
         try:
-            with _Interrupt():
+            with Interrupts():
                 model.learn(remaining, callback=callbacks, reset_num_timesteps=False, log_interval=1)
         except KeyboardInterrupt:
             path = run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip"
