@@ -230,8 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
     be = sub.add_parser("bench", help="measure our overhead against raw EnergyPlus on this machine")
     be.add_argument("--weather", default="CA")
     be.add_argument("--days", type=int, default=365, help="period for the raw and env runs (default a year)")
-    be.add_argument("--vector-steps", type=int, default=4000, help="vector steps per worker")
-    be.add_argument("--train-steps", type=int, default=3 * 16384, help="env steps of TRPO learn")
+    be.add_argument("--train-steps", type=int, default=16384, help="env steps of TRPO learn (default one batch)")
+    be.add_argument(
+        "--vector-steps", type=int, help="vector steps per worker (default: the same simulated days as training)"
+    )
     be.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     be.add_argument("--repeats", type=int, default=3, help="repetitions; medians are reported")
     be.add_argument("--out", type=Path, default=Path("results") / "bench.json")
