@@ -84,6 +84,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         workers_per_actor=args.workers_per_actor,
         time_features=args.time_features,
+        schedule_features=args.schedule_features,
         init_from=str(args.init_from) if args.init_from else None,
         residual_scale=args.residual,
         rbc_target_c=args.rbc_target,
@@ -181,6 +182,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument(
         "--time-features", action="store_true",
         help="add hour and day of week (sine/cosine) to the paper's six observations",
+    )  # fmt: skip
+    tr.add_argument(
+        "--schedule-features", action="store_true",
+        help="add the IT-load schedule: the coming step's load, its last and next change, and how far away",
     )  # fmt: skip
     tr.add_argument(
         "--algorithm", default="trpo", choices=["trpo", "ppo"],

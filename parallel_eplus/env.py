@@ -14,8 +14,8 @@ from .reward import RewardConfig
 from .simulation import Simulation, SimulationConfig
 
 
-def observation_space(time_features: bool = False) -> gym.spaces.Box:
-    low, high = observation_bounds(time_features)
+def observation_space(time_features: bool = False, schedule_features: bool = False) -> gym.spaces.Box:
+    low, high = observation_bounds(time_features, schedule_features)
     return gym.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
 
 
@@ -26,7 +26,8 @@ def action_space(n: int) -> gym.spaces.Box:
 class EnergyPlusEnv(gym.Env):
     """The paper's environment: 6 observations, 2 or 4 normalized actions, its reward.
 
-    `time_features=True` appends hour and day of week as sine/cosine pairs (`model.TIME_FEATURES`).
+    `time_features=True` appends hour and day of week as sine/cosine pairs (`model.TIME_FEATURES`);
+    `schedule_features=True` then the IT-load schedule's present value and its steps (`model.SCHEDULE_FEATURES`).
     `residual_scale > 0`: the action corrects the rule-based controller's by up to that much (rbc.py).
 
     `reset()` starts a new EnergyPlus process (stopping a running one) and returns the state at the
@@ -48,6 +49,7 @@ class EnergyPlusEnv(gym.Env):
         start_timeout_s: float = 180.0,
         idf: str | Path | None = None,
         time_features: bool = False,
+        schedule_features: bool = False,
         residual_scale: float = 0.0,
         rbc_target_c: float | None = None,
     ):
@@ -63,13 +65,14 @@ class EnergyPlusEnv(gym.Env):
             step_timeout_s=step_timeout_s,
             idf=None if idf is None else str(idf),
             time_features=time_features,
+            schedule_features=schedule_features,
             residual_scale=residual_scale,
             rbc_target_c=rbc_target_c,
         )
         self.sim = Simulation(self.config, weathers)
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
-        self.observation_space = observation_space(time_features)
+        self.observation_space = observation_space(time_features, schedule_features)
         self.action_space = action_space(len(self.sim.elements))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):

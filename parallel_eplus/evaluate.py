@@ -39,6 +39,7 @@ class Controller:
     kind: str  # "baseline", "policy" or "rbc"
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
+    schedule_features: bool = False  # and model.SCHEDULE_FEATURES
     rbc_target_c: float | None = None  # the rule-based controller's zone target; None: RBCConfig's
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
 
@@ -66,7 +67,7 @@ def policy_controller(spec: str) -> Controller:
     path = Path(path_text)
     if path.is_dir():
         path = path / "model.zip"
-    from .train import policy_time_features, require_policy_files, run_dir_of
+    from .train import policy_features, require_policy_files, run_dir_of
 
     require_policy_files(path)
     config = run_dir_of(path) / "config.json"
@@ -75,8 +76,9 @@ def policy_controller(spec: str) -> Controller:
     if not label and saved:
         algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
+    time_features, schedule_features = policy_features(path)
     return Controller(
-        label or path.parent.name, "policy", path, policy_time_features(path),
+        label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
     )  # fmt: skip
 
@@ -120,7 +122,8 @@ def run_sweep(
                 controller, weather = jobs.popleft()
                 cfg = SimulationConfig(
                     weather=weather, model=controller.model, run_days=run_days, reward=reward or RewardConfig(),
-                    time_features=controller.time_features, residual_scale=controller.residual_scale,
+                    time_features=controller.time_features, schedule_features=controller.schedule_features,
+                    residual_scale=controller.residual_scale,
                     rbc_target_c=controller.rbc_target_c,
                     output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
                 )  # fmt: skip

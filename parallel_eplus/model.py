@@ -7,7 +7,9 @@ EnergyPlus-side callback looks up the same variable and actuator names.
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,6 +76,11 @@ ZONE_TEMP_NAMES = ("west_temp_c", "east_temp_c")
 # schedule with steps at 00:00, 06:00, 08:00 and 18:00 that the six sensors cannot anticipate. They
 # describe the start of the 15 minutes the next action controls; all lie in [-1, 1].
 TIME_FEATURES = ("hour_sin", "hour_cos", "weekday_sin", "weekday_cos")
+# The schedule itself, as the operator knows it: the load the next step runs at, the last and the next
+# step in it, and how far away they are (in days). A step's effect on the zones is sharp in time, which
+# hour sine/cosine features describe only through a sharp function a small network learns slowly.
+SCHEDULE_FEATURES = ("it_load", "it_load_last_change", "days_since_change", "it_load_next_change", "days_to_change")
+IT_SCHEDULE = "Data Center CPU Loading Schedule"
 
 
 def time_features(t: dt.datetime) -> tuple[float, ...]:
@@ -82,12 +89,35 @@ def time_features(t: dt.datetime) -> tuple[float, ...]:
     return math.sin(hour), math.cos(hour), math.sin(day), math.cos(day)
 
 
-def observation_names(with_time: bool = False) -> tuple[str, ...]:
-    return SENSOR_NAMES + (TIME_FEATURES if with_time else ())
+@functools.cache
+def it_load_schedule(idf: Path = AGENT_IDF, name: str = IT_SCHEDULE) -> tuple[tuple[float, float], ...]:
+    """(until hour, load fraction) pairs of the model's ordinary-day IT loading, read from the IDF."""
+    text = idf.read_text(encoding="latin-1")
+    m = re.search(rf"Schedule:Compact,\s*{re.escape(name)},(.*?);", text, re.S | re.I)
+    if not m:
+        raise ValueError(f"schedule {name!r} not found in {idf}")
+    body = re.sub(r"!.*", "", m.group(1))
+    days = body.split("For:")
+    ordinary = next(d for d in days if "AllOtherDays" in d or "AllDays" in d)
+    pairs = re.findall(r"Until:\s*(\d+):(\d+)\s*,\s*([-\d.]+)", ordinary)
+    return tuple((int(h) + int(mi) / 60, float(v)) for h, mi, v in pairs)
 
 
-def observation_bounds(with_time: bool = False) -> tuple[list[float], list[float]]:
-    extra = len(TIME_FEATURES) if with_time else 0
+def schedule_features(t: dt.datetime, schedule: tuple[tuple[float, float], ...]) -> tuple[float, ...]:
+    """`SCHEDULE_FEATURES` at time t; every day runs the same schedule, so it wraps at midnight."""
+    hour = t.hour + t.minute / 60
+    i = next((k for k, (until, _) in enumerate(schedule) if hour < until), len(schedule) - 1)
+    start = schedule[i - 1][0] if i else 0.0
+    load, before, after = schedule[i][1], schedule[i - 1][1], schedule[(i + 1) % len(schedule)][1]
+    return load, load - before, (hour - start) / 24, after - load, (schedule[i][0] - hour) / 24
+
+
+def observation_names(with_time: bool = False, with_schedule: bool = False) -> tuple[str, ...]:
+    return SENSOR_NAMES + (TIME_FEATURES if with_time else ()) + (SCHEDULE_FEATURES if with_schedule else ())
+
+
+def observation_bounds(with_time: bool = False, with_schedule: bool = False) -> tuple[list[float], list[float]]:
+    extra = len(observation_names(with_time, with_schedule)) - len(SENSORS)
     return [s.low for s in SENSORS] + [-1.0] * extra, [s.high for s in SENSORS] + [1.0] * extra
 
 

@@ -61,7 +61,7 @@ class RayVectorEnv:
             else:
                 ray.init(num_cpus=len(shares), include_dashboard=False, log_to_driver=True)
         self.num_envs = len(shares)
-        self.single_observation_space = observation_space(config.time_features)
+        self.single_observation_space = observation_space(config.time_features, config.schedule_features)
         self.single_action_space = action_space(len(control_model(config.model).actions))
         group = _actor_class()
         self.slices: list[slice] = []

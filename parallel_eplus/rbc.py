@@ -9,27 +9,11 @@ too cold, the setpoint rises instead. It acts through the same env as a policy (
 from __future__ import annotations
 
 import datetime as dt
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import ACTIONS, AGENT_IDF, ZONE_TEMP_NAMES
-
-IT_SCHEDULE = "Data Center CPU Loading Schedule"
-
-
-def it_load_schedule(idf=AGENT_IDF, name: str = IT_SCHEDULE) -> list[tuple[float, float]]:
-    """(until hour, load fraction) pairs of the model's ordinary-day IT loading, read from the IDF."""
-    text = idf.read_text(encoding="latin-1")
-    m = re.search(rf"Schedule:Compact,\s*{re.escape(name)},(.*?);", text, re.S | re.I)
-    if not m:
-        raise ValueError(f"schedule {name!r} not found in {idf}")
-    body = re.sub(r"!.*", "", m.group(1))
-    days = body.split("For:")
-    ordinary = next(d for d in days if "AllOtherDays" in d or "AllDays" in d)
-    pairs = re.findall(r"Until:\s*(\d+):(\d+)\s*,\s*([-\d.]+)", ordinary)
-    return [(int(h) + int(mi) / 60, float(v)) for h, mi, v in pairs]
+from .model import ACTIONS, ZONE_TEMP_NAMES, it_load_schedule
 
 
 @dataclass
@@ -41,7 +25,7 @@ class RBCConfig:
     flow_per_load_kg_s: tuple[float, float] = (3.7, 4.1)  # West, East feed-forward at full IT load
     gain_kg_s_per_k: float = 0.06  # integral gain: flow demand added per K of zone error each step
     setpoint_k_per_kg_s: float = 4.0  # below the flow floor, demand turns into a warmer setpoint
-    schedule: list[tuple[float, float]] = field(default_factory=it_load_schedule)
+    schedule: tuple[tuple[float, float], ...] = field(default_factory=it_load_schedule)
 
 
 class RuleBasedController:

@@ -32,7 +32,17 @@ from .episode import (
     write_records,
 )
 from .errors import EnergyPlusError, ProtocolError
-from .model import ACTIONS, SENSOR_NAMES, SENSORS, STEPS_PER_DAY, control_model, observation_bounds, time_features
+from .model import (
+    ACTIONS,
+    SENSOR_NAMES,
+    SENSORS,
+    STEPS_PER_DAY,
+    control_model,
+    it_load_schedule,
+    observation_bounds,
+    schedule_features,
+    time_features,
+)
 from .rbc import RBCConfig, RuleBasedController
 from .reward import RewardConfig, reward
 from .weather import resolve_weather, weather_label
@@ -59,6 +69,7 @@ class SimulationConfig:
     initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
     spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
     time_features: bool = False  # append model.TIME_FEATURES to the observation
+    schedule_features: bool = False  # then model.SCHEDULE_FEATURES (the IT-load schedule in the IDF)
     # > 0: the action, times this, corrects the rule-based controller's (rbc.py) instead of acting
     # alone (residual control: learning starts from the hand-tuned loop, not from scratch).
     residual_scale: float = 0.0
@@ -114,6 +125,7 @@ class Simulation:
         self.idf = Path(config.idf) if config.idf else self.model.idf
         if not self.idf.is_file():
             raise FileNotFoundError(f"model file not found: {self.idf}")
+        self._schedule = it_load_schedule(self.idf) if config.schedule_features else None
         self.weathers = weathers or [config.weather]
         self.weather_paths = [resolve_weather(w) for w in self.weathers]  # fail before spawning
         self.steps_per_episode = config.run_days * STEPS_PER_DAY
@@ -245,8 +257,11 @@ class Simulation:
         if not all(lo <= v <= hi for lo, v, hi in zip(_LOWS, sensed, _HIGHS, strict=True)):
             info["raw_observation"] = raw.copy()
             obs = np.clip(obs, OBS_LOW, OBS_HIGH)
-        if self.config.time_features:
-            obs = np.concatenate([obs, np.array(time_features(info["time"]), np.float32)])
+        if self.config.time_features or self._schedule:
+            extra = time_features(info["time"]) if self.config.time_features else ()
+            if self._schedule:
+                extra += schedule_features(info["time"], self._schedule)
+            obs = np.concatenate([obs, np.array(extra, np.float32)])
         self._info = info
         return obs, info
 

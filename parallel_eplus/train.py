@@ -83,6 +83,7 @@ class TrainConfig:
     workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
     max_restarts: int = 3
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
+    schedule_features: bool = False  # opt-in IT-load schedule features (model.SCHEDULE_FEATURES)
     init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
     algorithm: str = "trpo"  # the paper's; or "ppo"
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
@@ -144,6 +145,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         keep_episodes=cfg.keep_episodes,
         reward=cfg.reward,
         time_features=cfg.time_features,
+        schedule_features=cfg.schedule_features,
         residual_scale=cfg.residual_scale,
         rbc_target_c=cfg.rbc_target_c,
     )
@@ -293,7 +295,7 @@ def train(
         cfg = saved
     cfg = cfg.resolved()
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
-        _check_init_from(Path(cfg.init_from), cfg.time_features)  # before any EnergyPlus starts
+        _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.json").write_text(cfg.to_json())
@@ -400,11 +402,13 @@ def require_policy_files(model_zip: Path, context: str = "") -> Path:
     return stats
 
 
-def _check_init_from(model_zip: Path, time_features: bool) -> None:
+def _check_init_from(model_zip: Path, features: tuple[bool, bool]) -> None:
     require_policy_files(model_zip, "--init-from: ")
-    if policy_time_features(model_zip) != time_features:
-        flag = "add" if not time_features else "drop"
-        raise ValueError(f"--init-from {model_zip}: that policy sees other observations; {flag} --time-features")
+    saved = policy_features(model_zip)
+    if saved != features:
+        flags = [f for f, on in zip(("--time-features", "--schedule-features"), saved, strict=True) if on]
+        trained = f"with {' and '.join(flags)}" if flags else "without --time-features or --schedule-features"
+        raise ValueError(f"--init-from {model_zip}: that policy was trained {trained}; pass the same flags")
 
 
 def _warm_normalizer(model_zip: Path, venv: SB3VecEnv) -> VecNormalize:
@@ -414,16 +418,19 @@ def _warm_normalizer(model_zip: Path, venv: SB3VecEnv) -> VecNormalize:
     return env
 
 
-def policy_time_features(model_zip: str | Path) -> bool:
-    """Whether a saved policy observes `model.TIME_FEATURES`, read from its observation statistics."""
+def policy_features(model_zip: str | Path) -> tuple[bool, bool]:
+    """Whether a saved policy observes (`model.TIME_FEATURES`, `model.SCHEDULE_FEATURES`), read from
+    the size of its observation statistics."""
     import pickle
 
     with open(normalization_file(Path(model_zip)), "rb") as f:
         norm: VecNormalize = pickle.load(f)
     n = norm.observation_space.shape[0]
-    if n not in (len(observation_names(False)), len(observation_names(True))):
+    options = [(t, s) for t in (False, True) for s in (False, True)]
+    found = [o for o in options if len(observation_names(*o)) == n]
+    if not found:
         raise ValueError(f"{model_zip}: a policy over {n} observations does not fit this model")
-    return n == len(observation_names(True))
+    return found[0]
 
 
 def load_policy(model_zip: str | Path):

@@ -167,6 +167,26 @@ def test_time_features_follow_the_clock(no_leaks):
         env.close()
 
 
+def test_schedule_features_announce_the_it_load_step_the_next_action_meets(no_leaks):
+    env = EnergyPlusEnv(weather="CO", run_days=1, time_features=True, schedule_features=True)
+    try:
+        obs, info = env.reset(seed=0)
+        assert obs.shape == (15,) and env.observation_space.contains(obs)
+        it_power = {}
+        while info["time"].hour < 6 or info["time"].minute < 15:
+            obs, *_, info = env.step(np.zeros(4, dtype=np.float32))
+            it_power[info["time"].strftime("%H:%M")] = info["it_power_w"]
+            if info["time"].strftime("%H:%M") == "06:00":
+                # The IDF's schedule: 0.5 until 06:00, 0.75 until 08:00; the step after 06:00 runs at 0.75.
+                assert obs[10:] == pytest.approx([0.75, 0.25, 0.0, 0.25, 2 / 24], abs=1e-6)
+        assert obs[10:] == pytest.approx([0.75, 0.25, 0.25 / 24, 0.25, 1.75 / 24], abs=1e-6)
+        # ... and the physics agrees: IT power rises in the step the features said would run at 0.75.
+        assert it_power["06:15"] > 1.1 * it_power["06:00"]
+        assert it_power["06:00"] == pytest.approx(it_power["05:45"], rel=0.01)
+    finally:
+        env.close()
+
+
 def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
     from parallel_eplus.rbc import RBCConfig, RuleBasedController
 

@@ -77,13 +77,14 @@ def test_bad_input_fails_before_anything_runs(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
-def test_policy_with_time_features_is_evaluated_with_them(tmp_path, no_leaks):
+@pytest.mark.parametrize("schedule", [False, True])
+def test_policy_with_extra_features_is_evaluated_with_them(tmp_path, no_leaks, schedule):
     cfg = TrainConfig(
         workers=1, weathers=["CO"], run_days=1, timesteps=96, batch_size=96, run_name="clock", time_features=True,
-        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
+        schedule_features=schedule, runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
     )  # fmt: skip
     controller = policy_controller(str(train(cfg, progress=False)))
-    assert controller.time_features
+    assert controller.time_features and controller.schedule_features == schedule
     df = run_sweep([controller], ["CO"], run_days=1, workers=1, out_dir=tmp_path / "eval", progress=False)
     assert df.steps.tolist() == [96] and df.power_kw.gt(0).all()
 
