@@ -42,7 +42,7 @@ log = logging.getLogger(__name__)
 class BenchConfig:
     weather: str = "CA"
     raw_days: int = 365  # period for raw and env
-    # EnergyPlus's cost under exploring actions varies with the season (a summer step costs up to 1.7
+    # EnergyPlus's cost under exploring actions varies with the season (a summer step costs up to 1.5-1.7
     # times a January one here), so the vector env and training are timed over the same simulated days.
     train_steps: int = 16384  # env steps of TRPO learn: one paper batch and its update
     vector_steps: int | None = None  # vector steps per worker; None: train_steps / workers

@@ -259,6 +259,7 @@ class UpdateTimer(BaseCallback):
         self._t0, self._steps0 = time.perf_counter(), self.num_timesteps
 
     def _on_training_end(self) -> None:
+        self._update_done()  # the last rollout's update, which no rollout follows
         self.learn_s = time.perf_counter() - self._t0
         self.learn_steps = self.num_timesteps - self._steps0
 
@@ -266,9 +267,13 @@ class UpdateTimer(BaseCallback):
         self._t = time.perf_counter()
 
     def _on_rollout_start(self) -> None:
+        self._update_done()
+
+    def _update_done(self) -> None:
         if self._t is not None:
             self.updates.append(time.perf_counter() - self._t)
             self.logger.record("throughput/update_s", self.updates[-1])
+            self._t = None
 
     def _on_step(self) -> bool:
         return True

@@ -8,7 +8,7 @@ from parallel_eplus.bench import BenchConfig, format_table, run
 
 
 def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
-    cfg = BenchConfig(raw_days=1, vector_steps=40, train_steps=256, batch_size=128, workers=2, repeats=1)
+    cfg = BenchConfig(raw_days=1, vector_steps=40, train_steps=128, batch_size=128, workers=2, repeats=1)
     out = tmp_path / "bench.json"
     results = run(cfg, out)
     assert json.loads(out.read_text()) == results
