@@ -155,17 +155,21 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
     results: dict = {"config": asdict(cfg), "machine": {"cores": os.cpu_count()}}
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-bench-") as tmp:
         tmp = Path(tmp)
-        raw = [raw_seconds(cfg, tmp / f"raw{i}") for i in range(cfg.repeats)]
-        envs = [env_run(cfg, tmp / f"env{i}") for i in range(cfg.repeats)]
+        # Back to back within each repeat, and ratios taken per repeat: this machine's speed drifts by
+        # 10-20 % from one minute to the next, which medians of separate series would not cancel.
+        raw, raw_n, envs = [], [], []
+        for i in range(cfg.repeats):
+            raw.append(raw_seconds(cfg, tmp / f"raw{i}"))
+            envs.append(env_run(cfg, tmp / f"env{i}"))
+            # The machine's own ceiling on scaling: N raw runs at once against one alone.
+            raw_n.append(raw_seconds(cfg, tmp / f"rawN{i}", copies=cfg.workers))
         worker_rss_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         results["raw_s"] = statistics.median(raw)
-        # The machine's own ceiling on scaling: N raw runs at once against one alone.
-        raw_n = [raw_seconds(cfg, tmp / f"rawN{i}", copies=cfg.workers) for i in range(cfg.repeats)]
         results["raw_n_s"] = statistics.median(raw_n)
-        results["raw_scaling"] = results["raw_s"] / results["raw_n_s"]
+        results["raw_scaling"] = statistics.median(r / n for r, n in zip(raw, raw_n, strict=True))
         results["env_s"] = statistics.median(e["seconds"] for e in envs)
         results["env_steps_per_s"] = statistics.median(e["steps_per_s"] for e in envs)
-        results["env_over_raw"] = results["env_s"] / results["raw_s"]
+        results["env_over_raw"] = statistics.median(e["seconds"] / r for e, r in zip(envs, raw, strict=True))
         results["first_obs_s"] = statistics.median(e["first_obs_s"] for e in envs)
         one = [vector_rate(cfg, 1, tmp / f"v1_{i}") for i in range(cfg.repeats)]
         many = [vector_rate(cfg, cfg.workers, tmp / f"vN_{i}") for i in range(cfg.repeats)]

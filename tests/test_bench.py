@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from parallel_eplus.bench import BenchConfig, format_table, run
 
 
@@ -14,7 +16,8 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     assert json.loads(out.read_text()) == results
     assert results["env_steps_per_s"] > 0 and results["env_over_raw"] == results["env_s"] / results["raw_s"]
     # Two raw runs at once take at least about as long as one (not half: each does a whole run).
-    assert results["raw_scaling"] == results["raw_s"] / results["raw_n_s"] and 0.2 < results["raw_scaling"] < 1.5
+    assert results["raw_scaling"] == pytest.approx(results["raw_s"] / results["raw_n_s"])
+    assert 0.2 < results["raw_scaling"] < 1.5
     for n in ("1", "n"):
         assert results[f"vector_{n}_steps_per_s"] > 0
         assert 0 < results[f"vector_{n}_cores_busy"] <= cfg.workers + 0.5
