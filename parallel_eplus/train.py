@@ -314,16 +314,10 @@ def train(
             model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu")
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
         else:
-            if cfg.init_from is not None:
-                env = _warm_normalizer(Path(cfg.init_from), venv)
-            else:
-                env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
+            env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
             model = _new_model(cfg, env)
             if cfg.init_from is not None:
-                try:
-                    model.policy.load_state_dict(_saved_policy(Path(cfg.init_from)).state_dict())
-                except RuntimeError as e:  # another network shape
-                    raise ValueError(f"--init-from {cfg.init_from}: its network does not fit this run's: {e}") from e
+                _warm_start(Path(cfg.init_from), model, env)
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
@@ -410,17 +404,39 @@ def require_policy_files(model_zip: Path, context: str = "") -> Path:
 def _check_init_from(model_zip: Path, features: tuple[bool, bool]) -> None:
     require_policy_files(model_zip, "--init-from: ")
     saved = policy_features(model_zip)
-    if saved != features:
+    old, new = observation_names(*saved), observation_names(*features)
+    if new[: len(old)] != old:
         flags = [f for f, on in zip(("--time-features", "--schedule-features"), saved, strict=True) if on]
         trained = f"with {' and '.join(flags)}" if flags else "without --time-features or --schedule-features"
-        raise ValueError(f"--init-from {model_zip}: that policy was trained {trained}; pass the same flags")
+        raise ValueError(
+            f"--init-from {model_zip}: that policy was trained {trained}; pass the same flags (more may be added)"
+        )
 
 
-def _warm_normalizer(model_zip: Path, venv: SB3VecEnv) -> VecNormalize:
-    """The observation statistics a warm-started run inherits; they keep updating."""
-    env = VecNormalize.load(str(normalization_file(model_zip)), venv)
-    env.training = True
-    return env
+def _warm_start(model_zip: Path, model, env: VecNormalize) -> None:
+    """The saved policy's weights and observation statistics, into a run that may observe more.
+
+    Observations added after the saved policy's own (`--schedule-features` on a policy trained with
+    `--time-features`, say) enter its first layers with zero weights, so the run starts from exactly
+    the saved policy's behaviour; their statistics start at mean 0, variance 1 and keep updating.
+    """
+    import pickle
+
+    state = model.policy.state_dict()
+    for key, value in _saved_policy(model_zip).state_dict().items():
+        target = state.get(key)
+        if target is not None and value.ndim == target.ndim == 2 and target.shape[1] > value.shape[1]:
+            # An input layer over more observations (a wrong row count still fails in load_state_dict).
+            value = th.cat([value, th.zeros(value.shape[0], target.shape[1] - value.shape[1])], dim=1)
+        state[key] = value
+    try:
+        model.policy.load_state_dict(state)
+    except RuntimeError as e:  # another network shape
+        raise ValueError(f"--init-from {model_zip}: its network does not fit this run's: {e}") from e
+    with open(normalization_file(model_zip), "rb") as f:
+        stats = pickle.load(f).obs_rms
+    n = len(stats.mean)
+    env.obs_rms.mean[:n], env.obs_rms.var[:n], env.obs_rms.count = stats.mean, stats.var, stats.count
 
 
 def policy_features(model_zip: str | Path) -> tuple[bool, bool]:

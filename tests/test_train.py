@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch as th
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from parallel_eplus.reward import RewardConfig
-from parallel_eplus.train import TrainConfig, _latest_checkpoint, load_policy, train
+from parallel_eplus.train import TrainConfig, _latest_checkpoint, _saved_policy, load_policy, train
 
 from .conftest import our_pipe_dirs, our_processes
 
@@ -101,11 +102,22 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
 def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
     import pickle
 
-    base = train(small_config(tmp_path, "base", weathers=["CA"], timesteps=768), progress=False)
-    with pytest.raises(ValueError, match="--time-features"):  # another observation: refused before EnergyPlus starts
-        train(small_config(tmp_path, "wrong", init_from=str(base), time_features=True), progress=False)
+    base = train(small_config(tmp_path, "base", weathers=["CA"], timesteps=768, time_features=True), progress=False)
+    with pytest.raises(ValueError, match="--time-features"):  # fewer observations: refused before EnergyPlus starts
+        train(small_config(tmp_path, "wrong", init_from=str(base)), progress=False)
+    # More observations: they enter with zero weights, so the new run starts as the saved policy acts.
+    grown = small_config(tmp_path, "grown", timesteps=0, init_from=str(base), time_features=True)
+    grown.schedule_features = True
+    old, new = (_saved_policy(m).state_dict() for m in (base, train(grown, progress=False)))
+    for key in old:
+        if key.endswith("_net.0.weight"):  # the input layers: 6 sensors + 4 time features, then 5 new columns
+            assert th.equal(new[key][:, :10], old[key]) and not new[key][:, 10:].any(), key
+        else:
+            assert th.equal(new[key], old[key]), key
     reward = RewardConfig(center_c=23.0, lower_c=22.5, upper_c=23.5)
-    tuned = small_config(tmp_path, "tuned", weathers=["CO"], timesteps=512, batch_size=512, reward=reward)
+    tuned = small_config(
+        tmp_path, "tuned", weathers=["CO"], timesteps=512, batch_size=512, reward=reward, time_features=True
+    )
     tuned.init_from = str(base)
     final = train(tuned, progress=False)
     counts = []
