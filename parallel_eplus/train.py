@@ -363,7 +363,7 @@ def _new_model(cfg: TrainConfig, env: VecNormalize):
     common = dict(
         n_steps=cfg.n_steps, gamma=t.gamma, gae_lambda=t.gae_lambda, seed=cfg.seed, device="cpu",
         # Fused Adam: the same update in one kernel per step instead of a Python loop over the tensors.
-        # The critic takes 1,280 minibatch steps per 16k batch; this cut the update by about a third.
+        # The critic takes 1,280 minibatch steps per 16k batch; this cut the update by a quarter (2.3 -> 1.7 s).
         policy_kwargs={"net_arch": list(t.net_arch), "activation_fn": th.nn.Tanh, "optimizer_kwargs": {"fused": True}},
     )  # fmt: skip
     if cfg.algorithm == "ppo":
