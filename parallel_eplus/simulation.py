@@ -204,7 +204,9 @@ class Simulation:
         self.last_summary = None
         if self.config.residual_scale:  # a fresh integral state per episode
             target = self.config.rbc_target_c
-            self.base = RuleBasedController(RBCConfig() if target is None else RBCConfig(target_c=target))
+            # Its feed-forward reads the IT schedule of the model actually run, as the schedule features do.
+            rbc = {"schedule": it_load_schedule(self.idf)} | ({} if target is None else {"target_c": target})
+            self.base = RuleBasedController(RBCConfig(**rbc))
 
     def first_observation(self) -> tuple[np.ndarray, dict]:
         """Wait through sizing and warmup for observation 0 of the launched episode."""
