@@ -66,7 +66,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     from .reward import RewardConfig
-    from .train import TrainConfig, train
+    from .train import TrainConfig, TRPOSettings, train
     from .weather import parse_weathers
 
     cfg = TrainConfig(
@@ -87,9 +87,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         schedule_features=args.schedule_features,
         init_from=str(args.init_from) if args.init_from else None,
         residual_scale=args.residual,
+        residual_space=args.residual_space,
         rbc_target_c=args.rbc_target,
         algorithm=args.algorithm,
         reward=RewardConfig.from_any(args.reward),
+        trpo=TRPOSettings(log_std_init=args.log_std_init),
     )
     if args.resume and "--timesteps" not in sys.argv:
         cfg.timesteps = 0  # 0: keep the resumed run's own total
@@ -195,7 +197,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--residual", type=float, default=0.0, metavar="SCALE",
         help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting alone",
     )  # fmt: skip
+    tr.add_argument(
+        "--residual-space", default="action", choices=["action", "demand"],
+        help="with --residual: correct each normalized action (default) or each zone's flow demand (SCALE in kg/s)",
+    )  # fmt: skip
     tr.add_argument("--rbc-target", type=float, help="with --residual: the rule-based controller's zone target, C")
+    tr.add_argument(
+        "--log-std-init", type=float, default=0.0,
+        help="the policy's initial log standard deviation (default 0, the paper's); lower explores less",
+    )  # fmt: skip
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")

@@ -28,7 +28,9 @@ class EnergyPlusEnv(gym.Env):
 
     `time_features=True` appends hour and day of week as sine/cosine pairs (`model.TIME_FEATURES`);
     `schedule_features=True` then the IT-load schedule's present value and its steps (`model.SCHEDULE_FEATURES`).
-    `residual_scale > 0`: the action corrects the rule-based controller's by up to that much (rbc.py).
+    `residual_scale > 0`: the action corrects the rule-based controller's by up to that much (rbc.py):
+    each normalized action (`residual_space="action"`) or, with `"demand"`, each zone's flow demand
+    (two elements, up to `residual_scale` kg/s).
 
     `reset()` starts a new EnergyPlus process (stopping a running one) and returns the state at the
     start of the run period; each `step()` runs one 15-minute zone timestep under the given action.
@@ -51,6 +53,7 @@ class EnergyPlusEnv(gym.Env):
         time_features: bool = False,
         schedule_features: bool = False,
         residual_scale: float = 0.0,
+        residual_space: str = "action",
         rbc_target_c: float | None = None,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
@@ -67,13 +70,14 @@ class EnergyPlusEnv(gym.Env):
             time_features=time_features,
             schedule_features=schedule_features,
             residual_scale=residual_scale,
+            residual_space=residual_space,
             rbc_target_c=rbc_target_c,
         )
         self.sim = Simulation(self.config, weathers)
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
         self.observation_space = observation_space(time_features, schedule_features)
-        self.action_space = action_space(len(self.sim.elements))
+        self.action_space = action_space(len(self.sim.policy_names))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)

@@ -42,6 +42,7 @@ class Controller:
     schedule_features: bool = False  # and model.SCHEDULE_FEATURES
     rbc_target_c: float | None = None  # the rule-based controller's zone target; None: RBCConfig's
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
+    residual_space: str = "action"  # what the correction applies to (SimulationConfig)
 
     @property
     def model(self) -> str:
@@ -80,6 +81,7 @@ def policy_controller(spec: str) -> Controller:
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
+        residual_space=saved.get("residual_space", "action"),
     )  # fmt: skip
 
 
@@ -123,7 +125,7 @@ def run_sweep(
                 cfg = SimulationConfig(
                     weather=weather, model=controller.model, run_days=run_days, reward=reward or RewardConfig(),
                     time_features=controller.time_features, schedule_features=controller.schedule_features,
-                    residual_scale=controller.residual_scale,
+                    residual_scale=controller.residual_scale, residual_space=controller.residual_space,
                     rbc_target_c=controller.rbc_target_c,
                     output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
                 )  # fmt: skip

@@ -11,8 +11,7 @@ import logging
 import numpy as np
 
 from .env import action_space, observation_space
-from .model import control_model
-from .simulation import SimulationConfig
+from .simulation import SimulationConfig, policy_action_names
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +61,7 @@ class RayVectorEnv:
                 ray.init(num_cpus=len(shares), include_dashboard=False, log_to_driver=True)
         self.num_envs = len(shares)
         self.single_observation_space = observation_space(config.time_features, config.schedule_features)
-        self.single_action_space = action_space(len(control_model(config.model).actions))
+        self.single_action_space = action_space(len(policy_action_names(config)))
         group = _actor_class()
         self.slices: list[slice] = []
         self.actors = []

@@ -28,6 +28,11 @@ class RBCConfig:
     schedule: tuple[tuple[float, float], ...] = field(default_factory=it_load_schedule)
 
 
+# A residual policy in demand space (`SimulationConfig.residual_space`) adds one correction per zone to
+# the controller's flow demand: one continuous knob, which no clipping of a single actuator can swallow.
+DEMAND_CORRECTIONS = ("west_demand_kg_s", "east_demand_kg_s")
+
+
 class RuleBasedController:
     """Callable (observation, info) -> normalized action; a split-range integral loop per zone.
 
@@ -45,7 +50,9 @@ class RuleBasedController:
         hour = t.hour + t.minute / 60
         return next((v for until, v in self.cfg.schedule if hour < until), self.cfg.schedule[-1][1])
 
-    def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:
+    def __call__(self, obs: np.ndarray, info: dict, demand_correction: np.ndarray | None = None) -> np.ndarray:
+        """`demand_correction` (kg/s per zone) shifts this step's demand but not the integral state:
+        the loop still settles the zones on its target, so a correction acts on transients."""
         c = self.cfg
         fan_lo, fan_hi = self.low[2], self.high[2]
         error = np.array([info[name] for name in ZONE_TEMP_NAMES]) - c.target_c  # > 0: too warm
@@ -55,6 +62,8 @@ class RuleBasedController:
             self.trim + c.gain_kg_s_per_k * error, fan_lo - max_shortfall - feed_forward, fan_hi - feed_forward
         )
         demand = feed_forward + self.trim
+        if demand_correction is not None:
+            demand = demand + demand_correction
         flow = np.clip(demand, fan_lo, fan_hi)
         setpoint = c.setpoint_floor_c + c.setpoint_k_per_kg_s * np.maximum(fan_lo - demand, 0.0)
         physical = np.concatenate([setpoint, flow])

@@ -43,7 +43,7 @@ from .model import (
     schedule_features,
     time_features,
 )
-from .rbc import RBCConfig, RuleBasedController
+from .rbc import DEMAND_CORRECTIONS, RBCConfig, RuleBasedController
 from .reward import RewardConfig, reward
 from .weather import resolve_weather, weather_label
 
@@ -73,7 +73,22 @@ class SimulationConfig:
     # > 0: the action, times this, corrects the rule-based controller's (rbc.py) instead of acting
     # alone (residual control: learning starts from the hand-tuned loop, not from scratch).
     residual_scale: float = 0.0
+    # "action": the correction adds to each of the four normalized actions; "demand": one correction
+    # per zone, in kg/s, to the controller's split-range flow demand (rbc.DEMAND_CORRECTIONS).
+    residual_space: str = "action"
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
+
+
+RESIDUAL_SPACES = ("action", "demand")
+
+
+def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
+    """The elements of the action a policy gives: the model's own, or per-zone demand corrections."""
+    if config.residual_space not in RESIDUAL_SPACES:
+        raise ValueError(f"unknown residual space {config.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
+    if config.residual_scale and config.residual_space == "demand":
+        return DEMAND_CORRECTIONS
+    return tuple(e.name for e in control_model(config.model).actions)
 
 
 _YEAR_STARTS: dict[float, dt.datetime] = {}
@@ -139,6 +154,8 @@ class Simulation:
         if config.residual_scale and self.elements != ACTIONS:
             n = len(self.elements)
             raise ValueError(f"residual control corrects all four actions; model {config.model!r} has {n}")
+        self.policy_names = policy_action_names(config)  # what `send` takes; `action_names`: what EnergyPlus gets
+        self._demand = config.residual_scale > 0 and config.residual_space == "demand"
         self._tmp = None
         if config.output_dir is None:
             self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
@@ -223,8 +240,11 @@ class Simulation:
         if self.base is None:
             self._action = scale_action(action, self.low, self.high, self.action_names)
         else:
-            correction = np.array(check_action(action, self.action_names))
-            a = self.base(None, self._info) + self.config.residual_scale * correction
+            correction = self.config.residual_scale * np.array(check_action(action, self.policy_names))
+            if self._demand:
+                a = self.base(None, self._info, demand_correction=correction)
+            else:
+                a = self.base(None, self._info) + correction
             self._action = scale_action(a, self.low, self.high, self.action_names)
         try:
             self.pipes.send(pipe.encode(self._action))

@@ -26,7 +26,7 @@ from .errors import Interrupts
 from .model import STEPS_PER_DAY, observation_names
 from .reward import RewardConfig
 from .sb3_adapter import SB3VecEnv
-from .simulation import SimulationConfig
+from .simulation import RESIDUAL_SPACES, SimulationConfig
 from .vector_env import EnergyPlusVectorEnv, weather_shares
 from .weather import parse_weathers
 
@@ -50,6 +50,9 @@ class TRPOSettings:
     n_critic_updates: int = 5  # vf_iters
     learning_rate: float = 1e-3  # vf_stepsize
     critic_batch_size: int = 64  # OpenAI Baselines' value-function minibatch
+    # The Gaussian policy's initial log standard deviation (SB3's default, 0, is the paper's too). A residual
+    # policy starts from a working controller, where noise of one action unit would unsettle it.
+    log_std_init: float = 0.0
 
 
 @dataclass
@@ -87,6 +90,7 @@ class TrainConfig:
     init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
     algorithm: str = "trpo"  # the paper's; or "ppo"
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
+    residual_space: str = "action"  # what it corrects: each action, or each zone's flow demand (SimulationConfig)
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
@@ -105,6 +109,8 @@ class TrainConfig:
             raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo or ppo")
         if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
             raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
+        if self.residual_space not in RESIDUAL_SPACES:
+            raise ValueError(f"unknown --residual-space {self.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
         if self.run_name is None:
@@ -147,6 +153,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         time_features=cfg.time_features,
         schedule_features=cfg.schedule_features,
         residual_scale=cfg.residual_scale,
+        residual_space=cfg.residual_space,
         rbc_target_c=cfg.rbc_target_c,
     )
     shares = weather_shares(cfg.weathers, cfg.workers)
@@ -364,7 +371,10 @@ def _new_model(cfg: TrainConfig, env: VecNormalize):
         n_steps=cfg.n_steps, gamma=t.gamma, gae_lambda=t.gae_lambda, seed=cfg.seed, device="cpu",
         # Fused Adam: the same update in one kernel per step instead of a Python loop over the tensors.
         # The critic takes 1,280 minibatch steps per 16k batch; this cut the update by a quarter (2.3 -> 1.7 s).
-        policy_kwargs={"net_arch": list(t.net_arch), "activation_fn": th.nn.Tanh, "optimizer_kwargs": {"fused": True}},
+        policy_kwargs={
+            "net_arch": list(t.net_arch), "activation_fn": th.nn.Tanh, "log_std_init": t.log_std_init,
+            "optimizer_kwargs": {"fused": True},
+        },
     )  # fmt: skip
     if cfg.algorithm == "ppo":
         p = cfg.ppo
