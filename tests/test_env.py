@@ -187,20 +187,24 @@ def test_schedule_features_announce_the_it_load_step_the_next_action_meets(no_le
         env.close()
 
 
+def _controlled_episode(out: Path, act, **env_kwargs) -> pd.DataFrame:
+    """One day on CO under `act(obs, info)`; the step table."""
+    env = EnergyPlusEnv(weather="CO", run_days=1, output_dir=out, **env_kwargs)
+    try:
+        obs, info = env.reset(seed=0)
+        terminated = False
+        while not terminated:
+            obs, _, terminated, _, info = env.step(act(obs, info))
+        return read_steps(info["episode_dir"])
+    finally:
+        env.close()
+
+
 def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
     from parallel_eplus.rbc import RBCConfig, RuleBasedController
 
     def records(name: str, residual: float, act) -> pd.DataFrame:
-        env = EnergyPlusEnv(weather="CO", run_days=1, output_dir=tmp_path / name, residual_scale=residual,
-                            rbc_target_c=23.2)  # fmt: skip
-        try:
-            obs, info = env.reset(seed=0)
-            terminated = False
-            while not terminated:
-                obs, _, terminated, _, info = env.step(act(obs, info))
-            return read_steps(info["episode_dir"])
-        finally:
-            env.close()
+        return _controlled_episode(tmp_path / name, act, residual_scale=residual, rbc_target_c=23.2)
 
     rbc = records("rbc", 0.0, RuleBasedController(RBCConfig(target_c=23.2)))
     zero = records("zero", 0.2, lambda obs, info: np.zeros(4, np.float32))
@@ -212,3 +216,35 @@ def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
     with pytest.raises(ValueError, match="four actions"):
         EnergyPlusEnv(model="temp", residual_scale=0.2)
     assert set(Path(tempfile.gettempdir()).glob("parallel-eplus-episodes-*")) == temp_dirs  # refused before any
+
+
+def test_demand_residual_corrects_the_controllers_flow_demand(tmp_path, no_leaks):
+    from parallel_eplus.rbc import RBCConfig, RuleBasedController
+
+    cfg = RBCConfig(target_c=22.5)
+    env = EnergyPlusEnv(residual_scale=1.0, residual_space="demand")
+    assert env.action_space.shape == (2,)  # one knob per zone
+    env.close()
+
+    def records(name: str, act) -> pd.DataFrame:
+        return _controlled_episode(tmp_path / name, act, residual_scale=1.0, residual_space="demand", rbc_target_c=22.5)
+
+    def demand(row: pd.Series, zone: str) -> float:
+        """Invert the split range: the flow above the fan's floor, a warmer setpoint below it."""
+        setpoint, flow = row[f"{zone}_setpoint_c"], row[f"{zone}_fan_kg_s"]
+        if setpoint > cfg.setpoint_floor_c + 1e-9:
+            return 1.75 - (setpoint - cfg.setpoint_floor_c) / cfg.setpoint_k_per_kg_s
+        return flow
+
+    rbc = _controlled_episode(tmp_path / "rbc", RuleBasedController(cfg), rbc_target_c=22.5)
+    zero = records("zero", lambda obs, info: np.zeros(2, np.float32))
+    pd.testing.assert_frame_equal(zero, rbc)  # no correction: exactly the rule-based controller
+    # The first step's demand, 1 kg/s lower in both zones, wherever it falls on the split range.
+    less = records("less", lambda obs, info: np.array([-1, -1], np.float32))
+    for zone in ("west", "east"):
+        assert demand(less.iloc[0], zone) == pytest.approx(demand(rbc.iloc[0], zone) - 1.0, abs=1e-6)
+    # Held, the correction is integrated away: the zones still settle on the controller's target.
+    late = less.iloc[len(less) // 2 :]
+    assert abs(late.west_temp_c.mean() - 22.5) < 0.3 and abs(late.east_temp_c.mean() - 22.5) < 0.3
+    with pytest.raises(ValueError, match="residual space"):
+        EnergyPlusEnv(residual_scale=1.0, residual_space="flows")

@@ -97,17 +97,18 @@ def test_rule_based_controller_holds_the_target_it_is_given(tmp_path, no_leaks):
         assert warm[f"{zone}_temp_mean"] - cold[f"{zone}_temp_mean"] > 0.6, zone
 
 
-def test_residual_policy_is_evaluated_as_a_correction_of_the_rule_based_controller(tmp_path, no_leaks):
+@pytest.mark.parametrize("space", ["action", "demand"])
+def test_residual_policy_is_evaluated_as_a_correction_of_the_rule_based_controller(tmp_path, no_leaks, space):
     cfg = TrainConfig(
         workers=1, weathers=["CO"], run_days=1, timesteps=96, batch_size=96, run_name="residual",
-        time_features=True, residual_scale=0.1, rbc_target_c=23.0,
+        time_features=True, residual_scale=0.1, residual_space=space, rbc_target_c=23.0,
         runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
     )  # fmt: skip
     controller = policy_controller(str(train(cfg, progress=False)))
-    assert (controller.residual_scale, controller.rbc_target_c) == (0.1, 23.0)
+    assert (controller.residual_scale, controller.residual_space, controller.rbc_target_c) == (0.1, space, 23.0)
     assert controller.label == "TRPO+RBC (CO)"
     df = run_sweep([controller], ["CO"], run_days=1, workers=1, out_dir=tmp_path / "eval", progress=False)
     steps = pd.read_parquet(f"{df.episode_dir[0]}/steps.parquet")
     # Alone, a barely trained policy's mean action is mid-range (25 C supply air); as a correction it
-    # stays within 0.1 of the half-range (1.5 C) of the controller's, which keeps its supply air cold.
+    # stays within 0.1 of the half-range (1.5 C), or 0.1 kg/s of demand, of the controller's: cold supply air.
     assert steps.west_setpoint_c.median() < 15 and steps.east_setpoint_c.median() < 15
