@@ -4,7 +4,8 @@
    no pipe exchange), wall seconds from process start to exit;
 2. env: the same period and action stepped through `EnergyPlusEnv` (reset + steps, wall seconds);
 3. vector env: aggregate steps/s with 1 and N workers, and the scaling efficiency, beside the
-   machine's own: N raw runs at once against one;
+   machine's own: N raw runs at once against one, and N workers each stepped alone in a process of
+   its own (no lockstep, no shared learner: the ceiling any vector env can reach here);
 4. training: env steps/s inside TRPO `learn` with N workers, against the vector env's rate;
 5. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
 
@@ -16,7 +17,9 @@ from __future__ import annotations
 
 import json
 import logging
+import multiprocessing
 import os
+import queue
 import resource
 import statistics
 import subprocess
@@ -30,8 +33,9 @@ import numpy as np
 
 from .env import EnergyPlusEnv
 from .episode import MODEL_FILE, write_episode_idf
+from .errors import Interrupts
 from .model import AGENT_IDF, STEPS_PER_DAY, control_model
-from .simulation import SimulationConfig
+from .simulation import Simulation, SimulationConfig
 from .vector_env import EnergyPlusVectorEnv, weather_shares
 from .weather import resolve_weather
 
@@ -113,13 +117,18 @@ def env_run(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
     return {"seconds": total, "first_obs_s": t_first, "steps": steps, "steps_per_s": steps / (total - t_first)}
 
 
+def _exploring_actions(cfg: BenchConfig, workers: int) -> np.ndarray:
+    """(steps, workers, 4) actions drawn like an untrained policy's, the same for every measurement."""
+    steps = cfg.vector_steps or cfg.train_steps // cfg.workers
+    rng = np.random.default_rng(0)
+    return np.clip(rng.normal(size=(steps, workers, 4)), -1, 1).astype(np.float32)
+
+
 def vector_rate(cfg: BenchConfig, workers: int, workdir: Path) -> dict[str, float]:
     """Aggregate env steps/s of the vector env over `vector_steps` per worker, after the first observations,
     and the cores it kept busy (CPU seconds of learner and workers, start-up included, per wall second)."""
     sim = SimulationConfig(weather=cfg.weather, run_days=365, output_dir=str(workdir), keep_episodes=0)
-    rng = np.random.default_rng(0)
-    steps = cfg.vector_steps or cfg.train_steps // cfg.workers
-    actions = np.clip(rng.normal(size=(steps, workers, 4)), -1, 1).astype(np.float32)
+    actions = _exploring_actions(cfg, workers)
     cpu0, wall0 = _cpu_seconds(), time.perf_counter()
     venv = EnergyPlusVectorEnv(sim, weather_shares([cfg.weather], workers))
     try:
@@ -127,10 +136,68 @@ def vector_rate(cfg: BenchConfig, workers: int, workdir: Path) -> dict[str, floa
         t0 = time.perf_counter()
         for a in actions:
             venv.step_lists(a)
-        rate = workers * steps / (time.perf_counter() - t0)
+        rate = workers * len(actions) / (time.perf_counter() - t0)
     finally:
         venv.close()
     return {"steps_per_s": rate, "cores_busy": (_cpu_seconds() - cpu0) / (time.perf_counter() - wall0)}
+
+
+def _step_alone(sim_cfg: SimulationConfig, actions: np.ndarray, siblings: int, results) -> None:
+    """One worker stepped by a process of its own; puts its steps/s (or its error) on `results`."""
+    sim = None
+    try:
+        with Interrupts():  # the parent's terminate(), or Ctrl-C, still closes EnergyPlus and the pipes
+            sim = Simulation(sim_cfg, siblings=siblings)
+            sim.start()
+            t0 = time.perf_counter()
+            for a in actions:
+                sim.send(a)
+                sim.receive()
+            results.put(len(actions) / (time.perf_counter() - t0))
+    except KeyboardInterrupt:
+        pass  # the parent stops us; it reports the interruption
+    except Exception as e:  # noqa: BLE001 - reported to the parent, which raises it
+        results.put(f"{type(e).__name__}: {e}")
+    finally:
+        if sim is not None:
+            sim.close()
+
+
+def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
+    """Aggregate steps/s of N workers each stepped alone in a process of its own, all at once: the vector
+    env's actions without its lockstep (every step waits for the slowest worker) or a learner process
+    shared by all. What this machine gives N workers: the ceiling of the vector env's scaling."""
+    actions = _exploring_actions(cfg, cfg.workers)
+    ctx = multiprocessing.get_context("spawn")
+    results = ctx.Queue()
+    procs = [
+        ctx.Process(
+            target=_step_alone,
+            args=(SimulationConfig(weather=cfg.weather, output_dir=str(workdir / f"w{i}"), keep_episodes=0),
+                  actions[:, i], cfg.workers, results),
+        )
+        for i in range(cfg.workers)
+    ]  # fmt: skip
+    for p in procs:
+        p.start()
+    rates: list[float] = []
+    try:
+        while len(rates) < len(procs):
+            try:
+                got = results.get(timeout=1.0)
+            except queue.Empty:
+                if any(p.exitcode not in (None, 0) for p in procs):
+                    raise RuntimeError("a worker process of the independent-loop benchmark died") from None
+                continue
+            if isinstance(got, str):
+                raise RuntimeError(f"independent-loop benchmark: {got}")
+            rates.append(got)
+    finally:
+        for p in procs:
+            if p.is_alive() and len(rates) < len(procs):
+                p.terminate()
+            p.join()
+    return sum(rates)
 
 
 def training_rate(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
@@ -171,13 +238,20 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
         results["env_steps_per_s"] = statistics.median(e["steps_per_s"] for e in envs)
         results["env_over_raw"] = statistics.median(e["seconds"] / r for e, r in zip(envs, raw, strict=True))
         results["first_obs_s"] = statistics.median(e["first_obs_s"] for e in envs)
-        one = [vector_rate(cfg, 1, tmp / f"v1_{i}") for i in range(cfg.repeats)]
-        many = [vector_rate(cfg, cfg.workers, tmp / f"vN_{i}") for i in range(cfg.repeats)]
+        one, many, alone = [], [], []
+        for i in range(cfg.repeats):
+            one.append(vector_rate(cfg, 1, tmp / f"v1_{i}"))
+            many.append(vector_rate(cfg, cfg.workers, tmp / f"vN_{i}"))
+            alone.append(independent_rate(cfg, tmp / f"alone_{i}"))
         results["vector_1_steps_per_s"] = statistics.median(r["steps_per_s"] for r in one)
         results["vector_n_steps_per_s"] = statistics.median(r["steps_per_s"] for r in many)
         results["vector_1_cores_busy"] = statistics.median(r["cores_busy"] for r in one)
         results["vector_n_cores_busy"] = statistics.median(r["cores_busy"] for r in many)
         results["scaling_efficiency"] = results["vector_n_steps_per_s"] / (
+            cfg.workers * results["vector_1_steps_per_s"]
+        )
+        results["independent_n_steps_per_s"] = statistics.median(alone)
+        results["independent_scaling"] = results["independent_n_steps_per_s"] / (
             cfg.workers * results["vector_1_steps_per_s"]
         )
         tr = training_rate(cfg, tmp / "train")
@@ -206,6 +280,8 @@ def format_table(r: dict) -> str:
          f"{r['vector_1_cores_busy']:.2f} cores busy"),
         (f"vector env, {n} workers", f"{r['vector_n_steps_per_s']:.0f} steps/s",
          f"scaling {r['scaling_efficiency']:.2f} (target >= 0.90); {r['vector_n_cores_busy']:.2f} cores busy"),
+        (f"{n} workers stepped alone, at once", f"{r['independent_n_steps_per_s']:.0f} steps/s",
+         f"scaling {r['independent_scaling']:.2f}: the ceiling without lockstep or learner"),
         (f"TRPO learn, {n} workers", f"{r['train_steps_per_s']:.0f} steps/s",
          f"train/vector {r['train_over_vector']:.2f} (target >= 0.75)"),
         ("TRPO update of one 16k batch", f"{r['update_s']:.2f} s", ""),
