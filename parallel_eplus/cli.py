@@ -204,7 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--rbc-target", type=float, help="with --residual: the rule-based controller's zone target, C")
     tr.add_argument(
         "--log-std-init", type=float, default=0.0,
-        help="the policy's initial log standard deviation (default 0, the paper's); lower explores less",
+        help="the new policy's log standard deviation (default 0, the paper's; --init-from keeps the saved one)",
     )  # fmt: skip
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")

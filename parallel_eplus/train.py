@@ -111,6 +111,8 @@ class TrainConfig:
             raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
         if self.residual_space not in RESIDUAL_SPACES:
             raise ValueError(f"unknown --residual-space {self.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
+        if self.residual_space != "action" and not self.residual_scale:
+            raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE (kg/s of demand per unit)")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
         if self.run_name is None:

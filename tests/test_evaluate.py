@@ -11,7 +11,7 @@ import pytest
 
 from parallel_eplus.evaluate import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller, run_sweep, write_results
 from parallel_eplus.plots import plot_path
-from parallel_eplus.train import TrainConfig, train
+from parallel_eplus.train import TrainConfig, TRPOSettings, _saved_policy, train
 
 
 @pytest.fixture(scope="module")
@@ -102,9 +102,12 @@ def test_residual_policy_is_evaluated_as_a_correction_of_the_rule_based_controll
     cfg = TrainConfig(
         workers=1, weathers=["CO"], run_days=1, timesteps=96, batch_size=96, run_name="residual",
         time_features=True, residual_scale=0.1, residual_space=space, rbc_target_c=23.0,
-        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
+        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"), trpo=TRPOSettings(log_std_init=-1.5),
     )  # fmt: skip
-    controller = policy_controller(str(train(cfg, progress=False)))
+    final = train(cfg, progress=False)
+    # The exploration starts where asked (one small TRPO update moves it only a little).
+    assert _saved_policy(final).log_std.detach().numpy() == pytest.approx(-1.5, abs=0.1)
+    controller = policy_controller(str(final))
     assert (controller.residual_scale, controller.residual_space, controller.rbc_target_c) == (0.1, space, 23.0)
     assert controller.label == "TRPO+RBC (CO)"
     df = run_sweep([controller], ["CO"], run_days=1, workers=1, out_dir=tmp_path / "eval", progress=False)

@@ -141,3 +141,11 @@ def test_ppo_trains_the_same_way_and_its_policy_acts(tmp_path, no_leaks):
     assert policy_controller(str(final)).label == "PPO (CA)"
     with pytest.raises(ValueError, match="unknown algorithm"):
         train(small_config(tmp_path, "bad", algorithm="sac"), progress=False)
+
+
+def test_residual_settings_are_checked_before_anything_runs(tmp_path):
+    with pytest.raises(ValueError, match="needs --residual SCALE"):
+        train(small_config(tmp_path, "no-scale", residual_space="demand"), progress=False)
+    with pytest.raises(ValueError, match="unknown --residual-space"):
+        train(small_config(tmp_path, "bad-space", residual_scale=1.0, residual_space="flows"), progress=False)
+    assert not (tmp_path / "runs").exists()  # refused before a run directory or an EnergyPlus process
