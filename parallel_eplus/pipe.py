@@ -186,6 +186,14 @@ class PipePair:
     def send(self, frame: bytes) -> None:
         os.write(self.act_fd, frame)
 
+    def fds(self) -> list[int]:
+        """What becomes readable when the next frame arrives or the child exits: for a select over many pipes."""
+        return [self.obs_fd] if self._pidfd is None else [self.obs_fd, self._pidfd]
+
+    def has_frame(self) -> bool:
+        """A whole frame is already read and waiting (no select would report it)."""
+        return parse(self._obs.buf) is not None
+
     def recv(self, timeout: float, spin_s: float = SPIN_S) -> tuple[int, np.ndarray]:
         """Next frame from EnergyPlus. Raises TimeoutError or ChildProcessError, never returns zeros."""
         deadline = time.monotonic() + timeout

@@ -38,13 +38,36 @@ class SB3VecEnv(VecEnv):
         self._lengths += 1
         dones = terminated | truncated
         for i in np.flatnonzero(dones):
-            info = infos[i]
-            info["terminal_observation"] = info.pop("final_obs")
-            info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-            info["episode"] = {"r": float(self._returns[i]), "l": int(self._lengths[i])}
-            self._returns[i] = 0
-            self._lengths[i] = 0
+            self._episode_end(i, infos[i], bool(terminated[i]), bool(truncated[i]))
         return obs, rewards.astype(np.float32), dones, infos
+
+    # -- one worker at a time (pipelining), where the vector env offers it ----------------------
+    @property
+    def steps_workers_alone(self) -> bool:
+        """Whether `send_one`, `ready` and `receive_one` work (local workers: yes; Ray actors: no)."""
+        return hasattr(self.venv, "receive_one")
+
+    def send_one(self, i: int, action: np.ndarray) -> None:
+        self.venv.send_one(i, action)
+
+    def ready(self, indices) -> list[int]:
+        return self.venv.ready(indices)
+
+    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, dict]:
+        """Worker i's (observation, reward, done, info), with the keys `step_wait` gives SB3."""
+        obs, reward, terminated, truncated, info = self.venv.receive_one(i)
+        self._returns[i] += reward
+        self._lengths[i] += 1
+        if terminated or truncated:
+            self._episode_end(i, info, terminated, truncated)
+        return obs, reward, terminated or truncated, info
+
+    def _episode_end(self, i: int, info: dict, terminated: bool, truncated: bool) -> None:
+        info["terminal_observation"] = info.pop("final_obs")
+        info["TimeLimit.truncated"] = truncated and not terminated
+        info["episode"] = {"r": float(self._returns[i]), "l": int(self._lengths[i])}
+        self._returns[i] = 0
+        self._lengths[i] = 0
 
     def close(self) -> None:
         self.venv.close()

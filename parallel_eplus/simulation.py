@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -173,6 +174,7 @@ class Simulation:
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
+        self.deadline = math.inf  # when the observation for the action last sent is overdue (monotonic s)
         self._closed = False
 
     # -- episode lifecycle --------------------------------------------------------------------
@@ -250,10 +252,11 @@ class Simulation:
             self.pipes.send(pipe.encode(self._action))
         except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
             raise self._error(f"cannot send the action: {e}") from e
+        self.deadline = time.monotonic() + self.config.step_timeout_s
 
     def receive(self) -> tuple[np.ndarray, float, bool, dict]:
-        """(observation, reward, terminated, info) for the action last sent."""
-        code, values = self._recv(self.config.step_timeout_s, "an observation")
+        """(observation, reward, terminated, info) for the action last sent, due `step_timeout_s` after it."""
+        code, values = self._recv(self.config.step_timeout_s, "an observation", self.deadline)
         obs, info = self._observation(values)
         r, parts = reward((info["west_temp_c"], info["east_temp_c"]), info["power_w"], self.config.reward)
         info.update(parts)
@@ -287,9 +290,11 @@ class Simulation:
         self._info = info
         return obs, info
 
-    def _recv(self, timeout: float, what: str) -> tuple[int, np.ndarray]:
+    def _recv(self, timeout: float, what: str, deadline: float | None = None) -> tuple[int, np.ndarray]:
+        """The next frame, within `timeout` s or by the monotonic `deadline` (which the error then cites)."""
+        wait = timeout if deadline is None else max(deadline - time.monotonic(), 0.0)
         try:
-            code, values = self.pipes.recv(timeout, self.spin_s)
+            code, values = self.pipes.recv(wait, self.spin_s)
         except TimeoutError as e:
             raise self._error(f"EnergyPlus sent no {what} within {timeout:.0f} s (hung?)") from e
         except ChildProcessError as e:

@@ -3,6 +3,10 @@
 A vector step writes every worker's action, then reads every observation: one pipe round trip per
 worker, all EnergyPlus processes computing at once. Finished episodes restart in the same step
 (Gymnasium's SAME_STEP autoreset: the final observation and info are in `final_obs` / `final_info`).
+
+Workers can also be stepped one by one (`send_one`, `ready`, `receive_one`), so a learner can hand each
+worker its next action as soon as its own observation arrives instead of waiting for the slowest
+(pipelining; `rollout.py`).
 A worker whose EnergyPlus crashes restarts its episode (the cut episode ends as truncated) up to
 `max_restarts` times in a row, then the run fails with the worker's error.
 """
@@ -10,6 +14,9 @@ A worker whose EnergyPlus crashes restarts its episode (the cut episode ends as 
 from __future__ import annotations
 
 import logging
+import math
+import select
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -63,6 +70,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._failures = [0] * num_envs
+        self._send_errors: dict[int, EnergyPlusError] = {}
         self._obs = np.zeros((num_envs, *self.single_observation_space.shape), dtype=np.float32)
 
     # -- Gymnasium API ------------------------------------------------------------------------
@@ -93,36 +101,61 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
     def step_lists(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[dict]]:
         actions = np.asarray(actions)
         n = self.num_envs
+        for i in range(n):
+            self.send_one(i, actions[i])
         rewards = np.zeros(n)
         terminated = np.zeros(n, dtype=bool)
         truncated = np.zeros(n, dtype=bool)
         infos: list[dict] = [{} for _ in range(n)]
-        failed: dict[int, EnergyPlusError] = {}
-        for i, sim in enumerate(self.sims):
-            try:
-                sim.send(actions[i])
-            except EnergyPlusError as e:
-                failed[i] = e
-        for i, sim in enumerate(self.sims):
-            if i in failed:
-                continue
-            try:
-                self._obs[i], rewards[i], terminated[i], infos[i] = sim.receive()
-            except EnergyPlusError as e:
-                failed[i] = e
-        done = [i for i in range(n) if terminated[i]]
-        for i in done:
-            infos[i] = {"final_obs": self._obs[i].copy(), "final_info": infos[i]}
-            self._failures[i] = 0
-            self.sims[i].launch()
-        for i, error in failed.items():
-            infos[i] = {"final_obs": self._obs[i].copy(), "final_info": {}, "energyplus_error": str(error)}
-            truncated[i] = True
-            self._restart(i, error)
-        for i in [*done, *failed]:
+        ended = []
+        for i in range(n):
+            rewards[i], terminated[i], infos[i], error = self._collect(i)
+            if terminated[i] or error is not None:
+                truncated[i] = error is not None
+                infos[i] = self._end_episode(i, infos[i], error)
+                ended.append(i)
+        for i in ended:  # after every launch, so the new episodes start up at once
             self._obs[i], first = self._first_observation(i)
             infos[i].update(first)
         return self._obs.copy(), rewards, terminated, truncated, infos
+
+    # -- one worker at a time, for pipelining ---------------------------------------------------
+    def send_one(self, i: int, action) -> None:
+        """Send worker i its action; a failure is kept and reported by `receive_one`."""
+        try:
+            self.sims[i].send(action)
+        except EnergyPlusError as e:
+            self._send_errors[i] = e
+
+    def ready(self, indices) -> list[int]:
+        """The workers among `indices` whose answer is in (an observation, a failure, or a deadline passed).
+
+        Blocks until there is at least one; the learner sleeps meanwhile, leaving the cores to EnergyPlus.
+        """
+        indices = list(indices)
+        while True:
+            now = time.monotonic()
+            due = [
+                i for i in indices
+                if i in self._send_errors or self.sims[i].pipes.has_frame() or self.sims[i].deadline <= now
+            ]  # fmt: skip
+            if due:
+                return due
+            fds = {fd: i for i in indices for fd in self.sims[i].pipes.fds()}
+            wait = min(self.sims[i].deadline for i in indices) - now
+            readable, _, _ = select.select(list(fds), [], [], None if math.isinf(wait) else wait)
+            if readable:
+                return sorted({fds[fd] for fd in readable})
+
+    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Worker i's (observation, reward, terminated, truncated, info) for its last action, as `step`
+        gives them for each worker; a finished or failed episode is restarted before this returns."""
+        reward, terminated, info, error = self._collect(i)
+        if terminated or error is not None:
+            info = self._end_episode(i, info, error)
+            self._obs[i], first = self._first_observation(i)
+            info.update(first)
+        return self._obs[i].copy(), reward, terminated, error is not None, info
 
     # -- internals ----------------------------------------------------------------------------
     def _first_observation(self, i: int) -> tuple[np.ndarray, dict]:
@@ -131,6 +164,27 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
                 return self.sims[i].first_observation()
             except EnergyPlusError as e:
                 self._restart(i, e)
+
+    def _collect(self, i: int) -> tuple[float, bool, dict, EnergyPlusError | None]:
+        """Worker i's answer to its last action, into `_obs[i]`: (reward, terminated, info, its failure)."""
+        error = self._send_errors.pop(i, None)
+        if error is None:
+            try:
+                self._obs[i], reward, terminated, info = self.sims[i].receive()
+                return reward, terminated, info, None
+            except EnergyPlusError as e:
+                error = e
+        return 0.0, False, {}, error
+
+    def _end_episode(self, i: int, info: dict, error: EnergyPlusError | None) -> dict:
+        """Launch worker i's next episode after one finished (or failed); returns the autoreset info."""
+        if error is None:
+            self._failures[i] = 0
+            self.sims[i].launch()
+            return {"final_obs": self._obs[i].copy(), "final_info": info}
+        final = {"final_obs": self._obs[i].copy(), "final_info": {}, "energyplus_error": str(error)}
+        self._restart(i, error)
+        return final
 
     def _restart(self, i: int, error: EnergyPlusError) -> None:
         """Relaunch worker i's episode on the same weather, or fail the run after too many tries."""

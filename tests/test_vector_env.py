@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -67,3 +68,77 @@ def test_out_of_bounds_observation_is_clipped_with_raw_value_in_info(tmp_path):
         assert info["raw_observation"][0] == 55.0 and info["east_temp_c"] == 60.0
     finally:
         sim.close()
+
+
+def _step_alone(venv: EnergyPlusVectorEnv, i: int, action) -> tuple:
+    """One worker's step through the pipelining API: send, wait until it alone has answered, read."""
+    venv.send_one(i, action)
+    assert venv.ready([i]) == [i]
+    return venv.receive_one(i)
+
+
+def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_leaks):
+    """Pipelining changes only who waits for whom: each worker's episode is what lockstep gives it."""
+    rng = np.random.default_rng(0)
+    actions = np.clip(rng.normal(size=(STEPS_PER_DAY + 4, 2, 4)), -1, 1)
+    runs = {}
+    for mode in ("lockstep", "alone"):
+        venv = EnergyPlusVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path / mode)), [["CA"], ["CO"]])
+        try:
+            venv.reset()
+            obs, rewards, ends = [], [], []
+            for a in actions:
+                if mode == "lockstep":
+                    o, r, term, trunc, infos = venv.step_lists(a)
+                else:  # worker 1 runs a step ahead: its step t is read before worker 0's
+                    steps = [_step_alone(venv, i, a[i]) for i in (1, 0)][::-1]
+                    o, r, term, trunc, infos = (np.array(x) for x in zip(*steps, strict=True))
+                assert not trunc.any()
+                obs.append(o)
+                rewards.append(r)
+                ends.append([("final_obs" in info) for info in infos])
+            runs[mode] = np.array(obs), np.array(rewards), np.array(ends)
+        finally:
+            venv.close()
+    (obs, rewards, ends), (obs1, rewards1, ends1) = runs["lockstep"], runs["alone"]
+    np.testing.assert_array_equal(ends, ends1)
+    assert ends[STEPS_PER_DAY - 1].all() and ends.sum() == 2  # both days ended and restarted
+    np.testing.assert_allclose(obs1, obs, rtol=1e-6)
+    np.testing.assert_allclose(rewards1, rewards, rtol=1e-6)
+    assert not np.allclose(obs[:, 0], obs[:, 1])  # two weathers: a swapped worker would show
+
+
+def test_pipelined_worker_that_crashes_or_hangs_restarts_alone(tmp_path, no_leaks, caplog):
+    cfg = SimulationConfig(run_days=1, output_dir=str(tmp_path), step_timeout_s=2.0)
+    venv = EnergyPlusVectorEnv(cfg, [["CA"], ["FL"]], max_restarts=2)
+    zero = np.zeros(4)
+    try:
+        venv.reset()
+        for _ in range(3):
+            for i in (0, 1):
+                _step_alone(venv, i, zero)
+        os.kill(venv.sims[1].proc.pid, signal.SIGKILL)
+        venv.send_one(1, zero)
+        venv.send_one(0, zero)
+        answers: dict[int, tuple] = {}
+        while len(answers) < 2:
+            for i in venv.ready({0, 1} - set(answers)):
+                answers[i] = venv.receive_one(i)
+        assert not answers[0][3] and "energyplus_error" not in answers[0][4]  # worker 0 never noticed
+        *_, terminated, truncated, info = answers[1]
+        assert truncated and not terminated and "energyplus_error" in info and "final_obs" in info
+        assert "restarting its episode" in caplog.text and info["time"].hour == 0
+        caplog.clear()
+
+        os.kill(venv.sims[0].proc.pid, signal.SIGSTOP)  # hung: alive, but silent
+        venv.send_one(0, zero)
+        for _ in range(5):  # worker 1 goes on meanwhile
+            *_, truncated, info = _step_alone(venv, 1, zero)
+            assert not truncated
+        t0 = time.monotonic()
+        assert venv.ready([0]) == [0]  # once its deadline has passed
+        obs, reward, terminated, truncated, info = venv.receive_one(0)
+        assert truncated and "hung?" in info["energyplus_error"] and time.monotonic() - t0 < 3.0
+        assert info["weather"] == "CA" and info["time"].hour == 0  # a fresh episode on the same weather
+    finally:
+        venv.close()
