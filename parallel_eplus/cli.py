@@ -83,6 +83,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         backend=args.backend,
         ray_address=args.ray_address,
         workers_per_actor=args.workers_per_actor,
+        lockstep=args.lockstep,
         time_features=args.time_features,
         schedule_features=args.schedule_features,
         init_from=str(args.init_from) if args.init_from else None,
@@ -221,6 +222,11 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--backend", default="local", choices=["local", "ray"])
     tr.add_argument("--ray-address", help="an existing Ray cluster (default: start Ray locally)")
     tr.add_argument("--workers-per-actor", type=int, help="Ray: EnergyPlus workers hosted by each actor")
+    tr.add_argument(
+        "--lockstep", action="store_true",
+        help="step all workers together (a seed then fixes the run bit for bit; slower). Default: each "
+        "local worker gets its next action as soon as its observation arrives",
+    )  # fmt: skip
     tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=cmd_train)

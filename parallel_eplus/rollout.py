@@ -5,6 +5,14 @@ dispatch for a 32x32 network, a `Normal` per step and tensor conversions, while 
 worker waited for its action; on a 2-core machine that CPU is also taken from EnergyPlus. With the
 same arithmetic on numpy arrays the loop costs 0.36 ms. Everything else is SB3's: the rollout
 buffer, the timeout bootstrap, the callbacks and the algorithm's update, which still runs in torch.
+
+With local workers the loop is also pipelined: each worker gets its next action as soon as its own
+observation arrives, instead of every worker waiting for the slowest at every step (SB3's lockstep
+`VecEnv`). Each worker fills its own column of the buffer; callbacks still see whole vector steps.
+Each worker draws its exploration noise from a stream of its own, so with fixed observation
+statistics both loops collect the same rollout. The price of pipelining: the running statistics are
+updated in the order workers are served, which depends on timing, so a seed no longer fixes a
+training run bit for bit (`lockstep = True` does).
 """
 
 from __future__ import annotations
@@ -22,7 +30,9 @@ from stable_baselines3.common.distributions import DiagGaussianDistribution
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+
+from .sb3_adapter import SB3VecEnv
 
 _HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
 
@@ -105,12 +115,31 @@ class NumpyPolicy:
         z = (actions - mean) / self.std
         return self._log_prob_const - 0.5 * (z * z).sum(axis=1)
 
-    def sample(self, obs: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Stochastic float32 actions (as the buffer stores them), the critic's values, their log-probabilities."""
+    def sample(
+        self, obs: np.ndarray, rng: np.random.Generator | list[np.random.Generator]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stochastic float32 actions (as the buffer stores them), the critic's values, their log-probabilities.
+
+        `rng`: one generator for every row, or one per row (each worker's own stream).
+        """
         x = self._flat(obs)
         mean = _run(self.actor, x)
-        actions = (mean + self.std * rng.standard_normal(mean.shape)).astype(np.float32)
+        if isinstance(rng, np.random.Generator):
+            noise = rng.standard_normal(mean.shape)
+        else:
+            noise = np.array([r.standard_normal(mean.shape[1]) for r in rng])
+        actions = (mean + self.std * noise).astype(np.float32)
         return actions, _run(self.critic, x)[:, 0], self.log_prob(actions, mean)
+
+
+def _workers_alone(env: VecEnv) -> tuple[SB3VecEnv | None, VecNormalize | None]:
+    """Our local workers, and the observation normalization over them, when they can be stepped one by one."""
+    norm = None
+    if isinstance(env, VecNormalize) and not env.norm_reward and not isinstance(env.obs_rms, dict):
+        norm, env = env, env.venv
+    if isinstance(env, SB3VecEnv) and env.steps_workers_alone and env.num_envs > 1:
+        return env, norm
+    return None, None
 
 
 class NumpyRollouts:
@@ -119,12 +148,15 @@ class NumpyRollouts:
     Saved models are the algorithm's ordinary models: `sb3_contrib.TRPO.load` (or `PPO.load`) reads them.
     """
 
+    lockstep = False  # True: step every worker together, as SB3 does (reproducible for a seed, slower)
+
     def set_random_seed(self, seed: int | None = None) -> None:
         super().set_random_seed(seed)  # SB3 calls this while setting the model up, seed or not
-        self._rng = np.random.default_rng(seed)
+        # One stream per worker: its draws then do not depend on the order workers are served in.
+        self._rngs = np.random.default_rng(seed).spawn(self.n_envs)
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_rng"]
+        return [*super()._excluded_save_params(), "_rngs", "lockstep"]
 
     def collect_rollouts(
         self, env: VecEnv, callback: BaseCallback, rollout_buffer: RolloutBuffer, n_rollout_steps: int
@@ -134,11 +166,14 @@ class NumpyRollouts:
         assert self._last_obs is not None, "No previous observation was provided"
         self.policy.set_training_mode(False)
         policy = NumpyPolicy(self.policy)
+        workers, norm = (None, None) if self.lockstep else _workers_alone(env)
+        if workers is not None:
+            return self._collect_pipelined(policy, workers, norm, callback, rollout_buffer, n_rollout_steps)
         low, high = self.action_space.low, self.action_space.high
         rollout_buffer.reset()
         callback.on_rollout_start()
         for _ in range(n_rollout_steps):
-            actions, values, log_probs = policy.sample(self._last_obs, self._rng)
+            actions, values, log_probs = policy.sample(self._last_obs, self._rngs)
             clipped_actions = np.clip(actions, low, high)  # the buffer keeps the unclipped ones, as in SB3
             new_obs, rewards, dones, infos = env.step(clipped_actions)
             self.num_timesteps += env.num_envs
@@ -159,6 +194,79 @@ class NumpyRollouts:
             self._last_episode_starts = dones
         values = th.from_numpy(policy.value(new_obs))
         rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)
+        callback.update_locals(locals())
+        callback.on_rollout_end()
+        return True
+
+    def _collect_pipelined(
+        self, policy: NumpyPolicy, env: SB3VecEnv, norm: VecNormalize | None, callback: BaseCallback,
+        buffer: RolloutBuffer, n_steps: int,
+    ) -> bool:  # fmt: skip
+        """`collect_rollouts`, serving each worker as soon as its observation arrives.
+
+        Worker i's t-th transition goes to row t, column i of the buffer, as in the lockstep loop. Once
+        every worker has made step t, the callbacks see that vector step whole.
+        """
+        n = env.num_envs
+        low, high = self.action_space.low, self.action_space.high
+        obs = np.array(self._last_obs)  # normalized, as the policy sees it
+        raw = np.array(norm.old_obs if norm is not None else obs)
+        starts = np.array(self._last_episode_starts, dtype=bool)
+        step = [0] * n
+        infos: list[list[dict]] = [[{} for _ in range(n)] for _ in range(n_steps)]
+        dones = np.zeros((n_steps, n), dtype=bool)
+        buffer.reset()
+        callback.on_rollout_start()
+
+        def act(i: int) -> None:
+            t = step[i]
+            actions, values, log_probs = policy.sample(obs[i : i + 1], self._rngs[i : i + 1])
+            buffer.observations[t, i] = obs[i]
+            buffer.actions[t, i] = actions[0]
+            buffer.episode_starts[t, i] = starts[i]
+            buffer.values[t, i] = values[0]
+            buffer.log_probs[t, i] = log_probs[0]
+            env.send_one(i, np.clip(actions[0], low, high))  # the buffer keeps the unclipped one, as in SB3
+
+        for i in range(n):
+            act(i)
+        pending, whole = set(range(n)), 0
+        while pending:
+            for i in env.ready(pending):
+                new_obs, reward, done, info = env.receive_one(i)
+                raw[i] = new_obs
+                if norm is not None:
+                    if norm.training and norm.norm_obs:
+                        norm.obs_rms.update(new_obs[None])
+                    new_obs = norm.normalize_obs(new_obs)
+                    if done and "terminal_observation" in info:
+                        info["terminal_observation"] = norm.normalize_obs(info["terminal_observation"])
+                if done and info.get("TimeLimit.truncated", False) and "terminal_observation" in info:
+                    reward += self.gamma * policy.value(info["terminal_observation"][None])[0]  # SB3 issue #633
+                t = step[i]
+                buffer.rewards[t, i] = reward
+                infos[t][i], dones[t, i] = info, done
+                obs[i], starts[i] = new_obs, done
+                step[i] = t + 1
+                if step[i] < n_steps:
+                    act(i)
+                else:
+                    pending.discard(i)
+            while whole < min(step):  # vector steps every worker has made, for the callbacks
+                self.num_timesteps += n
+                callback.update_locals({"infos": infos[whole], "dones": dones[whole], "new_obs": obs})
+                if not callback.on_step():
+                    for i in pending:  # answers to actions already sent: keep each pipe in step
+                        env.receive_one(i)
+                    return False
+                self._update_info_buffer(infos[whole], dones[whole])
+                infos[whole] = []
+                whole += 1
+        buffer.pos, buffer.full = n_steps, True
+        self._last_obs, self._last_episode_starts = obs, starts
+        if norm is not None:
+            norm.old_obs = raw
+        buffer.compute_returns_and_advantage(last_values=th.from_numpy(policy.value(obs)), dones=starts)
         callback.update_locals(locals())
         callback.on_rollout_end()
         return True

@@ -85,6 +85,9 @@ class TrainConfig:
     ray_address: str | None = None
     workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
     max_restarts: int = 3
+    # True: every worker waits for the slowest at each step (SB3's way; a seed fixes the run bit for bit).
+    # False: each local worker gets its next action as soon as its observation arrives (rollout.py).
+    lockstep: bool = False
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     schedule_features: bool = False  # opt-in IT-load schedule features (model.SCHEDULE_FEATURES)
     init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
@@ -305,7 +308,7 @@ def train(
         saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
-        saved.backend, saved.ray_address = cfg.backend, cfg.ray_address
+        saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
         cfg = saved
     cfg = cfg.resolved()
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
@@ -328,6 +331,7 @@ def train(
             if cfg.init_from is not None:
                 _warm_start(Path(cfg.init_from), model, env)
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
+        model.lockstep = cfg.lockstep
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.n_steps * cfg.workers

@@ -1,13 +1,19 @@
-"""The learner's numpy policy computes what SB3's torch policy computes."""
+"""The learner's numpy policy computes what SB3's torch policy computes, and its pipelined loop
+collects what SB3's lockstep loop collects."""
 
 import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus.env import action_space, observation_space
-from parallel_eplus.rollout import NumpyPolicy
+from parallel_eplus.model import STEPS_PER_DAY
+from parallel_eplus.rollout import FastTRPO, NumpyPolicy, _workers_alone
+from parallel_eplus.sb3_adapter import SB3VecEnv
+from parallel_eplus.simulation import SimulationConfig
 from parallel_eplus.train import TRPOSettings
+from parallel_eplus.vector_env import EnergyPlusVectorEnv
 
 
 def _policy(time_features: bool) -> ActorCriticPolicy:
@@ -57,3 +63,41 @@ def test_other_policy_shapes_fall_back_to_sb3():
     assert not NumpyPolicy.supports(policy(act=gym.spaces.Box(-1, 1, (2, 3), np.float32)))  # not flat
     image = gym.spaces.Box(0, 255, (3, 36, 36), np.uint8)  # SB3 scales images by 1/255 first
     assert not NumpyPolicy.supports(policy(obs=image))
+
+
+def _one_rollout(out_dir, lockstep: bool) -> dict[str, np.ndarray]:
+    """One TRPO rollout (2 workers, CA and CO, 128 steps each: a day's episode ends inside it)."""
+    sim = SimulationConfig(run_days=1, output_dir=str(out_dir), keep_episodes=0)
+    env = VecNormalize(SB3VecEnv(EnergyPlusVectorEnv(sim, [["CA"], ["CO"]])), norm_reward=False)
+    env.training = False  # fixed statistics: served in any order, each worker sees the same numbers
+    try:
+        model = FastTRPO(
+            "MlpPolicy", env, n_steps=128, batch_size=128, seed=3, device="cpu",
+            policy_kwargs={"net_arch": [32, 32], "activation_fn": th.nn.Tanh},
+        )  # fmt: skip
+        model.lockstep = lockstep
+        assert (_workers_alone(env)[0] is not None) and model.n_envs == 2
+        model.learn(256)  # one rollout, then one update (which leaves the buffer's contents alone)
+        b = model.rollout_buffer
+        return {k: getattr(b, k).copy() for k in ("observations", "actions", "rewards", "episode_starts", "values",
+                                                  "log_probs", "returns")}  # fmt: skip
+    finally:
+        env.close()
+
+
+def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leaks, monkeypatch):
+    """Serving each worker as its observation arrives fills the same buffer: every column is its worker's."""
+    served: list[int] = []
+    receive_one = SB3VecEnv.receive_one
+    monkeypatch.setattr(SB3VecEnv, "receive_one", lambda self, i: served.append(i) or receive_one(self, i))
+    lockstep = _one_rollout(tmp_path / "lockstep", lockstep=True)
+    assert served == []
+    pipelined = _one_rollout(tmp_path / "pipelined", lockstep=False)
+    assert sorted(served) == [0] * 128 + [1] * 128  # every step, worker by worker
+    for key, value in lockstep.items():
+        np.testing.assert_allclose(pipelined[key], value, rtol=1e-5, atol=1e-6, err_msg=key)
+    starts = lockstep["episode_starts"]  # (step, worker): both days ended and restarted inside the rollout
+    assert starts.shape == (128, 2) and starts[0].all() and starts[STEPS_PER_DAY].all() and starts.sum() == 4
+    # The update flattened the rest worker by worker: 128 steps of CA, then 128 of CO.
+    obs = lockstep["observations"]
+    assert obs.shape == (256, 6) and not np.allclose(obs[:128], obs[128:])
