@@ -3,9 +3,10 @@
 1. raw: EnergyPlus alone (the agent model, a constant action held by the EnergyPlus-side callback with
    no pipe exchange), wall seconds from process start to exit;
 2. env: the same period and action stepped through `EnergyPlusEnv` (reset + steps, wall seconds);
-3. vector env: aggregate steps/s with 1 and N workers, and the scaling efficiency, beside the
-   machine's own: N raw runs at once against one, and N workers each stepped alone in a process of
-   its own (no lockstep, no shared learner: the ceiling any vector env can reach here);
+3. vector env: aggregate steps/s with 1 and N workers, and the scaling efficiency, with the workers
+   pipelined (each stepped as soon as it answers, as training steps them) and in lockstep, beside
+   the machine's own: N raw runs at once against one, and N workers each stepped alone in a process
+   of its own (no shared learner: the ceiling any vector env can reach here);
 4. training: env steps/s inside TRPO `learn` with N workers, against the vector env's rate;
 5. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
 
@@ -124,9 +125,27 @@ def _exploring_actions(cfg: BenchConfig, workers: int) -> np.ndarray:
     return np.clip(rng.normal(size=(steps, workers, 4)), -1, 1).astype(np.float32)
 
 
-def vector_rate(cfg: BenchConfig, workers: int, workdir: Path) -> dict[str, float]:
+def _step_pipelined(venv: EnergyPlusVectorEnv, actions: np.ndarray) -> None:
+    """Each worker through its own column of `actions`, handed its next action as soon as it answers."""
+    done = [0] * venv.num_envs
+    for i in range(venv.num_envs):
+        venv.send_one(i, actions[0, i])
+    pending = set(range(venv.num_envs))
+    while pending:
+        for i in venv.ready(pending):
+            venv.receive_one(i)
+            done[i] += 1
+            if done[i] < len(actions):
+                venv.send_one(i, actions[done[i], i])
+            else:
+                pending.discard(i)
+
+
+def vector_rate(cfg: BenchConfig, workers: int, workdir: Path, pipelined: bool = True) -> dict[str, float]:
     """Aggregate env steps/s of the vector env over `vector_steps` per worker, after the first observations,
-    and the cores it kept busy (CPU seconds of learner and workers, start-up included, per wall second)."""
+    and the cores it kept busy (CPU seconds of learner and workers, start-up included, per wall second).
+
+    `pipelined`: each worker stepped as soon as it answers (as training steps them); else in lockstep."""
     sim = SimulationConfig(weather=cfg.weather, run_days=365, output_dir=str(workdir), keep_episodes=0)
     actions = _exploring_actions(cfg, workers)
     cpu0, wall0 = _cpu_seconds(), time.perf_counter()
@@ -134,8 +153,11 @@ def vector_rate(cfg: BenchConfig, workers: int, workdir: Path) -> dict[str, floa
     try:
         venv.start_all(range(workers))
         t0 = time.perf_counter()
-        for a in actions:
-            venv.step_lists(a)
+        if pipelined and workers > 1:
+            _step_pipelined(venv, actions)
+        else:
+            for a in actions:
+                venv.step_lists(a)
         rate = workers * len(actions) / (time.perf_counter() - t0)
     finally:
         venv.close()
@@ -238,16 +260,21 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
         results["env_steps_per_s"] = statistics.median(e["steps_per_s"] for e in envs)
         results["env_over_raw"] = statistics.median(e["seconds"] / r for e, r in zip(envs, raw, strict=True))
         results["first_obs_s"] = statistics.median(e["first_obs_s"] for e in envs)
-        one, many, alone = [], [], []
+        one, many, lockstep, alone = [], [], [], []
         for i in range(cfg.repeats):
             one.append(vector_rate(cfg, 1, tmp / f"v1_{i}"))
             many.append(vector_rate(cfg, cfg.workers, tmp / f"vN_{i}"))
+            lockstep.append(vector_rate(cfg, cfg.workers, tmp / f"vL_{i}", pipelined=False))
             alone.append(independent_rate(cfg, tmp / f"alone_{i}"))
         results["vector_1_steps_per_s"] = statistics.median(r["steps_per_s"] for r in one)
         results["vector_n_steps_per_s"] = statistics.median(r["steps_per_s"] for r in many)
         results["vector_1_cores_busy"] = statistics.median(r["cores_busy"] for r in one)
         results["vector_n_cores_busy"] = statistics.median(r["cores_busy"] for r in many)
         results["scaling_efficiency"] = results["vector_n_steps_per_s"] / (
+            cfg.workers * results["vector_1_steps_per_s"]
+        )
+        results["lockstep_n_steps_per_s"] = statistics.median(r["steps_per_s"] for r in lockstep)
+        results["lockstep_scaling"] = results["lockstep_n_steps_per_s"] / (
             cfg.workers * results["vector_1_steps_per_s"]
         )
         results["independent_n_steps_per_s"] = statistics.median(alone)
@@ -278,8 +305,10 @@ def format_table(r: dict) -> str:
          f"the machine's own scaling {r['raw_scaling']:.2f}"),
         ("vector env, 1 worker", f"{r['vector_1_steps_per_s']:.0f} steps/s",
          f"{r['vector_1_cores_busy']:.2f} cores busy"),
-        (f"vector env, {n} workers", f"{r['vector_n_steps_per_s']:.0f} steps/s",
+        (f"vector env, {n} workers, pipelined", f"{r['vector_n_steps_per_s']:.0f} steps/s",
          f"scaling {r['scaling_efficiency']:.2f} (target >= 0.90); {r['vector_n_cores_busy']:.2f} cores busy"),
+        (f"vector env, {n} workers, lockstep", f"{r['lockstep_n_steps_per_s']:.0f} steps/s",
+         f"scaling {r['lockstep_scaling']:.2f}"),
         (f"{n} workers stepped alone, at once", f"{r['independent_n_steps_per_s']:.0f} steps/s",
          f"scaling {r['independent_scaling']:.2f}: the ceiling without lockstep or learner"),
         (f"TRPO learn, {n} workers", f"{r['train_steps_per_s']:.0f} steps/s",

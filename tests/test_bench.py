@@ -21,10 +21,14 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     for n in ("1", "n"):
         assert results[f"vector_{n}_steps_per_s"] > 0
         assert 0 < results[f"vector_{n}_cores_busy"] <= cfg.workers + 0.5
+    assert results["lockstep_n_steps_per_s"] > 0
+    assert results["lockstep_scaling"] == pytest.approx(
+        results["lockstep_n_steps_per_s"] / (2 * results["vector_1_steps_per_s"])
+    )
     assert results["independent_n_steps_per_s"] > 0
     assert results["independent_scaling"] == pytest.approx(
         results["independent_n_steps_per_s"] / (2 * results["vector_1_steps_per_s"])
     )
     assert results["update_s"] > 0 and results["train_steps_per_s"] > 0
     table = format_table(results)
-    assert "2 runs at once" in table and "cores busy" in table and "stepped alone" in table
+    assert "2 runs at once" in table and "cores busy" in table and "stepped alone" in table and "lockstep" in table
