@@ -130,9 +130,11 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
     def ready(self, indices) -> list[int]:
         """The workers among `indices` whose answer is in (an observation, a failure, or a deadline passed).
 
-        Blocks until there is at least one; the learner sleeps meanwhile, leaving the cores to EnergyPlus.
+        Blocks until there is at least one. Like a single worker's read, it polls for the workers' spin
+        time first (none when the workers and the learner have no spare core: see `pipe.default_spin_s`).
         """
         indices = list(indices)
+        spin_until = time.monotonic() + self.sims[0].spin_s
         while True:
             now = time.monotonic()
             due = [
@@ -142,7 +144,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             if due:
                 return due
             fds = {fd: i for i in indices for fd in self.sims[i].pipes.fds()}
-            wait = min(self.sims[i].deadline for i in indices) - now
+            wait = 0.0 if now < spin_until else min(self.sims[i].deadline for i in indices) - now
             readable, _, _ = select.select(list(fds), [], [], None if math.isinf(wait) else wait)
             if readable:
                 return sorted({fds[fd] for fd in readable})

@@ -83,7 +83,9 @@ def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_le
     actions = np.clip(rng.normal(size=(STEPS_PER_DAY + 4, 2, 4)), -1, 1)
     runs = {}
     for mode in ("lockstep", "alone"):
-        venv = EnergyPlusVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path / mode)), [["CA"], ["CO"]])
+        # One worker by one, the learner polls briefly before it sleeps (as it does with cores to spare).
+        cfg = SimulationConfig(run_days=1, output_dir=str(tmp_path / mode), spin_s=0.0005 if mode == "alone" else None)
+        venv = EnergyPlusVectorEnv(cfg, [["CA"], ["CO"]])
         try:
             venv.reset()
             obs, rewards, ends = [], [], []
