@@ -190,6 +190,11 @@ class PipePair:
         """What becomes readable when the next frame arrives or the child exits: for a select over many pipes."""
         return [self.obs_fd] if self._pidfd is None else [self.obs_fd, self._pidfd]
 
+    @property
+    def watches_exit(self) -> bool:
+        """Whether `fds()` includes a pidfd, so a select wakes when the child exits (Linux >= 5.3)."""
+        return self._pidfd is not None
+
     def has_frame(self) -> bool:
         """A whole frame is already read and waiting (no select would report it)."""
         return parse(self._obs.buf) is not None

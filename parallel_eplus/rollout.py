@@ -132,12 +132,12 @@ class NumpyPolicy:
         return actions, _run(self.critic, x)[:, 0], self.log_prob(actions, mean)
 
 
-def _workers_alone(env: VecEnv) -> tuple[SB3VecEnv | None, VecNormalize | None]:
+def _pipelinable(env: VecEnv) -> tuple[SB3VecEnv | None, VecNormalize | None]:
     """Our local workers, and the observation normalization over them, when they can be stepped one by one."""
     norm = None
     if isinstance(env, VecNormalize) and not env.norm_reward and not isinstance(env.obs_rms, dict):
         norm, env = env, env.venv
-    if isinstance(env, SB3VecEnv) and env.steps_workers_alone and env.num_envs > 1:
+    if isinstance(env, SB3VecEnv) and env.steps_one_by_one and env.num_envs > 1:
         return env, norm
     return None, None
 
@@ -152,8 +152,10 @@ class NumpyRollouts:
 
     def set_random_seed(self, seed: int | None = None) -> None:
         super().set_random_seed(seed)  # SB3 calls this while setting the model up, seed or not
-        # One stream per worker: its draws then do not depend on the order workers are served in.
-        self._rngs = np.random.default_rng(seed).spawn(self.n_envs)
+        # One stream per worker: its draws then do not depend on the order workers are served in. A
+        # resumed run (SB3 restores num_timesteps first) draws afresh rather than replaying its start.
+        entropy = None if seed is None else [seed, self.num_timesteps]
+        self._rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(entropy).spawn(self.n_envs)]
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_rngs", "lockstep"]
@@ -166,7 +168,7 @@ class NumpyRollouts:
         assert self._last_obs is not None, "No previous observation was provided"
         self.policy.set_training_mode(False)
         policy = NumpyPolicy(self.policy)
-        workers, norm = (None, None) if self.lockstep else _workers_alone(env)
+        workers, norm = (None, None) if self.lockstep else _pipelinable(env)
         if workers is not None:
             return self._collect_pipelined(policy, workers, norm, callback, rollout_buffer, n_rollout_steps)
         low, high = self.action_space.low, self.action_space.high
@@ -205,16 +207,30 @@ class NumpyRollouts:
         """`collect_rollouts`, serving each worker as soon as its observation arrives.
 
         Worker i's t-th transition goes to row t, column i of the buffer, as in the lockstep loop. Once
-        every worker has made step t, the callbacks see that vector step whole.
+        every worker has made step t, the callbacks see that vector step whole. Of `VecNormalize.step_wait`
+        this does what a run with `norm_reward=False` uses: the observation statistics, not the returns'.
         """
+        assert n_steps == buffer.buffer_size
+        finished = False
+        try:
+            finished = self._pipeline(policy, env, norm, callback, buffer, n_steps)
+            return finished
+        finally:
+            if not finished:  # stopped or failed with workers mid-step: the next `learn` must start
+                self._last_obs = None  # them afresh, which SB3 does when there is no last observation
+
+    def _pipeline(
+        self, policy: NumpyPolicy, env: SB3VecEnv, norm: VecNormalize | None, callback: BaseCallback,
+        buffer: RolloutBuffer, n_steps: int,
+    ) -> bool:  # fmt: skip
         n = env.num_envs
         low, high = self.action_space.low, self.action_space.high
         obs = np.array(self._last_obs)  # normalized, as the policy sees it
         raw = np.array(norm.old_obs if norm is not None else obs)
-        starts = np.array(self._last_episode_starts, dtype=bool)
+        starts = np.array(self._last_episode_starts, dtype=bool)  # worker i's last `done`
         step = [0] * n
-        infos: list[list[dict]] = [[{} for _ in range(n)] for _ in range(n_steps)]
-        dones = np.zeros((n_steps, n), dtype=bool)
+        step_infos: list[list[dict]] = [[{} for _ in range(n)] for _ in range(n_steps)]
+        step_dones = np.zeros((n_steps, n), dtype=bool)
         buffer.reset()
         callback.on_rollout_start()
 
@@ -230,7 +246,7 @@ class NumpyRollouts:
 
         for i in range(n):
             act(i)
-        pending, whole = set(range(n)), 0
+        pending, reported = set(range(n)), 0
         while pending:
             for i in env.ready(pending):
                 new_obs, reward, done, info = env.receive_one(i)
@@ -245,29 +261,29 @@ class NumpyRollouts:
                     reward += self.gamma * policy.value(info["terminal_observation"][None])[0]  # SB3 issue #633
                 t = step[i]
                 buffer.rewards[t, i] = reward
-                infos[t][i], dones[t, i] = info, done
+                step_infos[t][i], step_dones[t, i] = info, done
                 obs[i], starts[i] = new_obs, done
                 step[i] = t + 1
                 if step[i] < n_steps:
                     act(i)
                 else:
                     pending.discard(i)
-            while whole < min(step):  # vector steps every worker has made, for the callbacks
+            while reported < min(step):  # vector steps every worker has made, for the callbacks
                 self.num_timesteps += n
-                callback.update_locals({"infos": infos[whole], "dones": dones[whole], "new_obs": obs})
+                infos, dones = step_infos[reported], step_dones[reported]
+                callback.update_locals({"infos": infos, "dones": dones})
                 if not callback.on_step():
-                    for i in pending:  # answers to actions already sent: keep each pipe in step
-                        env.receive_one(i)
                     return False
-                self._update_info_buffer(infos[whole], dones[whole])
-                infos[whole] = []
-                whole += 1
+                self._update_info_buffer(infos, dones)
+                step_infos[reported] = []
+                reported += 1
         buffer.pos, buffer.full = n_steps, True
         self._last_obs, self._last_episode_starts = obs, starts
         if norm is not None:
             norm.old_obs = raw
-        buffer.compute_returns_and_advantage(last_values=th.from_numpy(policy.value(obs)), dones=starts)
-        callback.update_locals(locals())
+        values = th.from_numpy(policy.value(obs))
+        buffer.compute_returns_and_advantage(last_values=values, dones=starts)
+        callback.update_locals({"new_obs": obs, "dones": starts, "values": values})
         callback.on_rollout_end()
         return True
 

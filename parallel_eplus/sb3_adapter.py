@@ -43,7 +43,7 @@ class SB3VecEnv(VecEnv):
 
     # -- one worker at a time (pipelining), where the vector env offers it ----------------------
     @property
-    def steps_workers_alone(self) -> bool:
+    def steps_one_by_one(self) -> bool:
         """Whether `send_one`, `ready` and `receive_one` work (local workers: yes; Ray actors: no)."""
         return hasattr(self.venv, "receive_one")
 

@@ -220,6 +220,7 @@ class Simulation:
         self.pipes.watch(self.proc.pid, lambda: self.proc is not None and self.proc.poll() is None)
         self.records = StepRecorder(self.action_names, self.steps_per_episode)
         self._action = self.initial_action.tolist()
+        self.deadline = math.inf  # no action sent yet
         self.last_summary = None
         if self.config.residual_scale:  # a fresh integral state per episode
             target = self.config.rbc_target_c
@@ -291,7 +292,7 @@ class Simulation:
         return obs, info
 
     def _recv(self, timeout: float, what: str, deadline: float | None = None) -> tuple[int, np.ndarray]:
-        """The next frame, within `timeout` s or by the monotonic `deadline` (which the error then cites)."""
+        """The next frame, by the monotonic `deadline` if given, else within `timeout` s (which errors cite)."""
         wait = timeout if deadline is None else max(deadline - time.monotonic(), 0.0)
         try:
             code, values = self.pipes.recv(wait, self.spin_s)
@@ -346,6 +347,10 @@ class Simulation:
         if proc.poll() is None:
             proc.kill()
         proc.wait()
+
+    def running(self) -> bool:
+        """Whether this episode's EnergyPlus process is alive (it exits on its own only after its last step)."""
+        return self.proc is not None and self.proc.poll() is None
 
     def stop(self) -> None:
         """End a running episode early: kill EnergyPlus and keep the partial record."""

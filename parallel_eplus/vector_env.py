@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import select
 import time
 from dataclasses import replace
@@ -93,6 +94,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         indices = list(indices)
         infos: list[dict] = [{} for _ in range(self.num_envs)]
         for i in indices:
+            self._send_errors.pop(i, None)  # from an action to an episode now gone
             self.sims[i].launch()
         for i in indices:
             self._obs[i], infos[i] = self._first_observation(i)
@@ -134,17 +136,25 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         time first (none when the workers and the learner have no spare core: see `pipe.default_spin_s`).
         """
         indices = list(indices)
+        if not indices:
+            return []
         spin_until = time.monotonic() + self.sims[0].spin_s
         while True:
             now = time.monotonic()
             due = [
                 i for i in indices
                 if i in self._send_errors or self.sims[i].pipes.has_frame() or self.sims[i].deadline <= now
+                or not (self.sims[i].pipes.watches_exit or self.sims[i].running())
             ]  # fmt: skip
             if due:
                 return due
             fds = {fd: i for i in indices for fd in self.sims[i].pipes.fds()}
-            wait = 0.0 if now < spin_until else min(self.sims[i].deadline for i in indices) - now
+            wait = min(self.sims[i].deadline for i in indices) - now
+            if now < spin_until:
+                os.sched_yield()  # let a process on this core go first, as a single worker's read does
+                wait = 0.0
+            elif not all(self.sims[i].pipes.watches_exit for i in indices):
+                wait = min(wait, 0.2)  # no pidfd to wake us when a worker dies: look every 0.2 s
             readable, _, _ = select.select(list(fds), [], [], None if math.isinf(wait) else wait)
             if readable:
                 return sorted({fds[fd] for fd in readable})

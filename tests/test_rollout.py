@@ -4,12 +4,13 @@ collects what SB3's lockstep loop collects."""
 import gymnasium as gym
 import numpy as np
 import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus.env import action_space, observation_space
 from parallel_eplus.model import STEPS_PER_DAY
-from parallel_eplus.rollout import FastTRPO, NumpyPolicy, _workers_alone
+from parallel_eplus.rollout import FastTRPO, NumpyPolicy, _pipelinable
 from parallel_eplus.sb3_adapter import SB3VecEnv
 from parallel_eplus.simulation import SimulationConfig
 from parallel_eplus.train import TRPOSettings
@@ -76,7 +77,7 @@ def _one_rollout(out_dir, lockstep: bool) -> dict[str, np.ndarray]:
             policy_kwargs={"net_arch": [32, 32], "activation_fn": th.nn.Tanh},
         )  # fmt: skip
         model.lockstep = lockstep
-        assert (_workers_alone(env)[0] is not None) and model.n_envs == 2
+        assert (_pipelinable(env)[0] is not None) and model.n_envs == 2
         model.learn(256)  # one rollout, then one update (which leaves the buffer's contents alone)
         b = model.rollout_buffer
         return {k: getattr(b, k).copy() for k in ("observations", "actions", "rewards", "episode_starts", "values",
@@ -101,3 +102,28 @@ def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leak
     # The update flattened the rest worker by worker: 128 steps of CA, then 128 of CO.
     obs = lockstep["observations"]
     assert obs.shape == (256, 6) and not np.allclose(obs[:128], obs[128:])
+
+
+class _StopAfter(BaseCallback):
+    def __init__(self, calls: int):
+        super().__init__()
+        self.calls = calls
+
+    def _on_step(self) -> bool:
+        return self.n_calls < self.calls
+
+
+def test_a_rollout_stopped_midway_starts_the_workers_afresh_at_the_next_learn(tmp_path, no_leaks):
+    """Stopped by a callback, pipelined workers are mid-step; the next `learn` must not answer stale actions."""
+    sim = SimulationConfig(run_days=1, output_dir=str(tmp_path), keep_episodes=0)
+    env = VecNormalize(SB3VecEnv(EnergyPlusVectorEnv(sim, [["CA"], ["CO"]])), norm_reward=False)
+    try:
+        model = FastTRPO("MlpPolicy", env, n_steps=64, batch_size=64, seed=0, device="cpu")
+        model.learn(128, callback=_StopAfter(10))
+        assert model.num_timesteps == 20 and model._last_obs is None
+        model.learn(128, reset_num_timesteps=False)
+        starts = model.rollout_buffer.episode_starts
+        assert starts[0].all() and not starts[1:].any()  # a fresh episode on each worker, then no reset
+        assert model.num_timesteps == 20 + 128
+    finally:
+        env.close()
