@@ -127,16 +127,17 @@ def _exploring_actions(cfg: BenchConfig, workers: int) -> np.ndarray:
 
 def _step_pipelined(venv: EnergyPlusVectorEnv, actions: np.ndarray) -> None:
     """Each worker through its own column of `actions`, handed its next action as soon as it answers."""
-    done = [0] * venv.num_envs
+    steps_done = [0] * venv.num_envs
     for i in range(venv.num_envs):
         venv.send_one(i, actions[0, i])
     pending = set(range(venv.num_envs))
     while pending:
         for i in venv.ready(pending):
-            venv.receive_one(i)
-            done[i] += 1
-            if done[i] < len(actions):
-                venv.send_one(i, actions[done[i], i])
+            if venv.receive_one(i) is None:  # a new episode starting up
+                continue
+            steps_done[i] += 1
+            if steps_done[i] < len(actions):
+                venv.send_one(i, actions[steps_done[i], i])
             else:
                 pending.discard(i)
 

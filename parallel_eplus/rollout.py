@@ -249,7 +249,10 @@ class NumpyRollouts:
         pending, reported = set(range(n)), 0
         while pending:
             for i in env.ready(pending):
-                new_obs, reward, done, info = env.receive_one(i)
+                answer = env.receive_one(i)
+                if answer is None:  # its next episode is starting up: served when it is ready
+                    continue
+                new_obs, reward, done, info = answer
                 raw[i] = new_obs
                 if norm is not None:
                     if norm.training and norm.norm_obs:

@@ -53,9 +53,13 @@ class SB3VecEnv(VecEnv):
     def ready(self, indices) -> list[int]:
         return self.venv.ready(indices)
 
-    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, dict]:
-        """Worker i's (observation, reward, done, info), with the keys `step_wait` gives SB3."""
-        obs, reward, terminated, truncated, info = self.venv.receive_one(i)
+    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, dict] | None:
+        """Worker i's (observation, reward, done, info), with the keys `step_wait` gives SB3; None while
+        its next episode starts up."""
+        answer = self.venv.receive_one(i)
+        if answer is None:
+            return None
+        obs, reward, terminated, truncated, info = answer
         self._returns[i] += reward
         self._lengths[i] += 1
         if terminated or truncated:

@@ -174,7 +174,7 @@ class Simulation:
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
-        self.deadline = math.inf  # when the observation for the action last sent is overdue (monotonic s)
+        self.deadline = math.inf  # when the frame awaited next is overdue (monotonic s)
         self._closed = False
 
     # -- episode lifecycle --------------------------------------------------------------------
@@ -220,7 +220,7 @@ class Simulation:
         self.pipes.watch(self.proc.pid, lambda: self.proc is not None and self.proc.poll() is None)
         self.records = StepRecorder(self.action_names, self.steps_per_episode)
         self._action = self.initial_action.tolist()
-        self.deadline = math.inf  # no action sent yet
+        self.deadline = time.monotonic() + self.config.start_timeout_s  # for the first observation
         self.last_summary = None
         if self.config.residual_scale:  # a fresh integral state per episode
             target = self.config.rbc_target_c
@@ -230,7 +230,7 @@ class Simulation:
 
     def first_observation(self) -> tuple[np.ndarray, dict]:
         """Wait through sizing and warmup for observation 0 of the launched episode."""
-        code, values = self._recv(self.config.start_timeout_s, "the first observation")
+        code, values = self._recv(self.config.start_timeout_s, "the first observation", self.deadline)
         if code != pipe.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
         obs, info = self._observation(values)

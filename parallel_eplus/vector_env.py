@@ -72,6 +72,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._failures = [0] * num_envs
         self._send_errors: dict[int, EnergyPlusError] = {}
+        self._starting: dict[int, tuple] = {}  # worker -> its last step's answer, held until its next episode starts
         self._obs = np.zeros((num_envs, *self.single_observation_space.shape), dtype=np.float32)
 
     # -- Gymnasium API ------------------------------------------------------------------------
@@ -95,6 +96,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         infos: list[dict] = [{} for _ in range(self.num_envs)]
         for i in indices:
             self._send_errors.pop(i, None)  # from an action to an episode now gone
+            self._starting.pop(i, None)
             self.sims[i].launch()
         for i in indices:
             self._obs[i], infos[i] = self._first_observation(i)
@@ -130,7 +132,8 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             self._send_errors[i] = e
 
     def ready(self, indices) -> list[int]:
-        """The workers among `indices` whose answer is in (an observation, a failure, or a deadline passed).
+        """The workers among `indices` whose answer is in: an observation (a first one, for a worker
+        starting an episode), a failure, or a deadline passed.
 
         Blocks until there is at least one. Like a single worker's read, it polls for the workers' spin
         time first (none when the workers and the learner have no spare core: see `pipe.default_spin_s`).
@@ -159,15 +162,26 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             if readable:
                 return sorted({fds[fd] for fd in readable})
 
-    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, bool, dict]:
+    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, bool, dict] | None:
         """Worker i's (observation, reward, terminated, truncated, info) for its last action, as `step`
-        gives them for each worker; a finished or failed episode is restarted before this returns."""
+        gives them for each worker; None while its next episode starts up after one finished or failed.
+
+        The start-up (~0.5 s) runs while the other workers are served: ask again once `ready` reports it.
+        """
+        if i in self._starting:
+            try:
+                self._obs[i], first = self.sims[i].first_observation()
+            except EnergyPlusError as e:
+                self._restart(i, e)
+                return None
+            reward, terminated, truncated, info = self._starting.pop(i)
+            info.update(first)
+            return self._obs[i].copy(), reward, terminated, truncated, info
         reward, terminated, info, error = self._collect(i)
         if terminated or error is not None:
-            info = self._end_episode(i, info, error)
-            self._obs[i], first = self._first_observation(i)
-            info.update(first)
-        return self._obs[i].copy(), reward, terminated, error is not None, info
+            self._starting[i] = (reward, terminated, error is not None, self._end_episode(i, info, error))
+            return None
+        return self._obs[i].copy(), reward, False, False, info
 
     # -- internals ----------------------------------------------------------------------------
     def _first_observation(self, i: int) -> tuple[np.ndarray, dict]:

@@ -94,7 +94,7 @@ def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leak
     lockstep = _one_rollout(tmp_path / "lockstep", lockstep=True)
     assert served == []
     pipelined = _one_rollout(tmp_path / "pipelined", lockstep=False)
-    assert sorted(served) == [0] * 128 + [1] * 128  # every step, worker by worker
+    assert sorted(served) == [0] * 129 + [1] * 129  # each step, and the new day's first observation
     for key, value in lockstep.items():
         np.testing.assert_allclose(pipelined[key], value, rtol=1e-5, atol=1e-6, err_msg=key)
     starts = lockstep["episode_starts"]  # (step, worker): both days ended and restarted inside the rollout
