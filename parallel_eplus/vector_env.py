@@ -3,12 +3,12 @@
 A vector step writes every worker's action, then reads every observation: one pipe round trip per
 worker, all EnergyPlus processes computing at once. Finished episodes restart in the same step
 (Gymnasium's SAME_STEP autoreset: the final observation and info are in `final_obs` / `final_info`).
+A worker whose EnergyPlus crashes restarts its episode (the cut episode ends as truncated) up to
+`max_restarts` times in a row, then the run fails with the worker's error.
 
 Workers can also be stepped one by one (`send_one`, `ready`, `receive_one`), so a learner can hand each
 worker its next action as soon as its own observation arrives instead of waiting for the slowest
 (pipelining; `rollout.py`).
-A worker whose EnergyPlus crashes restarts its episode (the cut episode ends as truncated) up to
-`max_restarts` times in a row, then the run fails with the worker's error.
 """
 
 from __future__ import annotations
