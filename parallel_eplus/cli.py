@@ -224,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--workers-per-actor", type=int, help="Ray: EnergyPlus workers hosted by each actor")
     tr.add_argument(
         "--lockstep", action="store_true",
-        help="step all workers together (a seed then fixes the run bit for bit; slower). Default: each "
+        help="step all workers together (a seed then fixes the run bit for bit). Default: each "
         "local worker gets its next action as soon as its observation arrives",
     )  # fmt: skip
     tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")

@@ -148,7 +148,7 @@ class NumpyRollouts:
     Saved models are the algorithm's ordinary models: `sb3_contrib.TRPO.load` (or `PPO.load`) reads them.
     """
 
-    lockstep = False  # True: step every worker together, as SB3 does (reproducible for a seed, slower)
+    lockstep = False  # True: step every worker together, as SB3 does (a seed then fixes the run bit for bit)
 
     def set_random_seed(self, seed: int | None = None) -> None:
         super().set_random_seed(seed)  # SB3 calls this while setting the model up, seed or not
