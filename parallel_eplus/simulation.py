@@ -230,7 +230,7 @@ class Simulation:
 
     def first_observation(self) -> tuple[np.ndarray, dict]:
         """Wait through sizing and warmup for observation 0 of the launched episode."""
-        code, values = self._recv(self.config.start_timeout_s, "the first observation", self.deadline)
+        code, values = self._recv("the first observation", self.config.start_timeout_s)
         if code != pipe.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
         obs, info = self._observation(values)
@@ -257,7 +257,7 @@ class Simulation:
 
     def receive(self) -> tuple[np.ndarray, float, bool, dict]:
         """(observation, reward, terminated, info) for the action last sent, due `step_timeout_s` after it."""
-        code, values = self._recv(self.config.step_timeout_s, "an observation", self.deadline)
+        code, values = self._recv("an observation", self.config.step_timeout_s)
         obs, info = self._observation(values)
         r, parts = reward((info["west_temp_c"], info["east_temp_c"]), info["power_w"], self.config.reward)
         info.update(parts)
@@ -291,13 +291,12 @@ class Simulation:
         self._info = info
         return obs, info
 
-    def _recv(self, timeout: float, what: str, deadline: float | None = None) -> tuple[int, np.ndarray]:
-        """The next frame, by the monotonic `deadline` if given, else within `timeout` s (which errors cite)."""
-        wait = timeout if deadline is None else max(deadline - time.monotonic(), 0.0)
+    def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
+        """The frame awaited next, by `self.deadline` (set `limit_s` after the launch or the action)."""
         try:
-            code, values = self.pipes.recv(wait, self.spin_s)
+            code, values = self.pipes.recv(max(self.deadline - time.monotonic(), 0.0), self.spin_s)
         except TimeoutError as e:
-            raise self._error(f"EnergyPlus sent no {what} within {timeout:.0f} s (hung?)") from e
+            raise self._error(f"EnergyPlus sent no {what} within {limit_s:.0f} s (hung?)") from e
         except ChildProcessError as e:
             raise self._error(f"EnergyPlus died while we waited for {what}: {e}") from e
         except ProtocolError as e:
