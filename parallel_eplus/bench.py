@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import native
 from .env import EnergyPlusEnv
 from .episode import MODEL_FILE, write_episode_idf
 from .errors import Interrupts
@@ -77,6 +78,7 @@ def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
             sys.executable, "-m", "parallel_eplus.eplus_callback", "--idf", str(idf),
             "--epw", str(resolve_weather(cfg.weather)), "--output-dir", str(out), "--steps",
             str(cfg.raw_days * STEPS_PER_DAY), "--initial-action", *map(str, _constant_physical(cfg.action)),
+            *(["--native", lib] if (lib := native.bridge_library()) else []),  # the env's callbacks, minus pipes
         ])  # fmt: skip
     t0 = time.perf_counter()
     procs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL) for cmd in cmds]

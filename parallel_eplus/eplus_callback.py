@@ -13,12 +13,17 @@ Timing (one control step = one zone timestep, no shift between an observation an
 AfterPredictorAfterHVACManagers runs at every HVAC sub-timestep; actuators keep their values, so the
 action is written once per zone timestep. Frame values: year, day of year, hour, minute (when the
 observation was taken; EnergyPlus's own clock at this point is the last sub-timestep's), then the sensors.
+
+With `--native LIB` (native.py) the callbacks EnergyPlus calls are C (eplus_callback.c): they hand each
+call to this Bridge until its first exchange is done, then the Bridge arms them and every later step
+stays in C. Without it, this Bridge does every step.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import ctypes
 import os
 import sys
 import traceback
@@ -65,6 +70,8 @@ class Bridge:
         self._wait = None if act_fd is None else pipe.wait_readable(act_fd)
         self._actions = None if act_fd is None else pipe.FrameReader(act_fd)
         self.spin_s = spin_s
+        self.native: ctypes.CDLL | None = None  # the C bridge (set by `register`) until it is armed
+        self._armed: ctypes.CDLL | None = None  # the C bridge once it steps EnergyPlus
 
     # -- setup --------------------------------------------------------------------------------
     def _handles_ready(self, state) -> bool:
@@ -144,6 +151,36 @@ class Bridge:
             action = self.action
             for h, i in self.actuator_handles:
                 set_value(state, h, action[i])
+        if self.native is not None and self.started:
+            self._arm()
+
+    def _arm(self) -> None:
+        """Hand every later step to the C callbacks, in the state this Bridge has reached."""
+        if self._actions is not None and self._actions.buf:
+            raise pipe.ProtocolError("bytes beyond the action frame")
+        ints = lambda xs: (ctypes.c_int * len(xs))(*xs)  # noqa: E731
+        handles = [h for h, _ in self.actuator_handles]
+        indices = [i for _, i in self.actuator_handles]
+        status = self.native.bridge_arm(
+            -1 if self.raw else self.obs_fd, -1 if self.raw else self.act_fd,
+            len(self.sensor_handles), ints(self.sensor_handles), len(handles), ints(handles), ints(indices),
+            len(self.action), (ctypes.c_double * len(self.action))(*self.action), int(self.pending),
+            self.step, self.steps, self.minutes, self.spin_s,
+        )  # fmt: skip
+        if status != 0:
+            raise RuntimeError("the C bridge refused the model's sensors or actuators (too many)")
+        self.native, self._armed = None, self.native
+
+    def collect(self) -> None:
+        """After the run: take the step count, completion and any error from the C side if it was armed."""
+        lib = self._armed
+        if lib is None:
+            return
+        self.step, self.done = lib.bridge_step(), bool(lib.bridge_done())
+        message = lib.bridge_error()
+        if message and self.error is None:
+            self.error = RuntimeError(message.decode())
+            print(f"C bridge: {message.decode()}", file=sys.stderr)
 
     def _observe(self, state) -> None:
         if not self._handles_ready(state):
@@ -174,7 +211,39 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--steps", type=int, required=True, help="zone timesteps in the run period")
     p.add_argument("--initial-action", type=float, nargs="*", default=[])
     p.add_argument("--spin-us", type=float, default=0.0, help="poll this long for an action before blocking")
+    p.add_argument("--native", help="the compiled C bridge (native.py) to run each step in; default: Python")
     return p.parse_args(argv)
+
+
+def register(api, state, bridge: Bridge, native: str | None) -> list:
+    """Register the callbacks: the Bridge's own, or the C ones that call it until it arms them.
+
+    Returns what must stay alive while EnergyPlus runs (ctypes callback objects)."""
+    rt = api.runtime
+    if native is None:
+        rt.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
+        rt.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
+        return []
+    lib = ctypes.CDLL(native)
+    lib.bridge_init.argtypes = [ctypes.c_void_p] * 9
+    lib.bridge_init.restype = None
+    lib.bridge_arm.argtypes = [
+        ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.c_int,
+        ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int), ctypes.c_int,
+        ctypes.POINTER(ctypes.c_double), ctypes.c_int, ctypes.c_long, ctypes.c_long, ctypes.c_int, ctypes.c_double,
+    ]  # fmt: skip
+    lib.bridge_step.restype = ctypes.c_long
+    lib.bridge_error.restype = ctypes.c_char_p
+    callback = rt.py_state_callback_type  # void *(*)(void *state), as EnergyPlus calls it
+    slow = [callback(bridge.apply_action), callback(bridge.observe)]
+    x, r = api.exchange.api, rt.api
+    functions = [x.getVariableValue, x.setActuatorValue, x.calendarYear, x.dayOfYear, x.hour, x.zoneTimeStepNum]
+    lib.bridge_init(*(ctypes.cast(f, ctypes.c_void_p) for f in [*slow, *functions, r.stopSimulation]))
+    fast = [callback(("bridge_apply_action", lib)), callback(("bridge_observe", lib))]
+    r.callbackAfterPredictorAfterHVACManagers(state, fast[0])
+    r.callbackEndOfZoneTimeStepAfterZoneReporting(state, fast[1])
+    bridge.native = lib
+    return [lib, *slow, *fast]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -198,9 +267,10 @@ def main(argv: list[str] | None = None) -> int:
         state = api.state_manager.new_state()
         api.runtime.set_console_output_status(state, False)
         bridge = Bridge(api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6)
-        api.runtime.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
-        api.runtime.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
+        keep = register(api, state, bridge, args.native)
         status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])
+        bridge.collect()
+        del keep
     except BaseException:  # noqa: BLE001
         traceback.print_exc()
         return fail(-1.0)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import pipe
+from . import native, pipe
 from .episode import (
     MODEL_FILE,
     StepRecorder,
@@ -78,6 +78,7 @@ class SimulationConfig:
     # per zone, in kg/s, to the controller's split-range flow demand (rbc.DEMAND_CORRECTIONS).
     residual_space: str = "action"
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
+    native_bridge: bool = True  # EnergyPlus's side of each step in C (native.py) where a C compiler works
 
 
 RESIDUAL_SPACES = ("action", "demand")
@@ -135,6 +136,7 @@ class Simulation:
         auto = config.spin_s is None
         self.spin_s = pipe.default_spin_s(siblings + 1) if auto else config.spin_s
         self.child_spin_s = pipe.SPIN_S if auto else config.spin_s
+        self.native_bridge = native.bridge_library() if config.native_bridge else None
         self.name = name
         self.model = control_model(config.model)
         self.elements = self.model.actions
@@ -211,6 +213,7 @@ class Simulation:
             "--output-dir", str(self.episode_dir), "--model", self.model.name,
             "--steps", str(self.steps_per_episode),
             "--initial-action", *map(str, self.initial_action), "--spin-us", str(self.child_spin_s * 1e6),
+            *(["--native", self.native_bridge] if self.native_bridge else []),
         ]  # fmt: skip
         with open(self.episode_dir / "energyplus.log", "wb") as logf:
             self.proc = subprocess.Popen(

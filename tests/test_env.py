@@ -248,3 +248,58 @@ def test_demand_residual_corrects_the_controllers_flow_demand(tmp_path, no_leaks
     assert abs(late.west_temp_c.mean() - 22.5) < 0.3 and abs(late.east_temp_c.mean() - 22.5) < 0.3
     with pytest.raises(ValueError, match="residual space"):
         EnergyPlusEnv(residual_scale=1.0, residual_space="flows")
+
+
+def _bridges() -> list:
+    """Both EnergyPlus-side bridges; the C one only where it compiles (it does wherever CI runs)."""
+    from parallel_eplus import native
+
+    c = pytest.param(True, id="c-bridge")
+    if native.bridge_library() is None:
+        c = pytest.param(True, id="c-bridge", marks=pytest.mark.skip(reason="no C compiler"))
+    return [c, pytest.param(False, id="python-bridge")]
+
+
+def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
+    """The C bridge is the Python one's steady state moved to C: same actions, same physics, bit for bit."""
+    from parallel_eplus import native
+    from parallel_eplus.simulation import Simulation, SimulationConfig
+
+    if native.bridge_library() is None:
+        pytest.skip("no C compiler")
+    actions = np.clip(np.random.default_rng(3).normal(size=(STEPS_PER_DAY, 4)), -1, 1)
+    runs = []
+    for use_c in (True, False):
+        sim = Simulation(SimulationConfig(run_days=1, native_bridge=use_c))
+        assert (sim.native_bridge is not None) == use_c
+        try:
+            obs, _ = sim.start()
+            trajectory, terminated = [obs], False
+            for a in actions:
+                sim.send(a)
+                obs, r, terminated, info = sim.receive()
+                trajectory.append(np.append(obs, [r, info["time"].timestamp()]))
+            assert terminated
+            runs.append(np.concatenate(trajectory))
+        finally:
+            sim.close()
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("use_c", _bridges())
+def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_leaks):
+    from parallel_eplus import pipe
+    from parallel_eplus.errors import EnergyPlusError
+    from parallel_eplus.simulation import Simulation, SimulationConfig
+
+    sim = Simulation(SimulationConfig(run_days=1, native_bridge=use_c))
+    try:
+        sim.start()
+        sim.send(np.zeros(4))
+        sim.receive()  # one exchange first, so the C bridge is armed
+        sim.pipes.send(pipe.encode([1.0, 2.0]))  # two values where EnergyPlus expects four
+        with pytest.raises(EnergyPlusError, match=r"failed \(status") as e:
+            sim.receive()
+        assert "expected an action of 4 values" in str(e.value)
+    finally:
+        sim.close()

@@ -1,0 +1,212 @@
+/* The per-step half of eplus_callback.py, in C: the steady-state exchange with no Python on its path.
+ *
+ * eplus_callback.py registers bridge_apply_action and bridge_observe as the EnergyPlus callbacks. Until
+ * Python arms this bridge they hand each call to the Python Bridge (setup, warmup, sizing, the first
+ * exchange); once armed they do what Bridge._apply_action and Bridge._observe do, with the same frames
+ * (pipe.py: int32 count, then float64 values; a negative count is a control code) and the same spin
+ * (poll the action pipe, yielding the core, for spin_s; then block). No EnergyPlus headers: Python
+ * hands over the addresses of the few API functions used, as pyenergyplus has loaded them.
+ * Errors cannot cross the callback boundary: they are recorded, EnergyPlus is stopped, and Python
+ * reports them after the run (bridge_error).
+ */
+#include <errno.h>
+#include <poll.h>
+#include <sched.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#define MAX_VALUES 64
+#define TIME_FIELDS 4
+#define CODE_END (-1)
+
+typedef void *State;
+typedef void *(*state_fn)(State);
+typedef int (*int_fn)(State);
+typedef double (*get_fn)(State, int);
+typedef void *(*set_fn)(State, int, double);
+
+struct api {
+    get_fn get_variable;
+    set_fn set_actuator;
+    int_fn year, day_of_year, hour, zone_timestep;
+    state_fn stop;
+};
+
+static struct {
+    int armed, done, pending;
+    state_fn slow_apply, slow_observe; /* the Python Bridge's callbacks, until armed */
+    struct api api;
+    int obs_fd, act_fd;
+    int n_sensors, sensors[MAX_VALUES];
+    int n_actuators, actuators[MAX_VALUES], actuator_action[MAX_VALUES];
+    int n_actions;
+    double action[MAX_VALUES];
+    long step, steps;
+    int minutes;
+    double spin_s;
+    unsigned char buf[4 + 8 * MAX_VALUES + 4096];
+    size_t got;
+    char error[256];
+} b;
+
+/* Record the first error and stop EnergyPlus; later calls do nothing. */
+static void fail(State state, const char *what) {
+    if (!b.error[0])
+        snprintf(b.error, sizeof b.error, "%s", what);
+    b.api.stop(state);
+}
+
+static double now_s(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + t.tv_nsec * 1e-9;
+}
+
+/* One write, as pipe.encode builds it: frames stay under PIPE_BUF, so they arrive whole. */
+static int write_frame(int32_t code, const double *values, int32_t n) {
+    unsigned char out[8 + 8 * (4 + MAX_VALUES)];
+    size_t len = 0;
+    if (code != 0) {
+        memcpy(out, &code, 4);
+        len = 4;
+    }
+    memcpy(out + len, &n, 4);
+    memcpy(out + len + 4, values, 8 * (size_t)n);
+    len += 4 + 8 * (size_t)n;
+    ssize_t w;
+    do
+        w = write(b.obs_fd, out, len);
+    while (w < 0 && errno == EINTR);
+    return w == (ssize_t)len ? 0 : -1;
+}
+
+/* The next action frame into b.action; FrameReader.read's loop: take what has arrived, spin, block. */
+static int read_action(State state) {
+    double spin_until = -1.0;
+    for (;;) {
+        if (b.got >= 4) {
+            int32_t count;
+            memcpy(&count, b.buf, 4);
+            if (count != b.n_actions) {
+                char msg[128];
+                snprintf(msg, sizeof msg, "expected an action of %d values, got a frame of count %d",
+                         b.n_actions, count);
+                fail(state, msg);
+                return -1;
+            }
+            size_t end = 4 + 8 * (size_t)count;
+            if (b.got >= end) {
+                memcpy(b.action, b.buf + 4, 8 * (size_t)count);
+                memmove(b.buf, b.buf + end, b.got - end);
+                b.got -= end;
+                return 0;
+            }
+        }
+        ssize_t r = read(b.act_fd, b.buf + b.got, sizeof b.buf - b.got);
+        if (r > 0) {
+            b.got += (size_t)r;
+        } else if (r == 0) {
+            fail(state, "action pipe closed mid-frame");
+            return -1;
+        } else if (errno == EAGAIN) {
+            double t = now_s();
+            if (spin_until < 0)
+                spin_until = t + b.spin_s;
+            if (t < spin_until) {
+                sched_yield();
+            } else {
+                struct pollfd p = {b.act_fd, POLLIN, 0};
+                if (poll(&p, 1, -1) < 0 && errno != EINTR) {
+                    fail(state, "poll on the action pipe failed");
+                    return -1;
+                }
+            }
+        } else if (errno != EINTR) {
+            fail(state, "read from the action pipe failed");
+            return -1;
+        }
+    }
+}
+
+void *bridge_apply_action(State state) {
+    if (!b.armed)
+        return b.slow_apply(state);
+    if (b.done || b.error[0] || !b.pending)
+        return NULL;
+    b.pending = 0;
+    for (int i = 0; i < b.n_actuators; i++)
+        b.api.set_actuator(state, b.actuators[i], b.action[b.actuator_action[i]]);
+    return NULL;
+}
+
+void *bridge_observe(State state) {
+    if (!b.armed)
+        return b.slow_observe(state);
+    if (b.done || b.error[0])
+        return NULL;
+    double values[TIME_FIELDS + MAX_VALUES];
+    values[0] = b.api.year(state);
+    values[1] = b.api.day_of_year(state);
+    values[2] = b.api.hour(state);
+    values[3] = (double)b.api.zone_timestep(state) * b.minutes;
+    for (int i = 0; i < b.n_sensors; i++)
+        values[TIME_FIELDS + i] = b.api.get_variable(state, b.sensors[i]);
+    int n = TIME_FIELDS + b.n_sensors;
+    b.step++;
+    if (b.step >= b.steps) {
+        b.done = 1;
+        if (b.obs_fd >= 0 && write_frame(CODE_END, values, n) < 0)
+            fail(state, "cannot write the last observation");
+        return NULL;
+    }
+    if (b.obs_fd < 0) /* raw: EnergyPlus alone, the initial action held */
+        return NULL;
+    if (write_frame(0, values, n) < 0) {
+        fail(state, "cannot write an observation: the env is gone");
+        return NULL;
+    }
+    if (read_action(state) == 0)
+        b.pending = 1;
+    return NULL;
+}
+
+/* Before the run: where to hand calls until armed, and the API functions to use once armed. */
+void bridge_init(state_fn slow_apply, state_fn slow_observe, get_fn get_variable, set_fn set_actuator,
+                 int_fn year, int_fn day_of_year, int_fn hour, int_fn zone_timestep, state_fn stop) {
+    memset(&b, 0, sizeof b);
+    b.slow_apply = slow_apply;
+    b.slow_observe = slow_observe;
+    b.api = (struct api){get_variable, set_actuator, year, day_of_year, hour, zone_timestep, stop};
+}
+
+/* Take over from Python after its first exchange: from here on every call stays in C. */
+int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_actuators,
+               const int *actuators, const int *actuator_action, int n_actions, const double *action,
+               int pending, long step, long steps, int minutes, double spin_s) {
+    if (n_sensors > MAX_VALUES || n_actuators > MAX_VALUES || n_actions > MAX_VALUES)
+        return -1;
+    b.obs_fd = obs_fd;
+    b.act_fd = act_fd;
+    b.n_sensors = n_sensors;
+    memcpy(b.sensors, sensors, sizeof(int) * (size_t)n_sensors);
+    b.n_actuators = n_actuators;
+    memcpy(b.actuators, actuators, sizeof(int) * (size_t)n_actuators);
+    memcpy(b.actuator_action, actuator_action, sizeof(int) * (size_t)n_actuators);
+    b.n_actions = n_actions;
+    memcpy(b.action, action, sizeof(double) * (size_t)n_actions);
+    b.pending = pending;
+    b.step = step;
+    b.steps = steps;
+    b.minutes = minutes;
+    b.spin_s = spin_s;
+    b.armed = 1;
+    return 0;
+}
+
+long bridge_step(void) { return b.step; }
+int bridge_done(void) { return b.done; }
+int bridge_armed(void) { return b.armed; }
+const char *bridge_error(void) { return b.error; }
