@@ -1,7 +1,9 @@
 """Ray backend: each actor hosts a group of EnergyPlus workers (a local `EnergyPlusVectorEnv`) on its node.
 
-The learner steps every actor at once and concatenates the results, so anywhere in the cluster the
-same learner code sees one vector env.
+The learner sees one vector env either way: `step_lists` steps every actor at once and concatenates
+the results; pipelined (`send_one` / `ready` / `receive_one`, as the local vector env offers them) each
+actor steps as soon as all its workers have their actions, so no actor waits for the slowest of the
+cluster, only for the slowest of its own group.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ def _actor_class():
 
 
 class RayVectorEnv:
-    """Groups of workers in Ray actors, stepped together: write all actions, then gather all results."""
+    """Groups of workers in Ray actors: stepped together (`step_lists`) or each group as soon as it answers."""
 
     def __init__(
         self,
@@ -71,6 +73,11 @@ class RayVectorEnv:
             actor = group.options(num_cpus=len(part)).remote(config, part, start, max_restarts)
             self.actors.append(actor)
         self._obs = np.zeros((self.num_envs, *self.single_observation_space.shape), dtype=np.float32)
+        self._actor_of = [j for j, sl in enumerate(self.slices) for _ in range(sl.start, sl.stop)]
+        self._actions = np.zeros((self.num_envs, *self.single_action_space.shape), dtype=np.float32)
+        self._staged = [0] * len(self.actors)  # actions received for each actor's next step
+        self._in_flight: dict = {}  # ObjectRef of an actor's step -> actor index
+        self._answers: dict[int, tuple] = {}  # worker -> its answer, fetched but not yet received
         log.info("Ray backend: %d workers in %d actors", self.num_envs, len(self.actors))
 
     def observations(self) -> np.ndarray:
@@ -103,6 +110,39 @@ class RayVectorEnv:
         truncated = np.concatenate([r[3] for r in results])
         infos = [info for r in results for info in r[4]]
         return obs, rewards, terminated, truncated, infos
+
+    # -- one worker at a time, for pipelining ---------------------------------------------------
+    def send_one(self, i: int, action) -> None:
+        """Stage worker i's action; its actor steps once every worker of its group has one."""
+        j = self._actor_of[i]
+        self._actions[i] = action
+        self._staged[j] += 1
+        sl = self.slices[j]
+        if self._staged[j] == sl.stop - sl.start:
+            self._staged[j] = 0
+            self._in_flight[self.actors[j].step.remote(self._actions[sl].copy())] = j
+
+    def ready(self, indices) -> list[int]:
+        """The workers among `indices` whose answer is in, waiting for the first actor to finish if none is."""
+        import ray
+
+        wanted = list(indices)
+        if not any(i in self._answers for i in wanted):
+            if not self._in_flight:
+                raise RuntimeError("no Ray actor is stepping: send every worker of a group its action first")
+            done, _ = ray.wait(list(self._in_flight), num_returns=1)
+            for ref in done:
+                j = self._in_flight.pop(ref)
+                obs, rewards, terminated, truncated, infos = ray.get(ref)  # an actor's error surfaces here
+                for k, i in enumerate(range(self.slices[j].start, self.slices[j].stop)):
+                    self._answers[i] = (obs[k], float(rewards[k]), bool(terminated[k]), bool(truncated[k]), infos[k])
+        return [i for i in wanted if i in self._answers]
+
+    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Worker i's (observation, reward, terminated, truncated, info); an actor resets its own workers."""
+        answer = self._answers.pop(i)
+        self._obs[i] = answer[0]
+        return answer
 
     def close(self) -> None:
         import ray

@@ -44,7 +44,7 @@ class SB3VecEnv(VecEnv):
     # -- one worker at a time (pipelining), where the vector env offers it ----------------------
     @property
     def steps_one_by_one(self) -> bool:
-        """Whether `send_one`, `ready` and `receive_one` work (local workers: yes; Ray actors: no)."""
+        """Whether `send_one`, `ready` and `receive_one` work (local workers and Ray actors both offer them)."""
         return hasattr(self.venv, "receive_one")
 
     def send_one(self, i: int, action: np.ndarray) -> None:

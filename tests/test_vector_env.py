@@ -70,7 +70,7 @@ def test_out_of_bounds_observation_is_clipped_with_raw_value_in_info(tmp_path):
         sim.close()
 
 
-def _answer(venv: EnergyPlusVectorEnv, i: int) -> tuple:
+def _answer(venv, i: int) -> tuple:
     """Worker i's answer to its last action, waiting through a new episode's start-up if it has one."""
     while True:
         assert venv.ready([i]) == [i]
@@ -79,13 +79,29 @@ def _answer(venv: EnergyPlusVectorEnv, i: int) -> tuple:
             return answer
 
 
-def _step_alone(venv: EnergyPlusVectorEnv, i: int, action) -> tuple:
+def _step_alone(venv, i: int, action) -> tuple:
     """One worker's step through the pipelining API: send, wait until it alone has answered, read."""
     venv.send_one(i, action)
     return _answer(venv, i)
 
 
-def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_leaks):
+@pytest.fixture(params=["local", "ray"])
+def make_venv(request):
+    """Local workers, or the same workers in two Ray actors of one worker each (one Ray session per test)."""
+    if request.param == "local":
+        yield EnergyPlusVectorEnv
+        return
+    ray = pytest.importorskip("ray")
+    from parallel_eplus.ray_backend import RayVectorEnv
+
+    ray.init(num_cpus=2, include_dashboard=False)
+    try:
+        yield lambda cfg, shares: RayVectorEnv(cfg, shares, workers_per_actor=1)
+    finally:
+        ray.shutdown()
+
+
+def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_leaks, make_venv):
     """Pipelining changes only who waits for whom: each worker's episode is what lockstep gives it."""
     rng = np.random.default_rng(0)
     actions = np.clip(rng.normal(size=(STEPS_PER_DAY + 4, 2, 4)), -1, 1)
@@ -93,9 +109,9 @@ def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_le
     for mode in ("lockstep", "alone"):
         # One worker by one, the learner polls briefly before it sleeps (as it does with cores to spare).
         cfg = SimulationConfig(run_days=1, output_dir=str(tmp_path / mode), spin_s=0.0005 if mode == "alone" else None)
-        venv = EnergyPlusVectorEnv(cfg, [["CA"], ["CO"]])
+        venv = make_venv(cfg, [["CA"], ["CO"]])
         try:
-            venv.reset()
+            venv.start_all(range(2))
             obs, rewards, ends = [], [], []
             for a in actions:
                 if mode == "lockstep":
