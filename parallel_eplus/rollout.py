@@ -254,10 +254,13 @@ class NumpyRollouts:
                     continue
                 new_obs, reward, done, info = answer
                 raw[i] = new_obs
-                if norm is not None:
-                    if norm.training and norm.norm_obs:
-                        norm.obs_rms.update(new_obs[None])
-                    new_obs = norm.normalize_obs(new_obs)
+                if norm is not None and norm.norm_obs:
+                    # `VecNormalize.step_wait` on one row, minus the fixed costs that made it the learner's
+                    # largest per-step item: a row's mean is itself and its variance 0 (what `update`
+                    # would reduce to, bit for bit), and `normalize_obs` would deep-copy the row first.
+                    if norm.training:
+                        norm.obs_rms.update_from_moments(new_obs, 0.0, 1)
+                    new_obs = norm._normalize_obs(new_obs, norm.obs_rms).astype(np.float32)
                     if done and "terminal_observation" in info:
                         info["terminal_observation"] = norm.normalize_obs(info["terminal_observation"])
                 if done and info.get("TimeLimit.truncated", False) and "terminal_observation" in info:

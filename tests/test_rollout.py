@@ -86,6 +86,20 @@ def _one_rollout(out_dir, lockstep: bool) -> dict[str, np.ndarray]:
         env.close()
 
 
+def test_one_row_statistics_update_is_vecnormalizes_own_bit_for_bit():
+    """The pipelined loop updates and applies the observation statistics one row at a time, cheaply."""
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    rows = np.random.default_rng(0).normal(20.0, 5.0, size=(300, 6)).astype(np.float32)
+    ours, sb3 = RunningMeanStd(shape=(6,)), RunningMeanStd(shape=(6,))
+    for row in rows:
+        ours.update_from_moments(row, 0.0, 1)  # as rollout.py does
+        sb3.update(row[None])  # as VecNormalize.step_wait does
+    np.testing.assert_array_equal(ours.mean, sb3.mean)
+    np.testing.assert_array_equal(ours.var, sb3.var)
+    assert ours.count == sb3.count
+
+
 def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leaks, monkeypatch):
     """Serving each worker as its observation arrives fills the same buffer: every column is its worker's."""
     served: list[int] = []
