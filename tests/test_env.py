@@ -303,3 +303,24 @@ def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_lea
         assert "expected an action of 4 values" in str(e.value)
     finally:
         sim.close()
+
+
+def test_the_c_bridge_compiles_into_a_fresh_cache_or_falls_back_with_a_warning(tmp_path, monkeypatch, caplog):
+    from parallel_eplus import native
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    native.bridge_library.cache_clear()
+    try:
+        if native.bridge_library() is None:  # this machine has no compiler: it says so
+            assert "Python bridge" in caplog.text
+        else:
+            (lib,) = (tmp_path / "parallel-eplus").glob("eplus_callback-*.so")
+            assert native.bridge_library() == str(lib)
+        native.bridge_library.cache_clear()
+        monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+        for old in (tmp_path / "parallel-eplus").glob("*.so"):
+            old.unlink()
+        assert native.bridge_library() is None
+        assert "the Python bridge steps EnergyPlus instead" in caplog.text
+    finally:
+        native.bridge_library.cache_clear()
