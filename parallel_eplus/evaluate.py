@@ -22,7 +22,7 @@ from tqdm import tqdm
 from .model import STEPS_PER_DAY
 from .rbc import RBCConfig, RuleBasedController
 from .reward import RewardConfig
-from .simulation import Simulation, SimulationConfig
+from .simulation import Simulation, SimulationConfig, wait_any
 from .weather import parse_weathers, weather_label
 
 log = logging.getLogger(__name__)
@@ -129,21 +129,26 @@ def run_sweep(
                     rbc_target_c=controller.rbc_target_c,
                     output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
                 )  # fmt: skip
-                sim = Simulation(cfg, name=controller.label)
+                sim = Simulation(cfg, name=controller.label, siblings=workers)
                 sim.launch()
                 job = {"controller": controller, "sim": sim, "act": controller.make()}
                 active.append(job)
                 started.append(job)
             for job in started:
-                job["obs"], job["info"] = job["sim"].first_observation()
-            for job in active:
-                job["sim"].send(job["act"](job["obs"], job["info"]))
+                obs, info = job["sim"].first_observation()
+                job["sim"].send(job["act"](obs, info))
+            # Pipelined: each job gets its next action as soon as it answers, so a cheap episode (the
+            # built-in controller's) runs ahead of a costly one instead of at its pace.
             finished = []
-            for job in active:
-                job["obs"], _, terminated, job["info"] = job["sim"].receive()
+            for k in wait_any([job["sim"] for job in active], range(len(active))):
+                job = active[k]
+                obs, _, terminated, info = job["sim"].receive()
+                bar.update(1)
                 if terminated:
+                    job["info"] = info
                     finished.append(job)
-            bar.update(len(active))
+                else:
+                    job["sim"].send(job["act"](obs, info))
             for job in finished:
                 active.remove(job)
                 summary = job["info"]["episode_summary"]

@@ -11,12 +11,14 @@ import contextlib
 import datetime as dt
 import logging
 import math
+import os
+import select
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Container, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -379,3 +381,36 @@ class Simulation:
     def __del__(self):
         if not getattr(self, "_closed", True):
             self.close()
+
+
+def wait_any(sims: Sequence[Simulation], indices: Iterable[int], due: Container[int] = ()) -> list[int]:
+    """Those of `sims[i]` (i in `indices`) with something for `receive` or `first_observation`: a frame,
+    an exit, or a deadline passed (plus any in `due`). Blocks until there is at least one.
+
+    For pipelining: serve each simulation as soon as it answers instead of waiting for the slowest. Like
+    a single read, it polls for the simulations' spin time first (none when they and this process have
+    no spare core: see `pipe.default_spin_s`).
+    """
+    indices = list(indices)
+    if not indices:
+        return []
+    spin_until = time.monotonic() + sims[indices[0]].spin_s
+    while True:
+        now = time.monotonic()
+        ready = [
+            i for i in indices
+            if i in due or sims[i].pipes.has_frame() or sims[i].deadline <= now
+            or not (sims[i].pipes.watches_exit or sims[i].running())
+        ]  # fmt: skip
+        if ready:
+            return ready
+        fds = {fd: i for i in indices for fd in sims[i].pipes.fds()}
+        wait = min(sims[i].deadline for i in indices) - now
+        if now < spin_until:
+            os.sched_yield()  # let a process on this core go first, as a single simulation's read does
+            wait = 0.0
+        elif not all(sims[i].pipes.watches_exit for i in indices):
+            wait = min(wait, 0.2)  # no pidfd to wake us when a process dies: look every 0.2 s
+        readable, _, _ = select.select(list(fds), [], [], None if math.isinf(wait) else wait)
+        if readable:
+            return sorted({fds[fd] for fd in readable})

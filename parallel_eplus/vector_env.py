@@ -14,10 +14,6 @@ worker its next action as soon as its own observation arrives instead of waiting
 from __future__ import annotations
 
 import logging
-import math
-import os
-import select
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -28,7 +24,7 @@ from gymnasium.vector.utils import batch_space
 
 from .env import action_space, observation_space
 from .errors import EnergyPlusError
-from .simulation import Simulation, SimulationConfig
+from .simulation import Simulation, SimulationConfig, wait_any
 
 log = logging.getLogger(__name__)
 
@@ -138,29 +134,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         Blocks until there is at least one. Like a single worker's read, it polls for the workers' spin
         time first (none when the workers and the learner have no spare core: see `pipe.default_spin_s`).
         """
-        indices = list(indices)
-        if not indices:
-            return []
-        spin_until = time.monotonic() + self.sims[0].spin_s
-        while True:
-            now = time.monotonic()
-            due = [
-                i for i in indices
-                if i in self._send_errors or self.sims[i].pipes.has_frame() or self.sims[i].deadline <= now
-                or not (self.sims[i].pipes.watches_exit or self.sims[i].running())
-            ]  # fmt: skip
-            if due:
-                return due
-            fds = {fd: i for i in indices for fd in self.sims[i].pipes.fds()}
-            wait = min(self.sims[i].deadline for i in indices) - now
-            if now < spin_until:
-                os.sched_yield()  # let a process on this core go first, as a single worker's read does
-                wait = 0.0
-            elif not all(self.sims[i].pipes.watches_exit for i in indices):
-                wait = min(wait, 0.2)  # no pidfd to wake us when a worker dies: look every 0.2 s
-            readable, _, _ = select.select(list(fds), [], [], None if math.isinf(wait) else wait)
-            if readable:
-                return sorted({fds[fd] for fd in readable})
+        return wait_any(self.sims, indices, self._send_errors)
 
     def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, bool, dict] | None:
         """Worker i's (observation, reward, terminated, truncated, info) for its last action, as `step`
