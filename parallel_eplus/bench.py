@@ -1,13 +1,15 @@
 """`parallel-eplus bench`: our overhead against raw EnergyPlus, measured in one run on this machine.
 
-1. raw: EnergyPlus alone (the agent model, a constant action held by the EnergyPlus-side callback with
-   no pipe exchange), wall seconds from process start to exit;
+1. raw: EnergyPlus alone (the agent model, a constant action applied by the EnergyPlus-side callback
+   with no pipe exchange), wall seconds from process start to exit;
 2. env: the same period and action stepped through `EnergyPlusEnv` (reset + steps, wall seconds);
 3. vector env: aggregate steps/s with 1 and N workers, and the scaling efficiency, with the workers
    pipelined (each stepped as soon as it answers, as training steps them) and in lockstep, beside
    the machine's own: N raw runs at once against one, and N workers each stepped alone in a process
-   of its own (no shared learner: the ceiling any vector env can reach here);
-4. training: env steps/s inside TRPO `learn` with N workers, against the vector env's rate;
+   of its own (no shared learner: the ceiling any vector env can reach here), and raw EnergyPlus
+   replaying the same actions with no pipes (1 and N processes): what the physics alone costs;
+4. training: env steps/s inside TRPO `learn` with N workers, against the vector env's rate and raw's,
+   and the floor for a million steps here (raw EnergyPlus's time under those actions plus the updates);
 5. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
 
 Random actions in 3 are drawn like an untrained TRPO policy's (N(0, 1) clipped to [-1, 1]), so 3 and
@@ -37,7 +39,7 @@ from .env import EnergyPlusEnv
 from .episode import MODEL_FILE, write_episode_idf
 from .errors import Interrupts
 from .model import AGENT_IDF, STEPS_PER_DAY, control_model
-from .simulation import Simulation, SimulationConfig
+from .simulation import Simulation, SimulationConfig, scale_action
 from .vector_env import EnergyPlusVectorEnv, weather_shares
 from .weather import resolve_weather
 
@@ -58,33 +60,38 @@ class BenchConfig:
     action: float = 0.0  # the constant normalized action for raw and env
 
 
-def _constant_physical(action: float) -> list[float]:
-    return [e.low + (action + 1) / 2 * (e.high - e.low) for e in control_model("temp_fan").actions]
+def _physical(action) -> list[float]:
+    """A normalized action in the agent model's physical units, as the env scales it."""
+    elements = control_model("temp_fan").actions
+    low, high = [e.low for e in elements], [e.high for e in elements]
+    return scale_action(action, low, high, tuple(e.name for e in elements))
 
 
-def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
-    """EnergyPlus alone, holding the constant action in its callback, no pipes; wall seconds.
+def _raw_runs(cfg: BenchConfig, workdir: Path, replays: np.ndarray) -> tuple[float, list[str]]:
+    """Raw EnergyPlus runs at once, one per column of `replays` (steps x copies x actions, normalized), each
+    in its own directory, until the last exits: (wall seconds, each run's output).
 
-    With `copies` > 1, that many identical runs at once (each in its own directory), until the last
-    exits: what the machine itself gives N EnergyPlus processes, the ceiling for the vector env's scaling.
-    """
+    Each run is the env's simulation without the pipes: warmup under the model's initial action, then
+    step k's action applied where the env would apply it (tests/test_bench.py checks they agree)."""
+    elements = control_model("temp_fan").actions
+    lib = native.bridge_library()
     cmds = []
-    for i in range(copies):
+    for i in range(replays.shape[1]):
         out = workdir / f"copy{i}"
         out.mkdir(parents=True, exist_ok=True)
         idf = out / MODEL_FILE
-        write_episode_idf(AGENT_IDF, idf, cfg.raw_days)
+        write_episode_idf(AGENT_IDF, idf, -(-len(replays) // STEPS_PER_DAY))
+        np.save(out / "replay.npy", [_physical(a) for a in replays[:, i]])
         cmds.append([
             sys.executable, "-m", "parallel_eplus.eplus_callback", "--idf", str(idf),
-            "--epw", str(resolve_weather(cfg.weather)), "--output-dir", str(out), "--steps",
-            str(cfg.raw_days * STEPS_PER_DAY), "--initial-action", *map(str, _constant_physical(cfg.action)),
-            *(["--native", lib] if (lib := native.bridge_library()) else []),  # the env's callbacks, minus pipes
+            "--epw", str(resolve_weather(cfg.weather)), "--output-dir", str(out), "--steps", str(len(replays)),
+            "--initial-action", *(str(e.initial) for e in elements), "--replay", str(out / "replay.npy"),
+            *(["--native", lib] if lib else []),  # the env's own callbacks, minus the pipes
         ])  # fmt: skip
     t0 = time.perf_counter()
-    procs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL) for cmd in cmds]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True) for cmd in cmds]
     try:
-        for proc in procs:
-            proc.wait()
+        outputs = [proc.communicate()[0] for proc in procs]
     finally:  # Ctrl-C or a failed run: leave no EnergyPlus behind
         for proc in procs:
             if proc.poll() is None:
@@ -94,7 +101,25 @@ def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
     for proc, cmd in zip(procs, cmds, strict=True):
         if proc.returncode != 0:
             raise subprocess.CalledProcessError(proc.returncode, cmd)
-    return seconds
+    return seconds, outputs
+
+
+def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
+    """EnergyPlus alone under the constant action, no pipes; wall seconds, as the env run is timed.
+
+    With `copies` > 1, that many identical runs at once, until the last exits: what the machine itself
+    gives N EnergyPlus processes, the ceiling for the vector env's scaling.
+    """
+    return _raw_runs(cfg, workdir, np.full((cfg.raw_days * STEPS_PER_DAY, copies, 4), cfg.action))[0]
+
+
+def raw_rate(cfg: BenchConfig, workdir: Path, actions: np.ndarray) -> float:
+    """EnergyPlus alone under the vector env's exploring actions (steps x workers x 4), one process per
+    worker, all at once, no pipes: aggregate steps/s from the first step on, as the vector env is timed.
+    What the physics costs; the vector env and training are measured against it."""
+    _, outputs = _raw_runs(cfg, workdir, actions)
+    stepping = [float(line.split()[1]) for out in outputs for line in out.splitlines() if line.startswith("stepping_s")]
+    return sum(len(actions) / s for s in stepping)
 
 
 def _cpu_seconds() -> float:
@@ -263,12 +288,21 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
         results["env_steps_per_s"] = statistics.median(e["steps_per_s"] for e in envs)
         results["env_over_raw"] = statistics.median(e["seconds"] / r for e, r in zip(envs, raw, strict=True))
         results["first_obs_s"] = statistics.median(e["first_obs_s"] for e in envs)
-        one, many, lockstep, alone = [], [], [], []
+        one, many, lockstep, alone, phys_1, phys_n = [], [], [], [], [], []
         for i in range(cfg.repeats):
+            # What the physics costs under the same exploring actions, beside what we make of it.
+            phys_1.append(raw_rate(cfg, tmp / f"p1_{i}", _exploring_actions(cfg, 1)))
+            phys_n.append(raw_rate(cfg, tmp / f"pN_{i}", _exploring_actions(cfg, cfg.workers)))
             one.append(vector_rate(cfg, 1, tmp / f"v1_{i}"))
             many.append(vector_rate(cfg, cfg.workers, tmp / f"vN_{i}"))
             lockstep.append(vector_rate(cfg, cfg.workers, tmp / f"vL_{i}", pipelined=False))
             alone.append(independent_rate(cfg, tmp / f"alone_{i}"))
+        results["raw_exploring_1_steps_per_s"] = statistics.median(phys_1)
+        results["raw_exploring_n_steps_per_s"] = statistics.median(phys_n)
+        results["vector_1_over_raw"] = statistics.median(r["steps_per_s"] / p for r, p in zip(one, phys_1, strict=True))
+        results["vector_n_over_raw"] = statistics.median(
+            r["steps_per_s"] / p for r, p in zip(many, phys_n, strict=True)
+        )
         results["vector_1_steps_per_s"] = statistics.median(r["steps_per_s"] for r in one)
         results["vector_n_steps_per_s"] = statistics.median(r["steps_per_s"] for r in many)
         results["vector_1_cores_busy"] = statistics.median(r["cores_busy"] for r in one)
@@ -289,6 +323,11 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
         results["train_over_vector"] = tr["steps_per_s"] / results["vector_n_steps_per_s"]
         results["update_s"] = tr["update_s"]
         results["million_steps_minutes"] = 1e6 / tr["steps_per_s"] / 60
+        results["train_over_raw"] = tr["steps_per_s"] / results["raw_exploring_n_steps_per_s"]
+        # The floor for 1M steps here: EnergyPlus's own time under these actions, plus the updates.
+        results["million_steps_floor_minutes"] = (
+            1e6 / results["raw_exploring_n_steps_per_s"] + 1e6 / cfg.batch_size * tr["update_s"]
+        ) / 60
         results["worker_peak_rss_mb"] = worker_rss_mb
         results["learner_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if out is not None:
@@ -306,18 +345,22 @@ def format_table(r: dict) -> str:
          f"env/raw {r['env_over_raw']:.2f} (target <= 1.25)"),
         (f"raw EnergyPlus, {n} runs at once", f"{r['raw_n_s']:.2f} s",
          f"the machine's own scaling {r['raw_scaling']:.2f}"),
+        ("raw EnergyPlus, exploring actions, 1 run", f"{r['raw_exploring_1_steps_per_s']:.0f} steps/s",
+         "the physics alone, start-up excluded"),
+        (f"raw EnergyPlus, exploring actions, {n} at once", f"{r['raw_exploring_n_steps_per_s']:.0f} steps/s", ""),
         ("vector env, 1 worker", f"{r['vector_1_steps_per_s']:.0f} steps/s",
-         f"{r['vector_1_cores_busy']:.2f} cores busy"),
+         f"{r['vector_1_over_raw']:.2f} of raw; {r['vector_1_cores_busy']:.2f} cores busy"),
         (f"vector env, {n} workers, pipelined", f"{r['vector_n_steps_per_s']:.0f} steps/s",
-         f"scaling {r['scaling_efficiency']:.2f} (target >= 0.90); {r['vector_n_cores_busy']:.2f} cores busy"),
+         f"scaling {r['scaling_efficiency']:.2f} (target >= 0.90); {r['vector_n_over_raw']:.2f} of raw"),
         (f"vector env, {n} workers, lockstep", f"{r['lockstep_n_steps_per_s']:.0f} steps/s",
          f"scaling {r['lockstep_scaling']:.2f}"),
         (f"{n} workers stepped alone, at once", f"{r['independent_n_steps_per_s']:.0f} steps/s",
          f"scaling {r['independent_scaling']:.2f}: the ceiling without lockstep or learner"),
         (f"TRPO learn, {n} workers", f"{r['train_steps_per_s']:.0f} steps/s",
-         f"train/vector {r['train_over_vector']:.2f} (target >= 0.75)"),
+         f"train/vector {r['train_over_vector']:.2f} (target >= 0.75); {r['train_over_raw']:.2f} of raw"),
         ("TRPO update of one 16k batch", f"{r['update_s']:.2f} s", ""),
-        ("1M TRPO steps", f"{r['million_steps_minutes']:.1f} min", "target <= 15 min"),
+        ("1M TRPO steps", f"{r['million_steps_minutes']:.1f} min",
+         f"target <= 15 min; EnergyPlus's own time and the updates: {r['million_steps_floor_minutes']:.1f} min"),
         ("time to first observation", f"{r['first_obs_s']:.2f} s", "target <= 2 s"),
         ("peak RSS: EnergyPlus worker / learner", f"{r['worker_peak_rss_mb']:.0f} / {r['learner_peak_rss_mb']:.0f} MB",
          "worker target <= 300 MB"),

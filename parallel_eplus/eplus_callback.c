@@ -45,6 +45,9 @@ static struct {
     int n_actions;
     double action[MAX_VALUES];
     long step, steps;
+    const double *replay; /* raw runs only: one action row per step, applied as the env's would be */
+    long replay_rows, replayed;
+    double done_at;
     int minutes;
     double spin_s;
     unsigned char buf[4 + 8 * MAX_VALUES + 4096];
@@ -158,12 +161,21 @@ void *bridge_observe(State state) {
     b.step++;
     if (b.step >= b.steps) {
         b.done = 1;
-        if (b.obs_fd >= 0 && write_frame(CODE_END, values, n) < 0)
+        b.done_at = now_s();
+        if (b.obs_fd < 0) /* raw: the rest of the day would run under the last action; nobody wants it */
+            b.api.stop(state);
+        else if (write_frame(CODE_END, values, n) < 0)
             fail(state, "cannot write the last observation");
         return NULL;
     }
-    if (b.obs_fd < 0) /* raw: EnergyPlus alone, the initial action held */
+    if (b.obs_fd < 0) { /* raw: EnergyPlus alone, the initial action held or the replay's next row */
+        if (b.replayed < b.replay_rows) {
+            memcpy(b.action, b.replay + b.replayed * b.n_actions, sizeof(double) * (size_t)b.n_actions);
+            b.replayed++;
+            b.pending = 1;
+        }
         return NULL;
+    }
     if (write_frame(0, values, n) < 0) {
         fail(state, "cannot write an observation: the env is gone");
         return NULL;
@@ -185,7 +197,8 @@ void bridge_init(state_fn slow_apply, state_fn slow_observe, get_fn get_variable
 /* Take over from Python after its first exchange: from here on every call stays in C. */
 int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_actuators,
                const int *actuators, const int *actuator_action, int n_actions, const double *action,
-               int pending, long step, long steps, int minutes, double spin_s) {
+               int pending, long step, long steps, int minutes, double spin_s, const double *replay,
+               long replay_rows, long replayed) {
     if (n_sensors > MAX_VALUES || n_actuators > MAX_VALUES || n_actions > MAX_VALUES)
         return -1;
     b.obs_fd = obs_fd;
@@ -202,11 +215,15 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
     b.steps = steps;
     b.minutes = minutes;
     b.spin_s = spin_s;
+    b.replay = replay;
+    b.replay_rows = replay_rows;
+    b.replayed = replayed;
     b.armed = 1;
     return 0;
 }
 
 long bridge_step(void) { return b.step; }
 int bridge_done(void) { return b.done; }
+double bridge_done_at(void) { return b.done_at; }
 int bridge_armed(void) { return b.armed; }
 const char *bridge_error(void) { return b.error; }

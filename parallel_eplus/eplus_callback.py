@@ -14,6 +14,9 @@ AfterPredictorAfterHVACManagers runs at every HVAC sub-timestep; actuators keep 
 action is written once per zone timestep. Frame values: year, day of year, hour, minute (when the
 observation was taken; EnergyPlus's own clock at this point is the last sub-timestep's), then the sensors.
 
+Without pipes it runs EnergyPlus alone for benchmarks (bench.py): `--replay A.npy` applies one action
+row per step where the env's actions would land, stops after `--steps`, and prints the stepping time.
+
 With `--native LIB` (native.py) the callbacks EnergyPlus calls are C (eplus_callback.c): they hand each
 call to this Bridge until its first exchange is done, then the Bridge arms them and every later step
 stays in C. Without it, this Bridge does every step.
@@ -26,7 +29,10 @@ import contextlib
 import ctypes
 import os
 import sys
+import time
 import traceback
+
+import numpy as np
 
 from . import pipe
 from .model import SENSORS, control_model
@@ -46,8 +52,10 @@ class Bridge:
         steps: int,
         initial: list[float],
         spin_s: float = 0.0,
+        replay: np.ndarray | None = None,
     ):
-        """With no pipes (`--raw`) the initial action is held all run: EnergyPlus alone, for benchmarks."""
+        """With no pipes (`--raw`): EnergyPlus alone, for benchmarks. It holds the initial action all run,
+        or with `replay` (steps x actions, physical units) takes each step's action from it instead."""
         self.api = api
         self.x = api.exchange
         self.act_fd = act_fd
@@ -70,6 +78,11 @@ class Bridge:
         self._wait = None if act_fd is None else pipe.wait_readable(act_fd)
         self._actions = None if act_fd is None else pipe.FrameReader(act_fd)
         self.spin_s = spin_s
+        self.replay = None if replay is None else np.ascontiguousarray(replay, dtype=np.float64)
+        if self.replay is not None and (self.replay.ndim != 2 or self.replay.shape[1] != len(self.elements)):
+            raise SystemExit(f"--replay needs one row of {len(self.elements)} actions per step")
+        self.replayed = 0  # rows of `replay` applied so far
+        self.started_at = self.done_at = 0.0  # monotonic s: the run period's first exchange, the last step
         self.native: ctypes.CDLL | None = None  # the C bridge (set by `register`) until it is armed
         self._armed: ctypes.CDLL | None = None  # the C bridge once it steps EnergyPlus
 
@@ -114,6 +127,10 @@ class Bridge:
 
     def _exchange(self, values: list[float]) -> None:
         if self.raw:
+            if self.replay is not None and self.replayed < len(self.replay):
+                self.action = self.replay[self.replayed].tolist()
+                self.replayed += 1
+                self.pending = True
             return
         os.write(self.obs_fd, pipe.encode(values))
         code, action = self._actions.read(self._wait, self.spin_s)
@@ -144,6 +161,7 @@ class Bridge:
             return
         if not self.started and self._in_run_period(state):
             self.started = True
+            self.started_at = time.monotonic()
             self._exchange(self._time(state, at_start=True) + self.last_obs)
         if self.pending:
             self.pending = False
@@ -161,11 +179,13 @@ class Bridge:
         ints = lambda xs: (ctypes.c_int * len(xs))(*xs)  # noqa: E731
         handles = [h for h, _ in self.actuator_handles]
         indices = [i for _, i in self.actuator_handles]
+        replay = self.replay if self.replay is not None else np.zeros((0, len(self.action)))
         status = self.native.bridge_arm(
             -1 if self.raw else self.obs_fd, -1 if self.raw else self.act_fd,
             len(self.sensor_handles), ints(self.sensor_handles), len(handles), ints(handles), ints(indices),
             len(self.action), (ctypes.c_double * len(self.action))(*self.action), int(self.pending),
             self.step, self.steps, self.minutes, self.spin_s,
+            replay.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(replay), self.replayed,
         )  # fmt: skip
         if status != 0:
             raise RuntimeError("the C bridge refused the model's sensors or actuators (too many)")
@@ -176,7 +196,7 @@ class Bridge:
         lib = self._armed
         if lib is None:
             return
-        self.step, self.done = lib.bridge_step(), bool(lib.bridge_done())
+        self.step, self.done, self.done_at = lib.bridge_step(), bool(lib.bridge_done()), lib.bridge_done_at()
         message = lib.bridge_error()
         if message and self.error is None:
             self.error = RuntimeError(message.decode())
@@ -193,16 +213,19 @@ class Bridge:
         self.step += 1
         values = self._time(state) + sensors
         if self.step >= self.steps:
-            if not self.raw:
+            if self.raw:  # the rest of the day would run under the last action; nobody wants it
+                self.api.runtime.stop_simulation(state)
+            else:
                 os.write(self.obs_fd, pipe.encode(values, pipe.END))
             self.done = True
+            self.done_at = time.monotonic()
             return
         self._exchange(values)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description="Run one EnergyPlus simulation driven over named pipes.")
-    p.add_argument("--act-pipe", help="omit both pipes to hold the initial action with no exchange (--raw)")
+    p.add_argument("--act-pipe", help="omit both pipes to run EnergyPlus alone (raw, for benchmarks)")
     p.add_argument("--obs-pipe")
     p.add_argument("--idf", required=True)
     p.add_argument("--epw", required=True)
@@ -212,6 +235,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--initial-action", type=float, nargs="*", default=[])
     p.add_argument("--spin-us", type=float, default=0.0, help="poll this long for an action before blocking")
     p.add_argument("--native", help="the compiled C bridge (native.py) to run each step in; default: Python")
+    p.add_argument("--replay", help="without pipes: a .npy of one action row per step (physical units) to apply")
     return p.parse_args(argv)
 
 
@@ -231,8 +255,10 @@ def register(api, state, bridge: Bridge, native: str | None) -> list:
         ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.c_int,
         ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int), ctypes.c_int,
         ctypes.POINTER(ctypes.c_double), ctypes.c_int, ctypes.c_long, ctypes.c_long, ctypes.c_int, ctypes.c_double,
+        ctypes.POINTER(ctypes.c_double), ctypes.c_long, ctypes.c_long,
     ]  # fmt: skip
     lib.bridge_step.restype = ctypes.c_long
+    lib.bridge_done_at.restype = ctypes.c_double
     lib.bridge_error.restype = ctypes.c_char_p
     callback = rt.py_state_callback_type  # void *(*)(void *state), as EnergyPlus calls it
     slow = [callback(bridge.apply_action), callback(bridge.observe)]
@@ -266,7 +292,8 @@ def main(argv: list[str] | None = None) -> int:
         api = EnergyPlusAPI()
         state = api.state_manager.new_state()
         api.runtime.set_console_output_status(state, False)
-        bridge = Bridge(api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6)
+        replay = np.load(args.replay) if args.replay else None
+        bridge = Bridge(api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay)
         keep = register(api, state, bridge, args.native)
         status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])
         bridge.collect()
@@ -282,6 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     if not bridge.done:
         print(f"simulation ended after {bridge.step} of {args.steps} steps", file=sys.stderr)
         return fail(-3.0)
+    if bridge.raw:  # for benchmarks: the time its steps took, start-up excluded, as the vector env is timed
+        print(f"stepping_s {bridge.done_at - bridge.started_at:.6f}")
     return 0
 
 

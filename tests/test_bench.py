@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+import pandas as pd
 import pytest
 
-from parallel_eplus.bench import BenchConfig, format_table, run
+from parallel_eplus.bench import BenchConfig, _physical, format_table, raw_rate, run
+from parallel_eplus.episode import read_steps
+from parallel_eplus.model import ACTIONS
+from parallel_eplus.simulation import Simulation, SimulationConfig
 
 
 def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
@@ -29,6 +34,39 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     assert results["independent_scaling"] == pytest.approx(
         results["independent_n_steps_per_s"] / (2 * results["vector_1_steps_per_s"])
     )
+    for n in ("1", "n"):
+        assert results[f"vector_{n}_over_raw"] > 0 and results[f"raw_exploring_{n}_steps_per_s"] > 0
+    assert results["million_steps_floor_minutes"] > 0
     assert results["update_s"] > 0 and results["train_steps_per_s"] > 0
     table = format_table(results)
     assert "2 runs at once" in table and "cores busy" in table and "stepped alone" in table and "lockstep" in table
+
+
+@pytest.mark.parametrize("bridge", ["c", "python"])
+def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, bridge, monkeypatch):
+    """The floor the benchmark measures against: replaying an env run's actions in raw EnergyPlus gives
+    the very same simulation, timestep by timestep (so raw and env do the same work)."""
+    from parallel_eplus import native
+
+    if bridge == "python":
+        monkeypatch.setattr(native, "bridge_library", lambda: None)
+    elif native.bridge_library() is None:
+        pytest.skip("no C compiler")
+    actions = np.clip(np.random.default_rng(5).normal(size=(96, 1, 4)), -1, 1)
+    sim = Simulation(SimulationConfig(run_days=1, output_dir=str(tmp_path / "env")))
+    try:
+        sim.start()
+        for a in actions[:, 0]:
+            sim.send(a)
+            sim.receive()
+        env_dir = sim.episode_dir
+    finally:
+        sim.close()
+    steps = read_steps(env_dir)
+    sent = steps[[e.name for e in ACTIONS]].to_numpy()
+    np.testing.assert_allclose(sent, [_physical(a) for a in actions[:, 0]])
+    assert raw_rate(BenchConfig(), tmp_path / "raw", actions) > 0
+    env_out = pd.read_csv(env_dir / "eplusout.csv")
+    raw_out = pd.read_csv(tmp_path / "raw" / "copy0" / "eplusout.csv")
+    assert len(env_out) == 96 and env_out["Date/Time"].equals(raw_out["Date/Time"])
+    pd.testing.assert_frame_equal(raw_out, env_out)
