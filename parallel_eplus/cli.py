@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -149,8 +150,17 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from .bench import BenchConfig, format_table, run
+    from .bench import BenchConfig, format_table, replay_run, run
 
+    if args.replay_run:
+        with tempfile.TemporaryDirectory(prefix="parallel-eplus-replay-") as tmp:
+            r = replay_run(args.replay_run, args.workers, Path(tmp))
+        print(
+            f"{args.replay_run}: {r['episodes']} episodes, {r['steps']:.0f} steps. EnergyPlus alone under the same "
+            f"actions, {args.workers} at a time: {r['raw_wall_s'] / 60:.1f} min ({r['raw_steps_per_s']:.0f} steps/s), "
+            "start-ups included; the run's own rate is TensorBoard's time/fps."
+        )
+        return 0
     cfg = BenchConfig(
         weather=args.weather, raw_days=args.days, vector_steps=args.vector_steps, train_steps=args.train_steps,
         workers=args.workers, repeats=args.repeats,
@@ -258,6 +268,10 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     be.add_argument("--repeats", type=int, default=3, help="repetitions; medians are reported")
     be.add_argument("--out", type=Path, default=Path("results") / "bench.json")
+    be.add_argument(
+        "--replay-run", type=Path, metavar="RUN_DIR",
+        help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",
+    )  # fmt: skip
     be.set_defaults(func=cmd_bench)
 
     pl = sub.add_parser("plot", help="RUN_DIR: training convergence; EPISODE_DIR: one episode's time series")

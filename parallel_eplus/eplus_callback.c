@@ -22,22 +22,27 @@
 #define TIME_FIELDS 4
 #define CODE_END (-1)
 
+#if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "frames are little-endian (pipe.py); this bridge writes them in host order"
+#endif
+
 typedef void *State;
-typedef void *(*state_fn)(State);
+typedef void *(*callback_fn)(State); /* as pyenergyplus declares callbacks: void *(*)(void *) */
 typedef int (*int_fn)(State);
 typedef double (*get_fn)(State, int);
-typedef void *(*set_fn)(State, int, double);
+typedef void (*set_fn)(State, int, double);
+typedef void (*stop_fn)(State);
 
 struct api {
     get_fn get_variable;
     set_fn set_actuator;
     int_fn year, day_of_year, hour, zone_timestep;
-    state_fn stop;
+    stop_fn stop;
 };
 
 static struct {
     int armed, done, pending;
-    state_fn slow_apply, slow_observe; /* the Python Bridge's callbacks, until armed */
+    callback_fn slow_apply, slow_observe; /* the Python Bridge's callbacks, until armed */
     struct api api;
     int obs_fd, act_fd;
     int n_sensors, sensors[MAX_VALUES];
@@ -112,7 +117,7 @@ static int read_action(State state) {
         if (r > 0) {
             b.got += (size_t)r;
         } else if (r == 0) {
-            fail(state, "action pipe closed mid-frame");
+            fail(state, "the env closed the action pipe");
             return -1;
         } else if (errno == EAGAIN) {
             double t = now_s();
@@ -186,8 +191,8 @@ void *bridge_observe(State state) {
 }
 
 /* Before the run: where to hand calls until armed, and the API functions to use once armed. */
-void bridge_init(state_fn slow_apply, state_fn slow_observe, get_fn get_variable, set_fn set_actuator,
-                 int_fn year, int_fn day_of_year, int_fn hour, int_fn zone_timestep, state_fn stop) {
+void bridge_init(callback_fn slow_apply, callback_fn slow_observe, get_fn get_variable, set_fn set_actuator,
+                 int_fn year, int_fn day_of_year, int_fn hour, int_fn zone_timestep, stop_fn stop) {
     memset(&b, 0, sizeof b);
     b.slow_apply = slow_apply;
     b.slow_observe = slow_observe;
@@ -201,6 +206,9 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
                long replay_rows, long replayed) {
     if (n_sensors > MAX_VALUES || n_actuators > MAX_VALUES || n_actions > MAX_VALUES)
         return -1;
+    for (int i = 0; i < n_actuators; i++)
+        if (actuator_action[i] < 0 || actuator_action[i] >= n_actions)
+            return -1;
     b.obs_fd = obs_fd;
     b.act_fd = act_fd;
     b.n_sensors = n_sensors;

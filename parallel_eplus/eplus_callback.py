@@ -188,7 +188,7 @@ class Bridge:
             replay.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(replay), self.replayed,
         )  # fmt: skip
         if status != 0:
-            raise RuntimeError("the C bridge refused the model's sensors or actuators (too many)")
+            raise RuntimeError("the C bridge refused the model's sensors or actuators (too many, or unmapped)")
         self.native, self._armed = None, self.native
 
     def collect(self) -> None:

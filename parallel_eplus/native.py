@@ -2,18 +2,21 @@
 
 Why C: once a run is under way, every control step costs EnergyPlus two Python callbacks (plus one per
 HVAC sub-timestep), ten actuator writes and a pipe exchange; in C the step's own cost falls from tens
-of microseconds to a few. Where no C compiler works the Python bridge does the same exchange (slower),
-and a warning says so once.
+of microseconds to a few. Where the bridge cannot be built or loaded, the Python bridge does the same
+exchange (slower), and a warning says so once.
 """
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import hashlib
 import logging
 import os
 import platform
+import shlex
 import shutil
+import stat
 import subprocess
 import tempfile
 from pathlib import Path
@@ -21,39 +24,63 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("eplus_callback.c")
+FLAGS = ["-O2", "-shared", "-fPIC"]
 
 
-def _cache_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "parallel-eplus"
+def _cache_dirs() -> list[Path]:
+    """The user's cache, then a private directory under /tmp (for a read-only or missing home)."""
+    dirs = []
+    base = os.environ.get("XDG_CACHE_HOME") or (os.environ.get("HOME") and Path(os.environ["HOME"]) / ".cache")
+    if base:
+        dirs.append(Path(base) / "parallel-eplus")
+    dirs.append(Path(tempfile.gettempdir()) / f"parallel_eplus_native_{os.getuid()}")
+    return dirs
+
+
+def _ours(directory: Path) -> bool:
+    """Only a directory this user owns and nobody else can write to may hold a library we load."""
+    st = directory.stat()
+    return st.st_uid == os.getuid() and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+
+
+def _loads(lib: Path) -> bool:
+    try:
+        ctypes.CDLL(str(lib))  # what the EnergyPlus process will do: fail here, not in every episode
+        return True
+    except OSError as e:
+        log.warning("the C bridge %s does not load (%s)", lib, e)
+        return False
 
 
 @functools.cache
 def bridge_library() -> str | None:
-    """Path of the compiled bridge, or None (warned once) if it cannot be built here."""
-    source = SOURCE.read_bytes()
-    tag = hashlib.sha256(source + platform.machine().encode()).hexdigest()[:16]
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    for cache in (_cache_dir(), Path(tempfile.gettempdir()) / f"parallel_eplus_native_{os.getuid()}"):
+    """Path of the compiled bridge, or None (warned once) if it cannot be built or loaded here."""
+    cc = shlex.split(os.environ.get("CC", "")) or [shutil.which("cc") or shutil.which("gcc") or "cc"]
+    tag = hashlib.sha256(SOURCE.read_bytes() + " ".join([platform.machine(), *FLAGS]).encode()).hexdigest()[:16]
+    for cache in _cache_dirs():
         lib = cache / f"eplus_callback-{tag}.so"
-        if lib.is_file():
-            return str(lib)
-        if cc is None:
-            break
         try:
-            cache.mkdir(parents=True, exist_ok=True)
-            tmp = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
-            subprocess.run(
-                [cc, "-O2", "-shared", "-fPIC", "-o", str(tmp), str(SOURCE)],
-                check=True, capture_output=True, text=True, timeout=120,
-            )  # fmt: skip
-            os.replace(tmp, lib)  # atomic: workers compiling at once each install a whole library
-            return str(lib)
+            cache.mkdir(mode=0o700, parents=True, exist_ok=True)
+            if not _ours(cache):
+                continue
+            if not lib.is_file():
+                if not os.access(cache, os.W_OK):
+                    continue
+                tmp = lib.with_name(f"{lib.name}.{os.getpid()}.tmp")
+                subprocess.run(
+                    [*cc, *FLAGS, "-o", str(tmp), str(SOURCE)], check=True, capture_output=True, text=True, timeout=120
+                )
+                os.replace(tmp, lib)  # atomic: processes compiling at once each install a whole library
         except PermissionError:
-            continue  # a read-only home: try the temporary directory
+            continue  # a read-only cache: try the next place
+        except FileNotFoundError:
+            log.warning("no C compiler found (set CC); the Python bridge steps EnergyPlus instead (slower per step)")
+            return None
         except (OSError, subprocess.SubprocessError) as e:
-            detail = getattr(e, "stderr", "") or e
+            detail = (getattr(e, "stderr", "") or str(e)).strip()
             log.warning("the C bridge did not compile (%s); the Python bridge steps EnergyPlus instead", detail)
             return None
-    log.warning("no C compiler found (set CC); the Python bridge steps EnergyPlus instead (slower per step)")
+        if _loads(lib):
+            return str(lib)
+    log.warning("the C bridge cannot be built or loaded here; the Python bridge steps EnergyPlus instead")
     return None

@@ -87,6 +87,12 @@ class RayVectorEnv:
         import ray
 
         wanted = set(indices)
+        # A rollout stopped midway leaves steps in flight: each actor finishes its step before it
+        # restarts (its calls run in order), and those answers belong to the episodes being replaced.
+        if wanted >= set(range(self.num_envs)):
+            self._in_flight.clear()
+            self._answers.clear()
+            self._staged = [0] * len(self.actors)
         calls = []
         for actor, sl in zip(self.actors, self.slices, strict=True):
             local = [i - sl.start for i in range(sl.start, sl.stop) if i in wanted]

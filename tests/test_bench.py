@@ -70,3 +70,22 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
     raw_out = pd.read_csv(tmp_path / "raw" / "copy0" / "eplusout.csv")
     assert len(env_out) == 96 and env_out["Date/Time"].equals(raw_out["Date/Time"])
     pd.testing.assert_frame_equal(raw_out, env_out)
+
+
+def test_a_training_run_replays_in_raw_energyplus(tmp_path, no_leaks):
+    """`bench --replay-run`: every step a run took, with its own model and weather, minus pipes and learner."""
+    from parallel_eplus.bench import replay_run
+    from parallel_eplus.train import TrainConfig, train
+
+    cfg = TrainConfig(
+        workers=2, weathers=["CA", "FL"], run_days=1, timesteps=256, batch_size=128, run_name="r",
+        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"), keep_episodes=10,
+    )  # fmt: skip
+    train(cfg, progress=False)
+    r = replay_run(tmp_path / "runs" / "r", 2, tmp_path / "replay", progress=False)
+    # 128 steps per worker: one whole day (96) and 32 steps of the next, on each worker's weather.
+    assert r["episodes"] == 4 and r["steps"] == 256 and r["raw_steps_per_s"] > 0
+    cut = TrainConfig(**{**cfg.__dict__, "run_name": "cut", "keep_episodes": 0})
+    train(cut, progress=False)
+    with pytest.raises(ValueError, match="--keep-episodes"):
+        replay_run(tmp_path / "runs" / "cut", 2, tmp_path / "replay2", progress=False)
