@@ -116,13 +116,11 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
 
 def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray) -> list[RawJob]:
     """One job per column of `replays` (steps x copies x actions, normalized) on the bench's weather."""
-    jobs = []
-    for i in range(replays.shape[1]):
-        idf = workdir / f"model{i}.idf"
-        workdir.mkdir(parents=True, exist_ok=True)
-        write_episode_idf(AGENT_IDF, idf, -(-len(replays) // STEPS_PER_DAY))
-        jobs.append(RawJob(idf, resolve_weather(cfg.weather), np.array([_physical(a) for a in replays[:, i]])))
-    return jobs
+    workdir.mkdir(parents=True, exist_ok=True)
+    idf = workdir / MODEL_FILE  # one model file for all: each run writes its outputs in its own directory
+    write_episode_idf(AGENT_IDF, idf, -(-len(replays) // STEPS_PER_DAY))
+    epw = resolve_weather(cfg.weather)
+    return [RawJob(idf, epw, np.array([_physical(a) for a in replays[:, i]])) for i in range(replays.shape[1])]
 
 
 def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
@@ -131,7 +129,7 @@ def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
     With `copies` > 1, that many identical runs at once, until the last exits: what the machine itself
     gives N EnergyPlus processes, the ceiling for the vector env's scaling.
     """
-    constant = np.full((cfg.raw_days * STEPS_PER_DAY, copies, 4), cfg.action)
+    constant = np.full((cfg.raw_days * STEPS_PER_DAY, copies, len(control_model("temp_fan").actions)), cfg.action)
     return _raw_runs(_bench_jobs(cfg, workdir, constant), workdir)[0]
 
 
