@@ -161,7 +161,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         residual_space=cfg.residual_space,
         rbc_target_c=cfg.rbc_target_c,
     )
-    shares = weather_shares(cfg.weathers, cfg.workers)
+    shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
         from .ray_backend import RayVectorEnv
 
@@ -170,6 +170,22 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
     else:
         venv = EnergyPlusVectorEnv(sim, shares, max_restarts=cfg.max_restarts)
     return SB3VecEnv(venv)
+
+
+def _episodes_done(episodes_csv: Path, workers: int) -> list[int]:
+    """Finished episodes per worker so far (a resumed run continues each worker's weather cycle)."""
+    if not episodes_csv.is_file():
+        return [0] * workers
+    counts = pd.read_csv(episodes_csv, usecols=["worker"])["worker"].value_counts()
+    return [int(counts.get(i, 0)) for i in range(workers)]
+
+
+def episodes_per_weather(episodes_csv: Path) -> dict[str, int]:
+    """The run's finished episodes by weather, from its episodes.csv."""
+    if not episodes_csv.is_file():
+        return {}
+    counts = pd.read_csv(episodes_csv, usecols=["weather"])["weather"].value_counts().sort_index()
+    return {str(k): int(v) for k, v in counts.items()}
 
 
 class EpisodeMetrics(BaseCallback):
@@ -195,6 +211,7 @@ class EpisodeMetrics(BaseCallback):
         self.episodes_csv = episodes_csv
         self.progress = progress
         self.episodes = 0
+        self.per_weather = episodes_per_weather(episodes_csv)  # a resumed run counts on from its earlier episodes
         self._t0 = time.monotonic()
         self._steps0 = 0
 
@@ -214,6 +231,7 @@ class EpisodeMetrics(BaseCallback):
     def _record(self, summary: dict, episode_return: float | None) -> None:
         self.episodes += 1
         weather = summary.get("weather", "?")
+        self.per_weather[weather] = self.per_weather.get(weather, 0) + 1
         for key, tag in self.KEYS.items():
             if key in summary:
                 self.logger.record_mean(f"episode/{weather}/{tag}", summary[key])
@@ -231,6 +249,8 @@ class EpisodeMetrics(BaseCallback):
             self.logger.record("throughput/env_steps_per_s", rate)
             self.logger.record("throughput/sim_years_per_hour", rate * 3600 / STEPS_PER_YEAR)
         self.logger.record("throughput/episodes", self.episodes)
+        for weather, count in self.per_weather.items():
+            self.logger.record(f"episodes/{weather}", count)
 
 
 def _latest_checkpoint(path: Path) -> Path:
@@ -362,6 +382,9 @@ def train(
         final = run_dir / MODEL_FILE
         model.save(final)
         env.save(str(run_dir / NORMALIZE_FILE))
+        counts = episodes_per_weather(run_dir / "episodes.csv")
+        log.info("%s: %d steps; episodes per weather: %s", cfg.run_name, model.num_timesteps,
+                 ", ".join(f"{w} {n}" for w, n in counts.items()) or "none finished")  # fmt: skip
         return final
     finally:
         if bar is not None:

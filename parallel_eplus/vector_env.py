@@ -29,11 +29,15 @@ from .simulation import Simulation, SimulationConfig, wait_any
 log = logging.getLogger(__name__)
 
 
-def weather_shares(weathers: list[str], num_workers: int) -> list[list[str]]:
-    """Worker i starts on weathers[i % len]; with more weathers than workers each cycles its share."""
-    if len(weathers) <= num_workers:
-        return [[weathers[i % len(weathers)]] for i in range(num_workers)]
-    return [weathers[i::num_workers] for i in range(num_workers)]
+def weather_shares(weathers: list[str], num_workers: int, done: list[int] | None = None) -> list[list[str]]:
+    """Every worker cycles through all the weathers, worker i starting i places along, so each weather
+    gets an equal share of episodes whatever the worker count (the paper alternates them evenly).
+
+    `done[i]`: episodes worker i already finished (a resumed run), so its cycle continues where it was.
+    """
+    k = len(weathers)
+    starts = [(i + (done[i] if done else 0)) % k for i in range(num_workers)]
+    return [weathers[s:] + weathers[:s] for s in starts]
 
 
 class EnergyPlusVectorEnv(gym.vector.VectorEnv):

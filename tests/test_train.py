@@ -10,12 +10,20 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import torch as th
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from parallel_eplus.reward import RewardConfig
-from parallel_eplus.train import TrainConfig, _latest_checkpoint, _saved_policy, load_policy, train
+from parallel_eplus.train import (
+    TrainConfig,
+    _latest_checkpoint,
+    _saved_policy,
+    episodes_per_weather,
+    load_policy,
+    train,
+)
 
 from .conftest import our_pipe_dirs, our_processes
 
@@ -43,7 +51,7 @@ def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path
     assert (run / "config.json").is_file() and (run / "episodes.csv").is_file()
     assert sorted((run / "checkpoints").glob("model_*_steps.zip"))
     tags = scalars(tmp_path / "tb" / "short")
-    for weather in ("CA", "CO", "FL"):  # worker 0 cycles CA, FL; worker 1 runs CO
+    for weather in ("CA", "CO", "FL"):  # worker 0 cycles CA, CO, FL; worker 1 CO, FL, CA
         for metric in ("power_kw", "it_power_kw", "hvac_power_kw", "west_temp_mean", "in_22_25_pct", "return"):
             assert f"episode/{weather}/{metric}" in tags, (weather, metric)
     assert "throughput/env_steps_per_s" in tags and "train/value_loss" in tags
@@ -53,6 +61,19 @@ def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path
     a1, a2 = act(obs), act(obs)
     np.testing.assert_array_equal(a1, a2)
     assert a1.shape == (1, 4) and np.all(np.abs(a1) <= 1)
+
+
+def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cycle(tmp_path, no_leaks):
+    cfg = small_config(tmp_path, "fair", run_days=1, timesteps=576, batch_size=576)  # 3 one-day episodes per worker
+    train(cfg, progress=False)
+    csv = tmp_path / "runs" / "fair" / "episodes.csv"
+    assert episodes_per_weather(csv) == {"CA": 2, "CO": 2, "FL": 2}
+    tags = scalars(tmp_path / "tb" / "fair")
+    assert [e.value for e in tags["episodes/CO"]][-1] == 2
+    train(small_config(tmp_path, "fair", run_days=1, timesteps=1152, batch_size=576), resume=tmp_path / "runs" / "fair")
+    assert episodes_per_weather(csv) == {"CA": 4, "CO": 4, "FL": 4}
+    order = pd.read_csv(csv).groupby("worker")["weather"].apply(list).to_dict()
+    assert order == {0: ["CA", "CO", "FL"] * 2, 1: ["CO", "FL", "CA"] * 2}
 
 
 def test_ray_backend_trains_locally(tmp_path, no_leaks):

@@ -15,10 +15,19 @@ from parallel_eplus.simulation import SimulationConfig
 from parallel_eplus.vector_env import EnergyPlusVectorEnv, weather_shares
 
 
-def test_weather_shares():
+def test_weather_shares_give_every_weather_an_equal_share_of_episodes():
     assert weather_shares(["CA"], 2) == [["CA"], ["CA"]]
-    assert weather_shares(["CA", "CO", "FL"], 2) == [["CA", "FL"], ["CO"]]
-    assert weather_shares(["CA", "CO"], 3) == [["CA"], ["CO"], ["CA"]]
+    assert weather_shares(["CA", "CO", "FL"], 2) == [["CA", "CO", "FL"], ["CO", "FL", "CA"]]
+    assert weather_shares(["CA", "CO"], 3) == [["CA", "CO"], ["CO", "CA"], ["CA", "CO"]]
+    # A resumed run continues each worker's cycle where it stopped.
+    assert weather_shares(["CA", "CO", "FL"], 2, done=[4, 1]) == [["CO", "FL", "CA"], ["FL", "CA", "CO"]]
+    for workers in (1, 2, 4, 5):
+        for cycles in (1, 2):
+            shares = weather_shares(["CA", "CO", "FL"], workers)
+            episodes = [s[e % 3] for s in shares for e in range(3 * cycles)]
+            assert {w: episodes.count(w) for w in ("CA", "CO", "FL")} == dict.fromkeys(
+                ("CA", "CO", "FL"), workers * cycles
+            )
 
 
 def test_vector_env_autoresets_and_cycles_weathers(tmp_path, no_leaks):
