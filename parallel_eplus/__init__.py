@@ -1,7 +1,7 @@
 """Reinforcement-learning control of a data center's cooling against parallel EnergyPlus simulations.
 
 Importing the package registers `parallel_eplus/DataCenter-v0`; everything else loads on first use,
-so the EnergyPlus-side process (which imports `parallel_eplus.model`) stays small and starts fast.
+so the EnergyPlus-side process (which imports `parallel_eplus.buildings.model`) stays small and starts fast.
 """
 
 from gymnasium.envs.registration import register, registry
@@ -9,13 +9,13 @@ from gymnasium.envs.registration import register, registry
 ENV_ID = "parallel_eplus/DataCenter-v0"
 
 if ENV_ID not in registry:
-    register(id=ENV_ID, entry_point="parallel_eplus.env:EnergyPlusEnv", disable_env_checker=True)
+    register(id=ENV_ID, entry_point="parallel_eplus.envs.env:EnergyPlusEnv", disable_env_checker=True)
 
 _LAZY = {
-    "EnergyPlusEnv": "env",
+    "EnergyPlusEnv": "envs.env",
     "EnergyPlusError": "errors",
     "ProtocolError": "errors",
-    "RewardConfig": "reward",
+    "RewardConfig": "buildings.reward",
 }
 
 

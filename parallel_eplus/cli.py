@@ -35,7 +35,7 @@ def _format_summary(summary: dict) -> str:
 def cmd_simulate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from .env import EnergyPlusEnv
+    from parallel_eplus.envs.env import EnergyPlusEnv
 
     env = EnergyPlusEnv(
         weather=args.weather,
@@ -66,9 +66,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from .reward import RewardConfig
-    from .train import TrainConfig, TRPOSettings, train
-    from .weather import parse_weathers
+    from parallel_eplus.buildings.reward import RewardConfig
+    from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.training.config import TrainConfig, TRPOSettings
+    from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
         workers=args.workers,
@@ -117,9 +118,16 @@ def _temperatures(text: str, flag: str) -> list[float]:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from .evaluate import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller, run_sweep, write_results
-    from .reward import RewardConfig
-    from .weather import parse_weathers
+    from parallel_eplus.buildings.reward import RewardConfig
+    from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.evaluation.sweep import (
+        BASELINE_LABEL,
+        RBC_LABEL,
+        Controller,
+        policy_controller,
+        run_sweep,
+        write_results,
+    )
 
     weathers = parse_weathers(args.weathers)  # bad input fails here, before anything runs
     controllers = []
@@ -143,14 +151,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from .plots import plot_path
+    from parallel_eplus.evaluation.plots import plot_path
 
     print(f"written: {plot_path(args.path)}")
     return 0
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from .bench import BenchConfig, format_table, replay_run, run
+    from parallel_eplus.evaluation.bench import BenchConfig, format_table, replay_run, run
 
     if args.replay_run:
         with tempfile.TemporaryDirectory(prefix="parallel-eplus-replay-") as tmp:
@@ -287,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
-    from .errors import EnergyPlusError, Interrupts
+    from parallel_eplus.errors import EnergyPlusError, Interrupts
 
     try:
         with Interrupts():  # every command cleans up on Ctrl-C or SIGTERM, started in the background or not

@@ -8,4 +8,4 @@ python3 -m venv .venv
 .venv/bin/pip install -q --disable-pip-version-check -e ".[dev,ray]"
 # The EnergyPlus side of each control step in C (parallel_eplus/eplus_callback.c), compiled once here;
 # without a C compiler it warns, and the Python bridge does the same work, slower.
-.venv/bin/python -c "import logging; logging.basicConfig(format='%(message)s'); from parallel_eplus import native; native.bridge_library()"
+.venv/bin/python -c "import logging; logging.basicConfig(format='%(message)s'); from parallel_eplus.engine import native; native.bridge_library()"

@@ -23,7 +23,7 @@ def _started_by_us(pid: str) -> bool:
 
 def our_processes() -> list[str]:
     """EnergyPlus-side processes this test session started that are still alive (a leak)."""
-    out = subprocess.run(["pgrep", "-af", "parallel_eplus.eplus_callback"], capture_output=True, text=True)
+    out = subprocess.run(["pgrep", "-af", "parallel_eplus.engine.eplus_callback"], capture_output=True, text=True)
     return [ln for ln in out.stdout.splitlines() if ln.strip() and _started_by_us(ln.split()[0])]
 
 

@@ -8,10 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.bench import BenchConfig, _physical, format_table, raw_rate, run
-from parallel_eplus.episode import read_steps
-from parallel_eplus.model import ACTIONS
-from parallel_eplus.simulation import Simulation, SimulationConfig
+from parallel_eplus.buildings.model import ACTIONS
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import read_steps
+from parallel_eplus.engine.simulation import Simulation
+from parallel_eplus.evaluation.bench import BenchConfig, _physical, format_table, raw_rate, run
 
 
 def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
@@ -46,7 +47,7 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
 def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, bridge, monkeypatch):
     """The floor the benchmark measures against: replaying an env run's actions in raw EnergyPlus gives
     the very same simulation, timestep by timestep (so raw and env do the same work)."""
-    from parallel_eplus import native
+    from parallel_eplus.engine import native
 
     if bridge == "python":
         monkeypatch.setattr(native, "bridge_library", lambda: None)
@@ -74,8 +75,9 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
 
 def test_a_training_run_replays_in_raw_energyplus(tmp_path, no_leaks):
     """`bench --replay-run`: every step a run took, with its own model and weather, minus pipes and learner."""
-    from parallel_eplus.bench import replay_run
-    from parallel_eplus.train import TrainConfig, train
+    from parallel_eplus.evaluation.bench import replay_run
+    from parallel_eplus.training.config import TrainConfig
+    from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
         workers=2, weathers=["CA", "FL"], run_days=1, timesteps=256, batch_size=128, run_name="r",

@@ -13,8 +13,8 @@ from gymnasium.utils.env_checker import check_env
 
 import parallel_eplus
 from parallel_eplus import EnergyPlusEnv
-from parallel_eplus.episode import read_steps
-from parallel_eplus.model import SENSOR_NAMES, STEPS_PER_DAY
+from parallel_eplus.buildings.model import SENSOR_NAMES, STEPS_PER_DAY
+from parallel_eplus.engine.episode import read_steps
 
 INFO_KEYS = {"power_w", "it_power_w", "hvac_power_w", "west_temp_c", "east_temp_c", "outdoor_temp_c", "time"}
 
@@ -201,7 +201,7 @@ def _controlled_episode(out: Path, act, **env_kwargs) -> pd.DataFrame:
 
 
 def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
-    from parallel_eplus.rbc import RBCConfig, RuleBasedController
+    from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 
     def records(name: str, residual: float, act) -> pd.DataFrame:
         return _controlled_episode(tmp_path / name, act, residual_scale=residual, rbc_target_c=23.2)
@@ -219,7 +219,7 @@ def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
 
 
 def test_demand_residual_corrects_the_controllers_flow_demand(tmp_path, no_leaks):
-    from parallel_eplus.rbc import RBCConfig, RuleBasedController
+    from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 
     cfg = RBCConfig(target_c=22.5)
     env = EnergyPlusEnv(residual_scale=1.0, residual_space="demand")
@@ -252,7 +252,7 @@ def test_demand_residual_corrects_the_controllers_flow_demand(tmp_path, no_leaks
 
 def _bridges() -> list:
     """Both EnergyPlus-side bridges; the C one only where it compiles (it does wherever CI runs)."""
-    from parallel_eplus import native
+    from parallel_eplus.engine import native
 
     c = pytest.param(True, id="c-bridge")
     if native.bridge_library() is None:
@@ -262,8 +262,9 @@ def _bridges() -> list:
 
 def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
     """The C bridge is the Python one's steady state moved to C: same actions, same physics, bit for bit."""
-    from parallel_eplus import native
-    from parallel_eplus.simulation import Simulation, SimulationConfig
+    from parallel_eplus.engine import native
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
 
     if native.bridge_library() is None:
         pytest.skip("no C compiler")
@@ -288,9 +289,10 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
 
 @pytest.mark.parametrize("use_c", _bridges())
 def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_leaks):
-    from parallel_eplus import pipe
+    from parallel_eplus.engine import pipe
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
     from parallel_eplus.errors import EnergyPlusError
-    from parallel_eplus.simulation import Simulation, SimulationConfig
 
     sim = Simulation(SimulationConfig(run_days=1, native_bridge=use_c))
     try:
@@ -306,7 +308,7 @@ def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_lea
 
 
 def test_the_c_bridge_compiles_into_a_fresh_cache_or_falls_back_with_a_warning(tmp_path, monkeypatch, caplog):
-    from parallel_eplus import native
+    from parallel_eplus.engine import native
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     native.bridge_library.cache_clear()

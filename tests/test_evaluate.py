@@ -9,9 +9,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.evaluate import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller, run_sweep, write_results
-from parallel_eplus.plots import plot_path
-from parallel_eplus.train import TrainConfig, TRPOSettings, _saved_policy, train
+from parallel_eplus.evaluation.plots import plot_path
+from parallel_eplus.evaluation.sweep import (
+    BASELINE_LABEL,
+    RBC_LABEL,
+    Controller,
+    policy_controller,
+    run_sweep,
+    write_results,
+)
+from parallel_eplus.training.config import TrainConfig, TRPOSettings
+from parallel_eplus.training.policy_files import _saved_policy
+from parallel_eplus.training.train import train
 
 
 @pytest.fixture(scope="module")

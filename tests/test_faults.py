@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from parallel_eplus import EnergyPlusEnv, EnergyPlusError
-from parallel_eplus.model import AGENT_IDF
+from parallel_eplus.buildings.model import AGENT_IDF
 
 from .conftest import our_processes
 

@@ -9,7 +9,7 @@ import struct
 import numpy as np
 import pytest
 
-from parallel_eplus import pipe
+from parallel_eplus.engine import pipe
 from parallel_eplus.errors import ProtocolError
 
 

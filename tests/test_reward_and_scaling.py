@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from parallel_eplus.model import ACTIONS
-from parallel_eplus.reward import RewardConfig, reward
-from parallel_eplus.simulation import scale_action
+from parallel_eplus.buildings.model import ACTIONS
+from parallel_eplus.buildings.reward import RewardConfig, reward
+from parallel_eplus.engine.actions import scale_action
 
 
 def test_reward_at_center_is_two_minus_power():

@@ -8,13 +8,13 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import VecNormalize
 
-from parallel_eplus.env import action_space, observation_space
-from parallel_eplus.model import STEPS_PER_DAY
-from parallel_eplus.rollout import FastTRPO, NumpyPolicy, _pipelinable
-from parallel_eplus.sb3_adapter import SB3VecEnv
-from parallel_eplus.simulation import SimulationConfig
-from parallel_eplus.train import TRPOSettings
-from parallel_eplus.vector_env import EnergyPlusVectorEnv
+from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.envs.env import action_space, observation_space
+from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
+from parallel_eplus.training.config import TRPOSettings
+from parallel_eplus.training.rollout import FastTRPO, NumpyPolicy, _pipelinable
+from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 
 def _policy(time_features: bool) -> ActorCriticPolicy:

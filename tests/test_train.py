@@ -15,15 +15,11 @@ import pytest
 import torch as th
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from parallel_eplus.reward import RewardConfig
-from parallel_eplus.train import (
-    TrainConfig,
-    _latest_checkpoint,
-    _saved_policy,
-    episodes_per_weather,
-    load_policy,
-    train,
-)
+from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.training.callbacks import episodes_per_weather
+from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.policy_files import _latest_checkpoint, _saved_policy, load_policy
+from parallel_eplus.training.train import train
 
 from .conftest import our_pipe_dirs, our_processes
 
@@ -151,7 +147,7 @@ def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
 
 
 def test_ppo_trains_the_same_way_and_its_policy_acts(tmp_path, no_leaks):
-    from parallel_eplus.evaluate import policy_controller
+    from parallel_eplus.evaluation.sweep import policy_controller
 
     final = train(small_config(tmp_path, "ppo", weathers=["CA"], timesteps=768, algorithm="ppo"), progress=False)
     assert TrainConfig.from_json((final.parent / "config.json").read_text()).algorithm == "ppo"

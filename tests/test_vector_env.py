@@ -9,10 +9,10 @@ import time
 import numpy as np
 import pytest
 
+from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError
-from parallel_eplus.model import STEPS_PER_DAY
-from parallel_eplus.simulation import SimulationConfig
-from parallel_eplus.vector_env import EnergyPlusVectorEnv, weather_shares
 
 
 def test_weather_shares_give_every_weather_an_equal_share_of_episodes():
@@ -67,7 +67,7 @@ def test_crashed_worker_restarts_its_episode_then_gives_up(tmp_path, no_leaks, c
 
 
 def test_out_of_bounds_observation_is_clipped_with_raw_value_in_info(tmp_path):
-    from parallel_eplus.simulation import Simulation
+    from parallel_eplus.engine.simulation import Simulation
 
     sim = Simulation(SimulationConfig(run_days=1, output_dir=str(tmp_path)))
     try:
@@ -101,7 +101,7 @@ def make_venv(request):
         yield EnergyPlusVectorEnv
         return
     ray = pytest.importorskip("ray")
-    from parallel_eplus.ray_backend import RayVectorEnv
+    from parallel_eplus.envs.ray_vector_env import RayVectorEnv
 
     ray.init(num_cpus=2, include_dashboard=False)
     try:

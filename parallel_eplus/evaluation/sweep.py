@@ -19,11 +19,12 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from .model import STEPS_PER_DAY
-from .rbc import RBCConfig, RuleBasedController
-from .reward import RewardConfig
-from .simulation import Simulation, SimulationConfig, wait_any
-from .weather import parse_weathers, weather_label
+from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
+from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.buildings.weather import parse_weathers, weather_label
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.simulation import Simulation, wait_any
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ class Controller:
         if self.kind == "rbc":
             target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
             return RuleBasedController(RBCConfig(**target))
-        from .train import load_policy
+        from parallel_eplus.training.policy_files import load_policy
 
         act = load_policy(self.path)
         return lambda obs, info: act(obs[None, :])[0]
@@ -68,7 +69,7 @@ def policy_controller(spec: str) -> Controller:
     path = Path(path_text)
     if path.is_dir():
         path = path / "model.zip"
-    from .train import policy_features, require_policy_files, run_dir_of
+    from parallel_eplus.training.policy_files import policy_features, require_policy_files, run_dir_of
 
     require_policy_files(path)
     config = run_dir_of(path) / "config.json"
@@ -222,7 +223,7 @@ def table_markdown(df: pd.DataFrame) -> str:
 
 def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
     """results.csv, results.md and the figures; returns the files written."""
-    from . import plots
+    from parallel_eplus.evaluation import plots
 
     out_dir.mkdir(parents=True, exist_ok=True)
     df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(out_dir / "results.csv", index=False)

@@ -32,7 +32,7 @@ from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from .sb3_adapter import SB3VecEnv
+from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 _HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .model import ROOT
+from parallel_eplus.buildings.model import ROOT
 
 WEATHER_DIR = ROOT / "weather"
 

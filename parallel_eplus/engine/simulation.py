@@ -19,23 +19,11 @@ import sys
 import tempfile
 import time
 from collections.abc import Container, Iterable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from . import native, pipe
-from .episode import (
-    MODEL_FILE,
-    StepRecorder,
-    err_tail,
-    link_or_copy,
-    prune_episodes,
-    write_episode_idf,
-    write_records,
-)
-from .errors import EnergyPlusError, ProtocolError
-from .model import (
+from parallel_eplus.buildings.model import (
     ACTIONS,
     SENSOR_NAMES,
     SENSORS,
@@ -46,53 +34,27 @@ from .model import (
     schedule_features,
     time_features,
 )
-from .rbc import DEMAND_CORRECTIONS, RBCConfig, RuleBasedController
-from .reward import RewardConfig, reward
-from .weather import resolve_weather, weather_label
+from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
+from parallel_eplus.buildings.reward import reward
+from parallel_eplus.buildings.weather import resolve_weather, weather_label
+from parallel_eplus.engine import native, pipe
+from parallel_eplus.engine.actions import check_action, scale_action
+from parallel_eplus.engine.config import SimulationConfig, policy_action_names
+from parallel_eplus.engine.episode import (
+    MODEL_FILE,
+    StepRecorder,
+    err_tail,
+    link_or_copy,
+    prune_episodes,
+    write_episode_idf,
+    write_records,
+)
+from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
 log = logging.getLogger(__name__)
 
 OBS_LOW, OBS_HIGH = (np.array(b, dtype=np.float32) for b in observation_bounds(False))  # sensors only
 _LOWS, _HIGHS = (tuple(b.tolist()) for b in (OBS_LOW, OBS_HIGH))  # the same float32 bounds, as floats
-
-
-@dataclass
-class SimulationConfig:
-    """What one worker simulates; plain data, so it can be logged, saved and sent to Ray actors."""
-
-    weather: str = "CA"  # code or .epw path; a list cycles episode by episode
-    model: str = "temp_fan"
-    run_days: int = 365
-    output_dir: str | None = None  # None: a temporary directory removed on close
-    keep_episodes: int | None = None  # newest full episode directories kept; None keeps all
-    reward: RewardConfig = field(default_factory=RewardConfig)
-    start_timeout_s: float = 180.0  # sizing and warmup come before the first observation
-    step_timeout_s: float = 60.0
-    idf: str | None = None  # override the model's IDF (same sensors and actuators)
-    initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
-    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
-    time_features: bool = False  # append model.TIME_FEATURES to the observation
-    schedule_features: bool = False  # then model.SCHEDULE_FEATURES (the IT-load schedule in the IDF)
-    # > 0: the action, times this, corrects the rule-based controller's (rbc.py) instead of acting
-    # alone (residual control: learning starts from the hand-tuned loop, not from scratch).
-    residual_scale: float = 0.0
-    # "action": the correction adds to each of the four normalized actions; "demand": one correction
-    # per zone, in kg/s, to the controller's split-range flow demand (rbc.DEMAND_CORRECTIONS).
-    residual_space: str = "action"
-    rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
-    native_bridge: bool = True  # EnergyPlus's side of each step in C (native.py) where a C compiler works
-
-
-RESIDUAL_SPACES = ("action", "demand")
-
-
-def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
-    """The elements of the action a policy gives: the model's own, or per-zone demand corrections."""
-    if config.residual_space not in RESIDUAL_SPACES:
-        raise ValueError(f"unknown residual space {config.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
-    if config.residual_scale and config.residual_space == "demand":
-        return DEMAND_CORRECTIONS
-    return tuple(e.name for e in control_model(config.model).actions)
 
 
 _YEAR_STARTS: dict[float, dt.datetime] = {}
@@ -104,29 +66,6 @@ def _time(values: np.ndarray) -> dt.datetime:
     if start is None:
         start = _YEAR_STARTS[year] = dt.datetime(int(year), 1, 1)
     return start + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)
-
-
-def check_action(action, names: tuple[str, ...]) -> list[float]:
-    """The action as floats clipped to [-1, 1]; NaN or inf is a ValueError naming the element.
-
-    Per step, Python floats: numpy's fixed cost per call is most of the work on four values.
-    """
-    if isinstance(action, np.ndarray) and action.ndim == 1:
-        a = action.tolist()
-    else:
-        a = np.asarray(action, dtype=np.float64).reshape(-1).tolist()
-    if len(a) != len(names):
-        raise ValueError(f"action must have {len(names)} elements, got shape {np.shape(action)}")
-    for i, v in enumerate(a):
-        if not math.isfinite(v):
-            raise ValueError(f"action element {i} ({names[i]}) is {v}; actions must be finite")
-    return [-1.0 if v < -1.0 else 1.0 if v > 1.0 else float(v) for v in a]
-
-
-def scale_action(action, low: Sequence[float], high: Sequence[float], names: tuple[str, ...]) -> list[float]:
-    """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
-    a = check_action(action, names)
-    return [float(lo + (v + 1.0) * 0.5 * (hi - lo)) for v, lo, hi in zip(a, low, high, strict=True)]
 
 
 class Simulation:
@@ -209,7 +148,7 @@ class Simulation:
         write_episode_idf(self.idf, self.episode_dir / MODEL_FILE, self.config.run_days)
         link_or_copy(epw, self.episode_dir / epw.name)
         cmd = [
-            sys.executable, "-m", "parallel_eplus.eplus_callback",
+            sys.executable, "-m", "parallel_eplus.engine.eplus_callback",
             "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path),
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
             "--output-dir", str(self.episode_dir), "--model", self.model.name,

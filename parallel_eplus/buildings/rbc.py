@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import ACTIONS, ZONE_TEMP_NAMES, it_load_schedule
+from parallel_eplus.buildings.model import ACTIONS, ZONE_TEMP_NAMES, it_load_schedule
 
 
 @dataclass

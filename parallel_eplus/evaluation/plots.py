@@ -11,8 +11,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from .episode import STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
-from .model import COMFORT_BAND_C  # noqa: E402
+from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
+from parallel_eplus.engine.episode import STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
 
 
 def _save(fig, path: Path) -> Path:

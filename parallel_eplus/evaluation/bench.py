@@ -35,14 +35,16 @@ from pathlib import Path
 
 import numpy as np
 
-from . import native
-from .env import EnergyPlusEnv
-from .episode import MODEL_FILE, write_episode_idf
-from .errors import Interrupts
-from .model import AGENT_IDF, STEPS_PER_DAY, control_model
-from .simulation import Simulation, SimulationConfig, scale_action
-from .vector_env import EnergyPlusVectorEnv, weather_shares
-from .weather import resolve_weather
+from parallel_eplus.buildings.model import AGENT_IDF, STEPS_PER_DAY, control_model
+from parallel_eplus.buildings.weather import resolve_weather
+from parallel_eplus.engine import native
+from parallel_eplus.engine.actions import scale_action
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import MODEL_FILE, write_episode_idf
+from parallel_eplus.engine.simulation import Simulation
+from parallel_eplus.envs.env import EnergyPlusEnv
+from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
+from parallel_eplus.errors import Interrupts
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +93,7 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
         out.mkdir(parents=True, exist_ok=True)
         np.save(out / "replay.npy", job.actions)
         cmds.append([
-            sys.executable, "-m", "parallel_eplus.eplus_callback", "--idf", str(job.idf), "--epw", str(job.epw),
+            sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--idf", str(job.idf), "--epw", str(job.epw),
             "--output-dir", str(out), "--model", job.model, "--steps", str(len(job.actions)),
             "--initial-action", *(str(e.initial) for e in control_model(job.model).actions),
             "--replay", str(out / "replay.npy"),
@@ -148,7 +150,7 @@ def replay_run(run_dir: Path, workers: int, workdir: Path, progress: bool = True
     Needs the run's step tables: train with `--keep-episodes` at least its episodes per worker."""
     from tqdm import tqdm
 
-    from .episode import read_steps
+    from parallel_eplus.engine.episode import read_steps
 
     run_dir = Path(run_dir)
     saved = json.loads((run_dir / "config.json").read_text())
@@ -306,7 +308,9 @@ def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
 
 def training_rate(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
     """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded."""
-    from .train import TrainConfig, UpdateTimer, train
+    from parallel_eplus.training.callbacks import UpdateTimer
+    from parallel_eplus.training.config import TrainConfig
+    from parallel_eplus.training.train import train
 
     tc = TrainConfig(
         workers=cfg.workers, weathers=[cfg.weather], timesteps=cfg.train_steps, batch_size=cfg.batch_size,

@@ -1,6 +1,6 @@
 """The EnergyPlus side of the pipes: runs one simulation through the pyenergyplus API.
 
-    python -m parallel_eplus.eplus_callback --act-pipe A --obs-pipe O --idf M.idf --epw W.epw \
+    python -m parallel_eplus.engine.eplus_callback --act-pipe A --obs-pipe O --idf M.idf --epw W.epw \
         --output-dir D --model temp_fan --steps N --initial-action 20 20 4 4
 
 Timing (one control step = one zone timestep, no shift between an observation and its action):
@@ -34,8 +34,8 @@ import traceback
 
 import numpy as np
 
-from . import pipe
-from .model import SENSORS, control_model
+from parallel_eplus.buildings.model import SENSORS, control_model
+from parallel_eplus.engine import pipe
 
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
 

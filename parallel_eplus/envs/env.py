@@ -9,9 +9,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from .model import observation_bounds
-from .reward import RewardConfig
-from .simulation import Simulation, SimulationConfig
+from parallel_eplus.buildings.model import observation_bounds
+from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.simulation import Simulation
 
 
 def observation_space(time_features: bool = False, schedule_features: bool = False) -> gym.spaces.Box:

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ProtocolError
+from parallel_eplus.errors import ProtocolError
 
 DATA = 0
 END = -1

@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 IDF_DIR = ROOT / "idf"
 BASELINE_IDF = IDF_DIR / "2ZoneDataCenterHVAC_wEconomizer.idf"
 AGENT_IDF = IDF_DIR / "2ZoneDataCenterHVAC_wEconomizer_agent.idf"

@@ -12,8 +12,8 @@ import logging
 
 import numpy as np
 
-from .env import action_space, observation_space
-from .simulation import SimulationConfig, policy_action_names
+from parallel_eplus.engine.config import SimulationConfig, policy_action_names
+from parallel_eplus.envs.env import action_space, observation_space
 
 log = logging.getLogger(__name__)
 
@@ -21,7 +21,7 @@ log = logging.getLogger(__name__)
 def _actor_class():
     import ray
 
-    from .vector_env import EnergyPlusVectorEnv
+    from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
 
     @ray.remote
     class WorkerGroup:

@@ -22,9 +22,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from .env import action_space, observation_space
-from .errors import EnergyPlusError
-from .simulation import Simulation, SimulationConfig, wait_any
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.simulation import Simulation, wait_any
+from parallel_eplus.envs.env import action_space, observation_space
+from parallel_eplus.errors import EnergyPlusError
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,50 @@
+"""What one EnergyPlus worker simulates: plain data, so it can be logged, saved and sent to Ray actors."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from parallel_eplus.buildings.model import (
+    control_model,
+)
+from parallel_eplus.buildings.rbc import DEMAND_CORRECTIONS
+from parallel_eplus.buildings.reward import RewardConfig
+
+
+@dataclass
+class SimulationConfig:
+    """What one worker simulates; plain data, so it can be logged, saved and sent to Ray actors."""
+
+    weather: str = "CA"  # code or .epw path; a list cycles episode by episode
+    model: str = "temp_fan"
+    run_days: int = 365
+    output_dir: str | None = None  # None: a temporary directory removed on close
+    keep_episodes: int | None = None  # newest full episode directories kept; None keeps all
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    start_timeout_s: float = 180.0  # sizing and warmup come before the first observation
+    step_timeout_s: float = 60.0
+    idf: str | None = None  # override the model's IDF (same sensors and actuators)
+    initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
+    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
+    time_features: bool = False  # append model.TIME_FEATURES to the observation
+    schedule_features: bool = False  # then model.SCHEDULE_FEATURES (the IT-load schedule in the IDF)
+    # > 0: the action, times this, corrects the rule-based controller's (rbc.py) instead of acting
+    # alone (residual control: learning starts from the hand-tuned loop, not from scratch).
+    residual_scale: float = 0.0
+    # "action": the correction adds to each of the four normalized actions; "demand": one correction
+    # per zone, in kg/s, to the controller's split-range flow demand (rbc.DEMAND_CORRECTIONS).
+    residual_space: str = "action"
+    rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
+    native_bridge: bool = True  # EnergyPlus's side of each step in C (native.py) where a C compiler works
+
+
+RESIDUAL_SPACES = ("action", "demand")
+
+
+def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
+    """The elements of the action a policy gives: the model's own, or per-zone demand corrections."""
+    if config.residual_space not in RESIDUAL_SPACES:
+        raise ValueError(f"unknown residual space {config.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
+    if config.residual_scale and config.residual_space == "demand":
+        return DEMAND_CORRECTIONS
+    return tuple(e.name for e in control_model(config.model).actions)

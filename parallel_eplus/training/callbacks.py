@@ -1,0 +1,119 @@
+"""What the learner reports while it trains: per-weather episode metrics, throughput and update times."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pandas as pd
+from stable_baselines3.common.callbacks import BaseCallback
+from tqdm import tqdm
+
+from parallel_eplus.training.config import STEPS_PER_YEAR
+
+
+def episodes_per_weather(episodes_csv: Path) -> dict[str, int]:
+    """The run's finished episodes by weather, from its episodes.csv."""
+    if not episodes_csv.is_file():
+        return {}
+    counts = pd.read_csv(episodes_csv, usecols=["weather"])["weather"].value_counts().sort_index()
+    return {str(k): int(v) for k, v in counts.items()}
+
+
+class EpisodeMetrics(BaseCallback):
+    """Per finished episode, tagged by weather: reward, power, zone temperatures, share in range.
+
+    Also appends every episode's summary to runs/<name>/episodes.csv and logs throughput.
+    """
+
+    KEYS = {
+        "reward_mean": "reward_per_step",
+        "power_kw": "power_kw",
+        "it_power_kw": "it_power_kw",
+        "hvac_power_kw": "hvac_power_kw",
+        "west_temp_mean": "west_temp_mean",
+        "west_temp_std": "west_temp_std",
+        "east_temp_mean": "east_temp_mean",
+        "east_temp_std": "east_temp_std",
+        "in_band_pct": "in_22_25_pct",
+    }
+
+    def __init__(self, episodes_csv: Path, progress: tqdm | None):
+        super().__init__()
+        self.episodes_csv = episodes_csv
+        self.progress = progress
+        self.episodes = 0
+        self.per_weather = episodes_per_weather(episodes_csv)  # a resumed run counts on from its earlier episodes
+        self._t0 = time.monotonic()
+        self._steps0 = 0
+
+    def _on_training_start(self) -> None:
+        self._t0 = time.monotonic()
+        self._steps0 = self.num_timesteps
+
+    def _on_step(self) -> bool:
+        for info in self.locals["infos"]:
+            final = info.get("final_info")
+            if final and "episode_summary" in final:
+                self._record(final["episode_summary"], info.get("episode", {}).get("r"))
+        if self.progress is not None:
+            self.progress.update(self.training_env.num_envs)
+        return True
+
+    def _record(self, summary: dict, episode_return: float | None) -> None:
+        self.episodes += 1
+        weather = summary.get("weather", "?")
+        self.per_weather[weather] = self.per_weather.get(weather, 0) + 1
+        for key, tag in self.KEYS.items():
+            if key in summary:
+                self.logger.record_mean(f"episode/{weather}/{tag}", summary[key])
+        if episode_return is not None:
+            self.logger.record_mean(f"episode/{weather}/return", episode_return)
+        row = {"timesteps": self.num_timesteps, **summary}
+        pd.DataFrame([row]).to_csv(self.episodes_csv, mode="a", header=not self.episodes_csv.exists(), index=False)
+        if self.progress is not None:
+            self.progress.set_postfix(episodes=self.episodes, last=f"{weather} {summary.get('power_kw', 0):.0f} kW")
+
+    def _on_rollout_end(self) -> None:
+        elapsed = time.monotonic() - self._t0
+        if elapsed > 0:
+            rate = (self.num_timesteps - self._steps0) / elapsed
+            self.logger.record("throughput/env_steps_per_s", rate)
+            self.logger.record("throughput/sim_years_per_hour", rate * 3600 / STEPS_PER_YEAR)
+        self.logger.record("throughput/episodes", self.episodes)
+        for weather, count in self.per_weather.items():
+            self.logger.record(f"episodes/{weather}", count)
+
+
+class UpdateTimer(BaseCallback):
+    """Wall time of each TRPO update (between rollouts), and of `learn` from the first observations on."""
+
+    def __init__(self):
+        super().__init__()
+        self.updates: list[float] = []
+        self._t: float | None = None
+        self.learn_s = 0.0
+        self.learn_steps = 0
+
+    def _on_training_start(self) -> None:  # SB3 has reset the env: every worker has its first observation
+        self._t0, self._steps0 = time.perf_counter(), self.num_timesteps
+
+    def _on_training_end(self) -> None:
+        self._update_done()  # the last rollout's update, which no rollout follows
+        self.learn_s = time.perf_counter() - self._t0
+        self.learn_steps = self.num_timesteps - self._steps0
+
+    def _on_rollout_end(self) -> None:
+        self._t = time.perf_counter()
+
+    def _on_rollout_start(self) -> None:
+        self._update_done()
+
+    def _update_done(self) -> None:
+        if self._t is not None:
+            self.updates.append(time.perf_counter() - self._t)
+            self.logger.record("throughput/update_s", self.updates[-1])
+            self._t = None
+
+    def _on_step(self) -> bool:
+        return True

@@ -1,0 +1,126 @@
+"""A training run's settings: plain data classes, saved as runs/<name>/config.json."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.buildings.weather import parse_weathers
+from parallel_eplus.engine.config import RESIDUAL_SPACES
+
+STEPS_PER_YEAR = 365 * STEPS_PER_DAY
+
+
+@dataclass
+class TRPOSettings:
+    """The paper's TRPO hyperparameters (Section 5.1.4), as sb3-contrib names them."""
+
+    net_arch: tuple[int, ...] = (32, 32)  # tanh MLP
+    target_kl: float = 0.01  # max_KL
+    cg_max_steps: int = 10  # cg_iters
+    cg_damping: float = 0.1
+    gamma: float = 0.99
+    gae_lambda: float = 0.98  # lam
+    n_critic_updates: int = 5  # vf_iters
+    learning_rate: float = 1e-3  # vf_stepsize
+    critic_batch_size: int = 64  # OpenAI Baselines' value-function minibatch
+    # The Gaussian policy's initial log standard deviation (SB3's default, 0, is the paper's too). A residual
+    # policy starts from a working controller, where noise of one action unit would unsettle it.
+    log_std_init: float = 0.0
+
+
+@dataclass
+class PPOSettings:
+    """Stable-Baselines3's PPO for comparison runs; network, gamma and GAE lambda come from TRPOSettings."""
+
+    learning_rate: float = 3e-4
+    n_epochs: int = 10
+    batch_size: int = 256  # minibatch
+    clip_range: float = 0.2
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run needs; saved as runs/<name>/config.json."""
+
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    weathers: list[str] = field(default_factory=lambda: ["CA"])
+    model: str = "temp_fan"
+    timesteps: int = 1_000_000
+    run_days: int = 365
+    batch_size: int = 16384  # the paper's timesteps_per_batch, split evenly across workers
+    seed: int = 0
+    run_name: str | None = None
+    runs_dir: str = "runs"
+    tensorboard_dir: str = "tensorboard_logs"
+    checkpoint_every: int = 100_000  # env steps
+    keep_episodes: int = 2  # full episode directories kept per worker
+    backend: str = "local"  # or "ray"
+    ray_address: str | None = None
+    workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
+    max_restarts: int = 3
+    # True: every worker waits for the slowest at each step (SB3's way; a seed fixes the run bit for bit).
+    # False: each local worker gets its next action as soon as its observation arrives (rollout.py).
+    lockstep: bool = False
+    time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
+    schedule_features: bool = False  # opt-in IT-load schedule features (model.SCHEDULE_FEATURES)
+    init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
+    algorithm: str = "trpo"  # the paper's; or "ppo"
+    residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
+    residual_space: str = "action"  # what it corrects: each action, or each zone's flow demand (SimulationConfig)
+    rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    trpo: TRPOSettings = field(default_factory=TRPOSettings)
+    ppo: PPOSettings = field(default_factory=PPOSettings)
+
+    def resolved(self) -> TrainConfig:
+        """Validate, and fill in the run name."""
+        parse_weathers(",".join(self.weathers))
+        if self.workers < 1:
+            raise ValueError("--workers must be at least 1")
+        if self.batch_size < self.workers:
+            raise ValueError("--batch-size must be at least the number of workers")
+        if self.init_from is not None:
+            self.init_from = str(Path(self.init_from).resolve())
+        if self.algorithm not in ("trpo", "ppo"):
+            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo or ppo")
+        if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
+            raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
+        if self.residual_space not in RESIDUAL_SPACES:
+            raise ValueError(f"unknown --residual-space {self.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
+        if self.residual_space != "action" and not self.residual_scale:
+            raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE (kg/s of demand per unit)")
+        if self.backend not in ("local", "ray"):
+            raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
+        if self.run_name is None:
+            self.run_name = f"{self.algorithm}-{'-'.join(self.weathers)}-{time.strftime('%Y%m%d-%H%M%S')}"
+        # Absolute, so a resumed run writes to the same places from any working directory.
+        self.runs_dir = str(Path(self.runs_dir).resolve())
+        self.tensorboard_dir = str(Path(self.tensorboard_dir).resolve())
+        return self
+
+    @property
+    def run_dir(self) -> Path:
+        return Path(self.runs_dir) / str(self.run_name)
+
+    @property
+    def n_steps(self) -> int:
+        """Steps per worker per batch."""
+        return math.ceil(self.batch_size / self.workers)
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> TrainConfig:
+        raw = json.loads(text)
+        raw["reward"] = RewardConfig(**raw["reward"])
+        raw["trpo"] = TRPOSettings(**{**raw["trpo"], "net_arch": tuple(raw["trpo"]["net_arch"])})
+        raw["ppo"] = PPOSettings(**raw.get("ppo", {}))  # runs from before PPO have none
+        return cls(**raw)

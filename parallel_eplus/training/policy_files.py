@@ -1,0 +1,138 @@
+"""A saved policy on disk: the model, its observation statistics, checkpoints, and loading them to act."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.vec_env import VecNormalize
+
+from parallel_eplus.buildings.model import observation_names
+
+MODEL_FILE = "model.zip"
+NORMALIZE_FILE = "vecnormalize.pkl"
+
+
+def _latest_checkpoint(path: Path) -> Path:
+    """A checkpoint .zip, or the newest save in a run directory: the last checkpoint, or the final model
+    when the run finished after it (SB3 ends on a whole batch, past the last checkpoint)."""
+    if path.is_file():
+        return path
+    checkpoints = sorted((path / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
+    saves = checkpoints[-1:] + [p for p in [path / MODEL_FILE] if p.is_file()]
+    if not saves:
+        raise FileNotFoundError(f"no checkpoint or {MODEL_FILE} in {path}")
+    return max(saves, key=lambda p: p.stat().st_mtime_ns)
+
+
+def normalization_file(model_zip: Path) -> Path:
+    """The VecNormalize statistics saved beside a model or checkpoint."""
+    if model_zip.name == MODEL_FILE:
+        return model_zip.with_name(NORMALIZE_FILE)
+    steps = model_zip.stem.split("_")[1]
+    return model_zip.with_name(f"model_vecnormalize_{steps}_steps.pkl")
+
+
+def run_dir_of(checkpoint: Path) -> Path:
+    return checkpoint.parent.parent if checkpoint.parent.name == "checkpoints" else checkpoint.parent
+
+
+def _saved_policy(model_zip: Path):
+    """The policy network of a saved model, whichever on-policy algorithm trained it."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    data, params, _ = load_from_zip_file(model_zip, device="cpu")
+    policy = data["policy_class"](
+        data["observation_space"], data["action_space"], lambda _: 0.0, **data["policy_kwargs"]
+    )
+    policy.load_state_dict(params["policy"])
+    policy.set_training_mode(False)
+    return policy
+
+
+def require_policy_files(model_zip: Path, context: str = "") -> Path:
+    """A saved policy is two files: the model and its observation statistics; returns the latter."""
+    if not model_zip.is_file():
+        raise FileNotFoundError(f"{context}policy not found: {model_zip}")
+    stats = normalization_file(model_zip)
+    if not stats.is_file():
+        raise FileNotFoundError(f"{context}observation statistics missing beside the policy: {stats}")
+    return stats
+
+
+def _check_init_from(model_zip: Path, features: tuple[bool, bool]) -> None:
+    require_policy_files(model_zip, "--init-from: ")
+    saved = policy_features(model_zip)
+    old, new = observation_names(*saved), observation_names(*features)
+    if new[: len(old)] != old:
+        flags = [f for f, on in zip(("--time-features", "--schedule-features"), saved, strict=True) if on]
+        trained = f"with {' and '.join(flags)}" if flags else "without --time-features or --schedule-features"
+        raise ValueError(
+            f"--init-from {model_zip}: that policy was trained {trained}; pass the same flags (more may be added)"
+        )
+
+
+def _warm_start(model_zip: Path, model, env: VecNormalize) -> None:
+    """The saved policy's weights and observation statistics, into a run that may observe more.
+
+    Observations added after the saved policy's own (`--schedule-features` on a policy trained with
+    `--time-features`, say) enter its first layers with zero weights, so the run starts from exactly
+    the saved policy's behaviour; their statistics start at mean 0, variance 1 and keep updating.
+    """
+    import pickle
+
+    state = model.policy.state_dict()
+    for key, value in _saved_policy(model_zip).state_dict().items():
+        target = state.get(key)
+        if target is not None and value.ndim == target.ndim == 2 and target.shape[1] > value.shape[1]:
+            # An input layer over more observations (a wrong row count still fails in load_state_dict).
+            value = th.cat([value, th.zeros(value.shape[0], target.shape[1] - value.shape[1])], dim=1)
+        state[key] = value
+    try:
+        model.policy.load_state_dict(state)
+    except RuntimeError as e:  # another network shape
+        raise ValueError(f"--init-from {model_zip}: its network does not fit this run's: {e}") from e
+    with open(normalization_file(model_zip), "rb") as f:
+        stats = pickle.load(f).obs_rms
+    n = len(stats.mean)
+    env.obs_rms.mean[:n], env.obs_rms.var[:n], env.obs_rms.count = stats.mean, stats.var, stats.count
+
+
+def policy_features(model_zip: str | Path) -> tuple[bool, bool]:
+    """Whether a saved policy observes (`model.TIME_FEATURES`, `model.SCHEDULE_FEATURES`), read from
+    the size of its observation statistics."""
+    import pickle
+
+    with open(normalization_file(Path(model_zip)), "rb") as f:
+        norm: VecNormalize = pickle.load(f)
+    n = norm.observation_space.shape[0]
+    options = [(t, s) for t in (False, True) for s in (False, True)]
+    found = [o for o in options if len(observation_names(*o)) == n]
+    if not found:
+        raise ValueError(f"{model_zip}: a policy over {n} observations does not fit this model")
+    return found[0]
+
+
+def load_policy(model_zip: str | Path):
+    """A trained policy and its observation normalizer, ready to act deterministically."""
+    model_zip = Path(model_zip)
+    stats = require_policy_files(model_zip)
+    saved = _saved_policy(model_zip)
+    import pickle
+
+    from parallel_eplus.training.rollout import NumpyPolicy
+
+    with open(stats, "rb") as f:
+        norm: VecNormalize = pickle.load(f)
+    norm.training = False
+    low, high = saved.action_space.low, saved.action_space.high
+    fast = NumpyPolicy(saved) if NumpyPolicy.supports(saved) else None
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        if fast is not None:  # the Gaussian's mean, as SB3's deterministic predict, without torch
+            return np.clip(fast.mean(norm.normalize_obs(obs)), low, high).astype(np.float32)
+        action, _ = saved.predict(norm.normalize_obs(obs), deterministic=True)
+        return action
+
+    return act

@@ -1,0 +1,176 @@
+"""The learner: sb3-contrib TRPO with the paper's settings over N EnergyPlus workers.
+
+Run output: `runs/<run-name>/` (config.json, checkpoints/, model.zip + vecnormalize.pkl, episodes.csv
+and the newest episode directories) and `tensorboard_logs/<run-name>/` (TensorBoard events).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import pandas as pd
+import torch as th
+from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import VecNormalize
+from tqdm import tqdm
+
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
+from parallel_eplus.errors import Interrupts
+from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather
+from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.policy_files import (
+    MODEL_FILE,
+    NORMALIZE_FILE,
+    _check_init_from,
+    _latest_checkpoint,
+    _warm_start,
+    normalization_file,
+    run_dir_of,
+)
+from parallel_eplus.training.sb3_adapter import SB3VecEnv
+
+log = logging.getLogger(__name__)
+
+
+def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
+    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
+    sim = SimulationConfig(
+        weather=cfg.weathers[0],
+        model=cfg.model,
+        run_days=cfg.run_days,
+        output_dir=str(cfg.run_dir / "episodes"),
+        keep_episodes=cfg.keep_episodes,
+        reward=cfg.reward,
+        time_features=cfg.time_features,
+        schedule_features=cfg.schedule_features,
+        residual_scale=cfg.residual_scale,
+        residual_space=cfg.residual_space,
+        rbc_target_c=cfg.rbc_target_c,
+    )
+    shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
+    if cfg.backend == "ray":
+        from parallel_eplus.envs.ray_vector_env import RayVectorEnv
+
+        per_actor = cfg.workers_per_actor or cfg.workers
+        venv = RayVectorEnv(sim, shares, per_actor, cfg.ray_address, cfg.max_restarts)
+    else:
+        venv = EnergyPlusVectorEnv(sim, shares, max_restarts=cfg.max_restarts)
+    return SB3VecEnv(venv)
+
+
+def _episodes_done(episodes_csv: Path, workers: int) -> list[int]:
+    """Finished episodes per worker so far (a resumed run continues each worker's weather cycle)."""
+    if not episodes_csv.is_file():
+        return [0] * workers
+    counts = pd.read_csv(episodes_csv, usecols=["worker"])["worker"].value_counts()
+    return [int(counts.get(i, 0)) for i in range(workers)]
+
+
+def train(
+    cfg: TrainConfig,
+    resume: str | Path | None = None,
+    progress: bool = True,
+    timer: UpdateTimer | None = None,
+) -> Path:
+    """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first."""
+    from parallel_eplus.training.rollout import ALGORITHMS
+
+    checkpoint = None
+    if resume is not None and cfg.init_from is not None:
+        raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
+    if resume is not None:
+        checkpoint = _latest_checkpoint(Path(resume))
+        saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
+        # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
+        saved.timesteps = cfg.timesteps or saved.timesteps
+        saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
+        cfg = saved
+    cfg = cfg.resolved()
+    if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
+        _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
+    run_dir = cfg.run_dir
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.json").write_text(cfg.to_json())
+    th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
+
+    venv = make_vec_env(cfg)
+    bar = None
+    try:
+        if checkpoint is not None:
+            env = VecNormalize.load(str(normalization_file(checkpoint)), venv)
+            model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu")
+            log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
+        else:
+            env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
+            model = _new_model(cfg, env)
+            if cfg.init_from is not None:
+                _warm_start(Path(cfg.init_from), model, env)
+                log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
+        model.lockstep = cfg.lockstep
+        model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
+        remaining = max(cfg.timesteps - model.num_timesteps, 0)
+        batch = cfg.n_steps * cfg.workers
+        end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
+        bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
+                   desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
+        callbacks = CallbackList([
+            timer or UpdateTimer(),
+            EpisodeMetrics(run_dir / "episodes.csv", bar),
+            CheckpointCallback(
+                save_freq=max(cfg.checkpoint_every // cfg.workers, 1),
+                save_path=str(run_dir / "checkpoints"),
+                name_prefix="model",
+                save_vecnormalize=True,
+            ),
+        ])  # fmt: skip
+        try:
+            with Interrupts():
+                model.learn(remaining, callback=callbacks, reset_num_timesteps=False, log_interval=1)
+        except KeyboardInterrupt:
+            path = run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            model.save(path)
+            env.save(str(normalization_file(path)))
+            log.warning("interrupted at step %d; checkpoint saved: %s", model.num_timesteps, path)
+            log.warning("resume with: parallel-eplus train --resume %s", path)
+            raise
+        final = run_dir / MODEL_FILE
+        model.save(final)
+        env.save(str(run_dir / NORMALIZE_FILE))
+        counts = episodes_per_weather(run_dir / "episodes.csv")
+        log.info("%s: %d steps; episodes per weather: %s", cfg.run_name, model.num_timesteps,
+                 ", ".join(f"{w} {n}" for w, n in counts.items()) or "none finished")  # fmt: skip
+        return final
+    finally:
+        if bar is not None:
+            bar.close()
+        venv.close()
+
+
+def _new_model(cfg: TrainConfig, env: VecNormalize):
+    from parallel_eplus.training.rollout import ALGORITHMS
+
+    t = cfg.trpo
+    common = dict(
+        n_steps=cfg.n_steps, gamma=t.gamma, gae_lambda=t.gae_lambda, seed=cfg.seed, device="cpu",
+        # Fused Adam: the same update in one kernel per step instead of a Python loop over the tensors.
+        # The critic takes 1,280 minibatch steps per 16k batch; this cut the update by a quarter (2.3 -> 1.7 s).
+        policy_kwargs={
+            "net_arch": list(t.net_arch), "activation_fn": th.nn.Tanh, "log_std_init": t.log_std_init,
+            "optimizer_kwargs": {"fused": True},
+        },
+    )  # fmt: skip
+    if cfg.algorithm == "ppo":
+        p = cfg.ppo
+        return ALGORITHMS["ppo"](
+            "MlpPolicy", env, learning_rate=p.learning_rate, n_epochs=p.n_epochs, batch_size=p.batch_size,
+            clip_range=p.clip_range, **common,
+        )  # fmt: skip
+    return ALGORITHMS["trpo"](
+        "MlpPolicy", env, learning_rate=t.learning_rate, batch_size=t.critic_batch_size, cg_max_steps=t.cg_max_steps,
+        cg_damping=t.cg_damping, n_critic_updates=t.n_critic_updates, target_kl=t.target_kl, **common,
+    )  # fmt: skip
