@@ -209,8 +209,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="add the IT-load schedule: the coming step's load, its last and next change, and how far away",
     )  # fmt: skip
     tr.add_argument(
-        "--algorithm", default="trpo", choices=["trpo", "ppo"],
-        help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting",
+        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac"],
+        help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting; "
+        "sac: Stable-Baselines3's off-policy SAC (training/config.py SACSettings; --batch-size is unused)",
     )  # fmt: skip
     tr.add_argument(
         "--residual", type=float, default=0.0, metavar="SCALE",

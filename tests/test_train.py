@@ -157,7 +157,7 @@ def test_ppo_trains_the_same_way_and_its_policy_acts(tmp_path, no_leaks):
     assert a.shape == (1, 4) and np.all(np.abs(a) <= 1)
     assert policy_controller(str(final)).label == "PPO (CA)"
     with pytest.raises(ValueError, match="unknown algorithm"):
-        train(small_config(tmp_path, "bad", algorithm="sac"), progress=False)
+        train(small_config(tmp_path, "bad", algorithm="a2c"), progress=False)
 
 
 def test_residual_settings_are_checked_before_anything_runs(tmp_path):
@@ -166,3 +166,39 @@ def test_residual_settings_are_checked_before_anything_runs(tmp_path):
     with pytest.raises(ValueError, match="unknown --residual-space"):
         train(small_config(tmp_path, "bad-space", residual_scale=1.0, residual_space="flows"), progress=False)
     assert not (tmp_path / "runs").exists()  # refused before a run directory or an EnergyPlus process
+
+
+def test_sac_trains_checkpoints_resumes_and_its_policy_evaluates(tmp_path, no_leaks, caplog):
+    from parallel_eplus.evaluation.sweep import policy_controller, run_sweep
+    from parallel_eplus.training.config import SACSettings
+
+    sac = SACSettings(learning_starts=100, batch_size=64, buffer_size=5000)
+    cfg = small_config(tmp_path, "sac", weathers=["CA", "CO"], run_days=1, timesteps=400, algorithm="sac",
+                       checkpoint_every=200, sac=sac)  # fmt: skip
+    final = train(cfg, progress=False)
+    run = final.parent
+    assert (run / "model_replay_buffer.pkl").is_file()  # beside the final model
+    checkpoint = run / "checkpoints" / "model_200_steps.zip"
+    assert checkpoint.is_file() and not (run / "checkpoints" / "model_200_steps_replay_buffer.pkl").exists()
+    tags = scalars(tmp_path / "tb" / "sac")
+    for weather in ("CA", "CO"):  # 1-day episodes: 96 steps, two per worker and weather in 400 steps
+        assert f"episode/{weather}/in_22_25_pct" in tags
+    assert "train/actor_loss" in tags and "throughput/env_steps_per_s" in tags
+
+    # From the final model: its replay buffer comes back; from a periodic checkpoint: an empty buffer, said so.
+    resumed = TrainConfig(timesteps=600)
+    final = train(resumed, resume=run, progress=False)
+    assert pd.read_csv(run / "episodes.csv")["timesteps"].max() > 400
+    with caplog.at_level("WARNING"):
+        train(TrainConfig(timesteps=800), resume=checkpoint, progress=False)
+    assert "empty buffer" in caplog.text
+
+    act = load_policy(final)
+    obs = np.array([[12.0, 23.0, 24.0, 120e3, 110e3, 10e3]], dtype=np.float32)
+    a1, a2 = act(obs), act(obs)
+    np.testing.assert_array_equal(a1, a2)
+    assert a1.shape == (1, 4) and np.all(np.abs(a1) <= 1)
+    controller = policy_controller(str(final))
+    assert controller.label == "SAC (CA-CO)"
+    df = run_sweep([controller], ["CA"], run_days=1, workers=1, out_dir=tmp_path / "eval", progress=False)
+    assert len(df) == 1 and 0 <= df["in_band_pct"].iloc[0] <= 100

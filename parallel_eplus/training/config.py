@@ -46,6 +46,28 @@ class PPOSettings:
 
 
 @dataclass
+class SACSettings:
+    """Stable-Baselines3's SAC (off-policy) for comparison runs.
+
+    64x64 ReLU (SB3's activation for SAC): the problem is small (6-10 observations, 4 actions), and on 2 shared
+    cores the gradient steps, not the network's capacity, bound wall time; 256x256 (SB3's default) costs ~10x
+    per step. One gradient step per vector step (0.5 per env step with 2 workers) keeps 1M env steps at a few
+    hours. The replay buffer holds the whole 1M-step budget (~80 MB).
+    """
+
+    net_arch: tuple[int, ...] = (64, 64)
+    learning_rate: float = 3e-4
+    buffer_size: int = 1_000_000
+    learning_starts: int = 10_000  # env steps of random actions first: a week of every worker's weather
+    batch_size: int = 256
+    tau: float = 0.005
+    gamma: float = 0.99
+    train_freq: int = 1  # vector steps between updates
+    gradient_steps: int = 1
+    ent_coef: str = "auto"
+
+
+@dataclass
 class TrainConfig:
     """Everything a training run needs; saved as runs/<name>/config.json."""
 
@@ -71,13 +93,14 @@ class TrainConfig:
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     schedule_features: bool = False  # opt-in IT-load schedule features (model.SCHEDULE_FEATURES)
     init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
-    algorithm: str = "trpo"  # the paper's; or "ppo"
+    algorithm: str = "trpo"  # the paper's; or "ppo", "sac"
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
     residual_space: str = "action"  # what it corrects: each action, or each zone's flow demand (SimulationConfig)
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
     ppo: PPOSettings = field(default_factory=PPOSettings)
+    sac: SACSettings = field(default_factory=SACSettings)
 
     def resolved(self) -> TrainConfig:
         """Validate, and fill in the run name."""
@@ -88,8 +111,8 @@ class TrainConfig:
             raise ValueError("--batch-size must be at least the number of workers")
         if self.init_from is not None:
             self.init_from = str(Path(self.init_from).resolve())
-        if self.algorithm not in ("trpo", "ppo"):
-            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo or ppo")
+        if self.algorithm not in ("trpo", "ppo", "sac"):
+            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo, ppo or sac")
         if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
             raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
         if self.residual_space not in RESIDUAL_SPACES:
@@ -123,4 +146,6 @@ class TrainConfig:
         raw["reward"] = RewardConfig(**raw["reward"])
         raw["trpo"] = TRPOSettings(**{**raw["trpo"], "net_arch": tuple(raw["trpo"]["net_arch"])})
         raw["ppo"] = PPOSettings(**raw.get("ppo", {}))  # runs from before PPO have none
+        sac = raw.get("sac", {})
+        raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
         return cls(**raw)

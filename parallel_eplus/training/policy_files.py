@@ -34,12 +34,18 @@ def normalization_file(model_zip: Path) -> Path:
     return model_zip.with_name(f"model_vecnormalize_{steps}_steps.pkl")
 
 
+def replay_buffer_file(model_zip: Path) -> Path:
+    """SAC's replay buffer beside a final model or an interrupt checkpoint (periodic checkpoints leave it out:
+    up to ~80 MB each; a run resumed from one starts with an empty buffer)."""
+    return model_zip.with_name(f"{model_zip.stem}_replay_buffer.pkl")
+
+
 def run_dir_of(checkpoint: Path) -> Path:
     return checkpoint.parent.parent if checkpoint.parent.name == "checkpoints" else checkpoint.parent
 
 
 def _saved_policy(model_zip: Path):
-    """The policy network of a saved model, whichever on-policy algorithm trained it."""
+    """The policy network of a saved model, whichever algorithm trained it (SAC's includes its critics)."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
     data, params, _ = load_from_zip_file(model_zip, device="cpu")

@@ -23,7 +23,7 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 from sb3_contrib import TRPO
-from stable_baselines3 import PPO
+from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.distributions import DiagGaussianDistribution
@@ -302,4 +302,5 @@ class FastPPO(NumpyRollouts, PPO):
     """Stable-Baselines3's PPO with the numpy rollout loop: the comparison the paper did not run."""
 
 
-ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO}
+# SAC is off-policy: SB3's own step-by-step collect_rollouts feeds its replay buffer.
+ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": SAC}

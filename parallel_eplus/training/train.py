@@ -29,6 +29,7 @@ from parallel_eplus.training.policy_files import (
     _latest_checkpoint,
     _warm_start,
     normalization_file,
+    replay_buffer_file,
     run_dir_of,
 )
 from parallel_eplus.training.sb3_adapter import SB3VecEnv
@@ -103,6 +104,7 @@ def train(
         if checkpoint is not None:
             env = VecNormalize.load(str(normalization_file(checkpoint)), venv)
             model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu")
+            _load_replay_buffer(model, checkpoint)
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
         else:
             env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
@@ -113,7 +115,7 @@ def train(
         model.lockstep = cfg.lockstep
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
-        batch = cfg.n_steps * cfg.workers
+        batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers
         end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
         bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
@@ -135,12 +137,14 @@ def train(
             path.parent.mkdir(parents=True, exist_ok=True)
             model.save(path)
             env.save(str(normalization_file(path)))
+            _save_replay_buffer(model, path)
             log.warning("interrupted at step %d; checkpoint saved: %s", model.num_timesteps, path)
             log.warning("resume with: parallel-eplus train --resume %s", path)
             raise
         final = run_dir / MODEL_FILE
         model.save(final)
         env.save(str(run_dir / NORMALIZE_FILE))
+        _save_replay_buffer(model, final)
         counts = episodes_per_weather(run_dir / "episodes.csv")
         log.info("%s: %d steps; episodes per weather: %s", cfg.run_name, model.num_timesteps,
                  ", ".join(f"{w} {n}" for w, n in counts.items()) or "none finished")  # fmt: skip
@@ -151,8 +155,34 @@ def train(
         venv.close()
 
 
+def _save_replay_buffer(model, model_zip: Path) -> None:
+    if hasattr(model, "save_replay_buffer"):  # off-policy (SAC)
+        model.save_replay_buffer(replay_buffer_file(model_zip))
+
+
+def _load_replay_buffer(model, checkpoint: Path) -> None:
+    if not hasattr(model, "load_replay_buffer"):
+        return
+    path = replay_buffer_file(checkpoint)
+    if path.is_file():
+        model.load_replay_buffer(path)
+        log.info("replay buffer restored: %d transitions", model.replay_buffer.size() * model.n_envs)
+    else:
+        log.warning("%s has no replay buffer beside it (periodic checkpoints leave it out): SAC resumes with an "
+                    "empty buffer and updates from it at once", checkpoint.name)  # fmt: skip
+
+
 def _new_model(cfg: TrainConfig, env: VecNormalize):
     from parallel_eplus.training.rollout import ALGORITHMS
+
+    if cfg.algorithm == "sac":
+        s = cfg.sac
+        return ALGORITHMS["sac"](
+            "MlpPolicy", env, learning_rate=s.learning_rate, buffer_size=s.buffer_size,
+            learning_starts=s.learning_starts, batch_size=s.batch_size, tau=s.tau, gamma=s.gamma,
+            train_freq=s.train_freq, gradient_steps=s.gradient_steps, ent_coef=s.ent_coef, seed=cfg.seed,
+            device="cpu", policy_kwargs={"net_arch": list(s.net_arch)},
+        )  # fmt: skip
 
     t = cfg.trpo
     common = dict(
