@@ -144,6 +144,16 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward), not args.quiet
     )
+    if args.online:
+        import pandas as pd
+
+        from parallel_eplus.evaluation.online import run_online
+
+        policies = [c for c in controllers if c.kind == "policy"]
+        if not policies:
+            raise ValueError("--online needs --policy: only a learning policy can keep learning")
+        online = run_online(policies, weathers, args.run_days, args.workers, args.out, args.online_batch)
+        df = pd.concat([df, online], ignore_index=True)
     files = write_results(df, args.out, histogram)
     print((args.out / "results.md").read_text())
     print("written: " + ", ".join(str(f) for f in files))
@@ -264,6 +274,12 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", type=Path, default=Path("results") / "latest")
     ev.add_argument("--histogram", help="CONTROLLER,WEATHER for the West-zone histogram (default: last, VA)")
     ev.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    ev.add_argument(
+        "--online", action="store_true",
+        help="also the paper's protocol: each --policy (TRPO/PPO) keeps learning, stochastic, on each weather for "
+        "one episode (a copy; the saved model is untouched); rows labelled '..., online'",
+    )  # fmt: skip
+    ev.add_argument("--online-batch", type=int, help="with --online: steps per update (default: the run's own)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     ev.set_defaults(func=cmd_evaluate)
 

@@ -124,3 +124,26 @@ def test_residual_policy_is_evaluated_as_a_correction_of_the_rule_based_controll
     # Alone, a barely trained policy's mean action is mid-range (25 C supply air); as a correction it
     # stays within 0.1 of the half-range (1.5 C), or 0.1 kg/s of demand, of the controller's: cold supply air.
     assert steps.west_setpoint_c.median() < 15 and steps.east_setpoint_c.median() < 15
+
+
+def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alone(tmp_path, no_leaks):
+    from parallel_eplus.training.config import TrainConfig
+    from parallel_eplus.training.train import train
+
+    cfg = TrainConfig(
+        workers=2, weathers=["CA"], run_days=1, timesteps=192, batch_size=192, run_name="p",
+        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
+    )  # fmt: skip
+    final = train(cfg, progress=False)
+    before = final.read_bytes(), (final.parent / "vecnormalize.pkl").read_bytes()
+    out = tmp_path / "eval"
+    cmd = [sys.executable, "-m", "parallel_eplus.cli", "evaluate", "--policy", str(final), "--online",
+           "--online-batch", "32", "--weathers", "CA,IL", "--run-days", "1", "--workers", "2",
+           "--out", str(out), "--quiet"]  # fmt: skip
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    df = pd.read_csv(out / "results.csv")
+    assert sorted(df["controller"].unique()) == ["TRPO (CA)", "TRPO (CA), online"]
+    online = df[df["controller"] == "TRPO (CA), online"]
+    assert sorted(online["weather"]) == ["CA", "IL"] and (online["steps"] == 96).all()
+    assert online["reward_mean"].notna().all()
+    assert (final.read_bytes(), (final.parent / "vecnormalize.pkl").read_bytes()) == before
