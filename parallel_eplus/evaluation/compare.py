@@ -1,0 +1,122 @@
+"""Which algorithm learns the building fastest: TRPO, PPO and SAC on one budget, evaluated along the way.
+
+Each algorithm trains in resumable chunks (`train --resume`); after every chunk its model is evaluated
+frozen and deterministic on all five weathers (`sweep.run_sweep`). Progress lives in `<out>/progress.csv`,
+so a rerun skips finished chunks. `compare_figure` and `compare_table` draw the result against the
+built-in and rule-based controllers' rows of an existing results.csv.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from parallel_eplus.evaluation.sweep import BASELINE_LABEL, RBC_LABEL, policy_controller, run_sweep  # noqa: E402
+from parallel_eplus.training.config import TrainConfig  # noqa: E402
+from parallel_eplus.training.train import train  # noqa: E402
+
+log = logging.getLogger(__name__)
+
+ALL_WEATHERS = ["CA", "CO", "FL", "IL", "VA"]
+
+
+def run_comparison(
+    out: Path, algorithms: list[str], timesteps: int, eval_every: int, base: TrainConfig, eval_days: int = 365
+) -> pd.DataFrame:
+    """Train each algorithm to `timesteps` in chunks of `eval_every`, evaluating after each; returns progress."""
+    progress_csv = out / "progress.csv"
+    done = pd.read_csv(progress_csv) if progress_csv.is_file() else pd.DataFrame(columns=["algorithm", "target"])
+    for algorithm in algorithms:
+        run_dir = out / "runs" / algorithm
+        wall = float(done.loc[done["algorithm"] == algorithm, "wall_s"].max()) if len(done) else 0.0
+        wall = 0.0 if pd.isna(wall) else wall
+        for target in range(eval_every, timesteps + eval_every, eval_every):
+            target = min(target, timesteps)
+            if ((done["algorithm"] == algorithm) & (done["target"] == target)).any():
+                continue
+            t0 = time.monotonic()
+            if (run_dir / "config.json").is_file():
+                final = train(TrainConfig(timesteps=target), resume=run_dir, progress=True)
+            else:
+                cfg = TrainConfig(**{**vars(base), "algorithm": algorithm, "timesteps": target, "run_name": algorithm,
+                                     "runs_dir": str(out / "runs"), "checkpoint_every": eval_every})  # fmt: skip
+                final = train(cfg, progress=True)
+            wall += time.monotonic() - t0
+            steps = _steps_of(final)
+            controller = policy_controller(str(final))
+            df = run_sweep([controller], ALL_WEATHERS, eval_days, base.workers, out / "eval" / f"{algorithm}-{steps}")
+            row = {"algorithm": algorithm, "target": target, "steps": steps, "wall_s": wall,
+                   "in_band_pct": df["in_band_pct"].mean(), "power_kw": df["power_kw"].mean(),
+                   "reward_mean": df["reward_mean"].mean()}  # fmt: skip
+            done = pd.concat([done, pd.DataFrame([row])], ignore_index=True)
+            out.mkdir(parents=True, exist_ok=True)
+            done.to_csv(progress_csv, index=False)
+            log.info("%s at %d steps (%.1f h): %.1f %% in band, %.1f kW", algorithm, steps, wall / 3600,
+                     row["in_band_pct"], row["power_kw"])  # fmt: skip
+    return done
+
+
+def _steps_of(model_zip: Path) -> int:
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    data, _, _ = load_from_zip_file(model_zip, device="cpu", load_data=True)
+    return int(data["num_timesteps"])
+
+
+def references(results_csv: Path) -> dict[str, tuple[float, float]]:
+    """The built-in and rule-based controllers' five-weather means: label -> (in-band %, power kW)."""
+    df = pd.read_csv(results_csv)
+    df = df[df["weather"].isin(ALL_WEATHERS)]
+    return {
+        label: (g["in_band_pct"].mean(), g["power_kw"].mean())
+        for label, g in df.groupby("controller")
+        if label in (BASELINE_LABEL, RBC_LABEL)
+    }
+
+
+def compare_figure(progress: pd.DataFrame, refs: dict[str, tuple[float, float]], path: Path) -> Path:
+    """In-band % and power saved (against the built-in controller) vs. env steps and vs. wall time."""
+    baseline_kw = refs[BASELINE_LABEL][1]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharey="row")
+    for algorithm, g in progress.groupby("algorithm", sort=False):
+        saved = 100 * (baseline_kw - g["power_kw"]) / baseline_kw
+        for col, x in enumerate((g["steps"], g["wall_s"] / 3600)):
+            axes[0, col].plot(x, g["in_band_pct"], marker="o", label=algorithm.upper())
+            axes[1, col].plot(x, saved, marker="o", label=algorithm.upper())
+    for label, (in_band, kw) in refs.items():
+        style = {"color": "grey" if label == BASELINE_LABEL else "black", "linestyle": "--", "linewidth": 1}
+        for col in range(2):
+            axes[0, col].axhline(in_band, label=label, **style)
+            axes[1, col].axhline(100 * (baseline_kw - kw) / baseline_kw, label=label, **style)
+    for col, xlabel in enumerate(("environment steps", "wall time (h)")):
+        axes[1, col].set_xlabel(xlabel)
+    axes[0, 0].set_ylabel("zone samples in 22-25 °C (%)")
+    axes[1, 0].set_ylabel("power saved vs. built-in (%)")
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle("TRPO, PPO and SAC on CA-CO-FL: five-weather mean, frozen deterministic policy")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def compare_table(progress: pd.DataFrame, refs: dict[str, tuple[float, float]]) -> str:
+    """Markdown: each algorithm's last evaluation beside the reference controllers."""
+    baseline_kw = refs[BASELINE_LABEL][1]
+    lines = ["| controller | env steps | wall time (h) | in 22-25 °C (%) | power (kW) | power saved (%) |",
+             "|---|---:|---:|---:|---:|---:|"]  # fmt: skip
+    for label, (in_band, kw) in refs.items():
+        lines.append(f"| {label} | - | - | {in_band:.2f} | {kw:.2f} | {100 * (baseline_kw - kw) / baseline_kw:.1f} |")
+    for algorithm, g in progress.groupby("algorithm", sort=False):
+        r = g.sort_values("steps").iloc[-1]
+        saved = 100 * (baseline_kw - r.power_kw) / baseline_kw
+        lines.append(f"| {algorithm.upper()} | {int(r.steps):,} | {r.wall_s / 3600:.2f} | {r.in_band_pct:.2f} "
+                     f"| {r.power_kw:.2f} | {saved:.1f} |")  # fmt: skip
+    return "\n".join(lines) + "\n"

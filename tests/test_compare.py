@@ -1,0 +1,24 @@
+"""The algorithm comparison's figure and table, from a progress table and the committed reference rows."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from parallel_eplus.evaluation.compare import compare_figure, compare_table, references
+
+RESULTS = Path(__file__).parent.parent / "results" / "paper" / "results.csv"
+
+
+def test_figure_and_table_show_each_algorithm_beside_the_reference_controllers(tmp_path):
+    refs = references(RESULTS)
+    assert set(refs) == {"Baseline", "Rule-based"} and refs["Rule-based"][1] < refs["Baseline"][1]
+    progress = pd.DataFrame(
+        [(a, s, s, s / 100, 50 + s / 1e4, 100 - s / 1e4, 0.1) for a in ("trpo", "sac") for s in (1000, 2000)],
+        columns=["algorithm", "target", "steps", "wall_s", "in_band_pct", "power_kw", "reward_mean"],
+    )
+    assert compare_figure(progress, refs, tmp_path / "c.png").stat().st_size > 10_000
+    table = compare_table(progress, refs)
+    assert "| TRPO | 2,000 |" in table and "| SAC | 2,000 |" in table and "| Rule-based |" in table
+    assert "| Baseline | - | - | 100.00 |" in table
