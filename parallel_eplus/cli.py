@@ -163,7 +163,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_plot(args: argparse.Namespace) -> int:
     from parallel_eplus.evaluation.plots import plot_path
 
-    print(f"written: {plot_path(args.path)}")
+    written = plot_path(args.path)
+    for path in written if isinstance(written, list) else [written]:
+        print(f"written: {path}")
     return 0
 
 
@@ -299,7 +301,9 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     be.set_defaults(func=cmd_bench)
 
-    pl = sub.add_parser("plot", help="RUN_DIR: training convergence; EPISODE_DIR: one episode's time series")
+    pl = sub.add_parser(
+        "plot", help="RUN_DIR: convergence; EPISODE_DIR: its time series; SWEEP_DIR: figures from results.csv"
+    )
     pl.add_argument("path", type=Path)
     pl.set_defaults(func=cmd_plot)
     return parser

@@ -15,6 +15,7 @@ from parallel_eplus.engine.simulation import Simulation
 from parallel_eplus.evaluation.bench import BenchConfig, _physical, format_table, raw_rate, run
 
 
+@pytest.mark.slow
 def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     cfg = BenchConfig(raw_days=1, vector_steps=40, train_steps=128, batch_size=128, workers=2, repeats=1)
     out = tmp_path / "bench.json"
@@ -73,6 +74,7 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
     pd.testing.assert_frame_equal(raw_out, env_out)
 
 
+@pytest.mark.slow
 def test_a_training_run_replays_in_raw_energyplus(tmp_path, no_leaks):
     """`bench --replay-run`: every step a run took, with its own model and weather, minus pipes and learner."""
     from parallel_eplus.evaluation.bench import replay_run

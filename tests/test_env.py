@@ -94,6 +94,7 @@ def test_each_zone_follows_its_own_setpoint(tmp_path, no_leaks):
     assert e_hi - e_lo > 3.0, (e_lo, e_hi)
 
 
+@pytest.mark.slow
 def test_check_env(tmp_path, no_leaks):
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
     try:

@@ -72,6 +72,7 @@ def test_plot_run_and_episode(tmp_path, policy):
     assert is_png(plot_path(episode))
 
 
+@pytest.mark.slow
 def test_bad_input_fails_before_anything_runs(tmp_path):
     def cli(*args):
         return subprocess.run([sys.executable, "-m", "parallel_eplus.cli", "evaluate", *args, "--out", str(tmp_path)],
@@ -86,6 +87,7 @@ def test_bad_input_fails_before_anything_runs(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("schedule", [False, True])
 def test_policy_with_extra_features_is_evaluated_with_them(tmp_path, no_leaks, schedule):
     cfg = TrainConfig(

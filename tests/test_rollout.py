@@ -3,6 +3,7 @@ collects what SB3's lockstep loop collects."""
 
 import gymnasium as gym
 import numpy as np
+import pytest
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
@@ -100,6 +101,7 @@ def test_one_row_statistics_update_is_vecnormalizes_own_bit_for_bit():
     assert ours.count == sb3.count
 
 
+@pytest.mark.slow
 def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leaks, monkeypatch):
     """Serving each worker as its observation arrives fills the same buffer: every column is its worker's."""
     served: list[int] = []

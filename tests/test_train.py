@@ -39,6 +39,7 @@ def scalars(tb_dir: Path) -> dict[str, list]:
     return {tag: ea.Scalars(tag) for tag in ea.Tags()["scalars"]}
 
 
+@pytest.mark.slow
 def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path, no_leaks):
     cfg = small_config(tmp_path, "short")
     final = train(cfg, progress=False)
@@ -59,6 +60,7 @@ def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path
     assert a1.shape == (1, 4) and np.all(np.abs(a1) <= 1)
 
 
+@pytest.mark.slow
 def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cycle(tmp_path, no_leaks):
     cfg = small_config(tmp_path, "fair", run_days=1, timesteps=576, batch_size=576)  # 3 one-day episodes per worker
     train(cfg, progress=False)
@@ -72,6 +74,7 @@ def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cyc
     assert order == {0: ["CA", "CO", "FL"] * 2, 1: ["CO", "FL", "CA"] * 2}
 
 
+@pytest.mark.slow
 def test_ray_backend_trains_locally(tmp_path, no_leaks):
     pytest.importorskip("ray")
     cfg = small_config(tmp_path, "ray", weathers=["CA"], timesteps=768, backend="ray", workers_per_actor=1)
@@ -81,6 +84,7 @@ def test_ray_backend_trains_locally(tmp_path, no_leaks):
     assert "episode/CA/power_kw" in tags
 
 
+@pytest.mark.slow
 def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path):
     pipes_before = our_pipe_dirs()
     cmd = [
@@ -116,6 +120,7 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
     assert _latest_checkpoint(tmp_path / "runs" / "cut") == resumed
 
 
+@pytest.mark.slow
 def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
     import pickle
 
@@ -146,6 +151,7 @@ def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
     assert saved.init_from == str(base) and saved.reward == reward and saved.batch_size == 512
 
 
+@pytest.mark.slow
 def test_ppo_trains_the_same_way_and_its_policy_acts(tmp_path, no_leaks):
     from parallel_eplus.evaluation.sweep import policy_controller
 

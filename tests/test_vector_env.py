@@ -110,6 +110,7 @@ def make_venv(request):
         ray.shutdown()
 
 
+@pytest.mark.slow
 def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_leaks, make_venv):
     """Pipelining changes only who waits for whom: each worker's episode is what lockstep gives it."""
     rng = np.random.default_rng(0)

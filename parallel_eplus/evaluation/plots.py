@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import textwrap
+import zlib
 from pathlib import Path
 
 import matplotlib
@@ -14,9 +16,42 @@ import pandas as pd  # noqa: E402
 from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
 from parallel_eplus.engine.episode import STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
 
+# One colour per controller in every figure: the references fixed, other labels by a stable hash.
+REFERENCE_COLORS = {"Baseline": "tab:gray", "Rule-based": "tab:green"}
+_POLICY_COLORS = ["tab:blue", "tab:orange", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan"]
+ZONE_COLORS = {"west": "tab:blue", "east": "tab:orange"}
+
+
+def controller_color(label: str) -> str:
+    """The colour a controller has in every figure (same label, same colour, across runs)."""
+    if label in REFERENCE_COLORS:
+        return REFERENCE_COLORS[label]
+    return _POLICY_COLORS[zlib.crc32(label.encode()) % len(_POLICY_COLORS)]
+
+
+def with_references(df: pd.DataFrame, references: pd.DataFrame | None) -> pd.DataFrame:
+    """Puts the built-in and rule-based controllers' rows (same weathers) before a sweep that lacks them."""
+    if references is None:
+        return df
+    refs = references[references["controller"].isin(REFERENCE_COLORS) & references["weather"].isin(df["weather"])]
+    refs = refs[~refs["controller"].isin(df["controller"])]
+    return pd.concat([refs, df], ignore_index=True) if not refs.empty else df
+
+
+def find_references(out_dir: Path) -> pd.DataFrame | None:
+    """The saved reference sweep (`results/reference/results.csv`) nearest above `out_dir`, if any."""
+    for parent in [out_dir, *out_dir.resolve().parents]:
+        candidate = parent / "reference" / "results.csv"
+        if candidate.is_file() and candidate.parent != out_dir.resolve():
+            return pd.read_csv(candidate)
+    return None
+
+
+def _figure(figsize):
+    return plt.subplots(figsize=figsize, layout="constrained")
+
 
 def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
@@ -26,7 +61,7 @@ def temperature_comparison(df: pd.DataFrame, path: Path) -> Path:
     """Figure 4 left: per controller, weather and zone a min-max line with a mean +- std box."""
     controllers = list(dict.fromkeys(df["controller"]))
     weathers = list(dict.fromkeys(df["weather"]))
-    fig, ax = plt.subplots(figsize=(max(6, 1.2 * len(controllers) * len(weathers)), 4))
+    fig, ax = _figure((min(16, max(7, 0.45 * len(controllers) * len(weathers) + 2.5)), 4.4))
     x, ticks, labels = 0.0, [], []
     for c in controllers:
         for w in weathers:
@@ -34,7 +69,7 @@ def temperature_comparison(df: pd.DataFrame, path: Path) -> Path:
             if r.empty:
                 continue
             r = r.iloc[0]
-            for k, (zone, color) in enumerate((("west", "tab:blue"), ("east", "tab:orange"))):
+            for k, (zone, color) in enumerate(ZONE_COLORS.items()):
                 xi = x + (k - 0.5) * 0.35
                 ax.vlines(xi, r[f"{zone}_temp_min"], r[f"{zone}_temp_max"], color=color, lw=1)
                 mean, std = r[f"{zone}_temp_mean"], r[f"{zone}_temp_std"]
@@ -43,15 +78,20 @@ def temperature_comparison(df: pd.DataFrame, path: Path) -> Path:
             labels.append(f"{w}")
             x += 1
         x += 0.6
-    ax.axhspan(*COMFORT_BAND_C, color="green", alpha=0.08, label="22–25 °C")
+    ax.axhspan(*COMFORT_BAND_C, color="green", alpha=0.08)
     ax.set_xticks(ticks, labels)
     ax.set_ylabel("zone temperature (°C)")
-    ax.set_title("Zone temperatures: min–max line, mean ± std box (West blue, East orange)")
+    ax.set_title("Zone temperatures (line: min–max, box: mean ± std)", fontsize=10)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c, alpha=0.8) for c in ZONE_COLORS.values()]
+    handles.append(plt.Rectangle((0, 0), 1, 1, color="green", alpha=0.15))
+    fig.legend(handles, ["West zone", "East zone", "22–25 °C"], loc="outside right upper", fontsize=8)
     # Controller names under their group of weathers.
     group = len(weathers)
     for i, c in enumerate(controllers):
-        ax.annotate(c, xy=(i * (group + 0.6) + (group - 1) / 2, 0), xycoords=("data", "axes fraction"),
-                    xytext=(0, -28), textcoords="offset points", ha="center", fontsize=9)  # fmt: skip
+        name = textwrap.fill(c, max(12, 5 * group))
+        ax.annotate(name, xy=(i * (group + 0.6) + (group - 1) / 2, 0), xycoords=("data", "axes fraction"),
+                    xytext=(0, -24), textcoords="offset points", ha="center", va="top", fontsize=8,
+                    color=controller_color(c))  # fmt: skip
     return _save(fig, path)
 
 
@@ -59,37 +99,38 @@ def power_comparison(df: pd.DataFrame, path: Path) -> Path:
     """Average total power per controller and weather."""
     table = df.pivot(index="weather", columns="controller", values="power_kw")
     table = table.loc[list(dict.fromkeys(df["weather"])), list(dict.fromkeys(df["controller"]))]
-    fig, ax = plt.subplots(figsize=(7, 4))
-    table.plot.bar(ax=ax, rot=0)
+    fig, ax = _figure((9, 4))
+    table.plot.bar(ax=ax, rot=0, color=[controller_color(c) for c in table.columns], legend=False)
     ax.set_ylabel("average total power (kW)")
     ax.set_xlabel("test weather")
-    ax.set_title("Average power per controller and weather")
+    ax.set_title("Average power per controller and weather", fontsize=10)
+    fig.legend(loc="outside right upper", fontsize=8, title="controller", title_fontsize=8)
     return _save(fig, path)
 
 
 def west_zone_histogram(episode_dir: Path, title: tuple[str, str], path: Path) -> Path:
     """Figure 4 right: distribution of West-zone temperatures for one controller and weather."""
     steps = read_steps(episode_dir)
-    fig, ax = plt.subplots(figsize=(5, 4))
+    fig, ax = _figure((5, 4))
     t = steps["west_temp_c"]
-    ax.hist(t, bins=np.arange(np.floor(t.min() * 10) / 10, t.max() + 0.1, 0.1), color="tab:blue")
+    ax.hist(t, bins=np.arange(np.floor(t.min() * 10) / 10, t.max() + 0.1, 0.1), color=controller_color(title[0]))
     ax.axvspan(*COMFORT_BAND_C, color="green", alpha=0.08)
     ax.set_xlabel("West zone temperature (°C)")
     ax.set_ylabel("timesteps")
-    ax.set_title(f"{title[0]}, {title[1]}")
+    ax.set_title(f"{title[0]}, {title[1]}", fontsize=10, wrap=True)
     return _save(fig, path)
 
 
 def convergence(run_dir: Path, path: Path | None = None) -> Path:
     """Figure 3: mean reward per step of each finished episode against timesteps, per weather."""
     episodes = pd.read_csv(run_dir / "episodes.csv")
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = _figure((8, 4))
     for weather, g in episodes.groupby("weather"):
         ax.plot(g["timesteps"], g["reward_mean"], "o-", ms=3, label=weather)
     ax.set_xlabel("timesteps")
     ax.set_ylabel("mean reward per step (episode)")
-    ax.set_title(f"Training convergence: {run_dir.name}")
-    ax.legend()
+    ax.set_title(f"Training convergence: {run_dir.name}", fontsize=10)
+    fig.legend(loc="outside right upper", fontsize=8, title="weather", title_fontsize=8)
     return _save(fig, path or run_dir / "convergence.png")
 
 
@@ -100,26 +141,26 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
     setpoints = [c for c in steps.columns if c.endswith("_setpoint_c")]
     fans = [c for c in steps.columns if c.endswith("_fan_kg_s")]
     panels = 2 + bool(setpoints) + bool(fans)
-    fig, axes = plt.subplots(panels, 1, figsize=(11, 2.6 * panels), sharex=True)
+    fig, axes = plt.subplots(panels, 1, figsize=(12, 2.6 * panels), sharex=True, layout="constrained")
     ax = axes[0]
     for col in ("outdoor_temp_c", "west_temp_c", "east_temp_c"):
         ax.plot(steps["time"], steps[col], lw=0.7, label=col.removesuffix("_temp_c"))
     ax.axhspan(*COMFORT_BAND_C, color="green", alpha=0.1)
     ax.set_ylabel("°C")
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     i = 1
     for cols, unit in ((setpoints, "setpoint °C"), (fans, "fan kg/s")):
         if cols:
             for col in cols:
                 axes[i].plot(steps["time"], steps[col], lw=0.7, label=col)
             axes[i].set_ylabel(unit)
-            axes[i].legend(loc="upper right", fontsize=8)
+            axes[i].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
             i += 1
     ax = axes[i]
     for col in ("power_w", "it_power_w", "hvac_power_w"):
         ax.plot(steps["time"], steps[col] / 1000, lw=0.7, label=col.removesuffix("_w"))
     ax.set_ylabel("kW")
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     text = (
         f"power {summary['power_kw']:.1f} kW (IT {summary['it_power_kw']:.1f}, HVAC {summary['hvac_power_kw']:.1f});  "
         f"West {summary['west_temp_mean']:.2f} ± {summary['west_temp_std']:.2f} °C;  "
@@ -130,10 +171,22 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
     return _save(fig, path or episode_dir / "episode.png")
 
 
-def plot_path(path: Path) -> Path:
-    """A run directory draws its convergence; an episode directory its time series."""
+def sweep(out_dir: Path) -> list[Path]:
+    """Redraws a saved sweep's temperatures.png and power.png from its results.csv, with the references.
+
+    The built-in and rule-based controllers come from `reference/results.csv` above `out_dir` when
+    the sweep did not run them itself.
+    """
+    df = with_references(pd.read_csv(out_dir / "results.csv"), find_references(out_dir))
+    return [temperature_comparison(df, out_dir / "temperatures.png"), power_comparison(df, out_dir / "power.png")]
+
+
+def plot_path(path: Path) -> Path | list[Path]:
+    """A run directory draws its convergence; an episode directory its time series; a sweep its figures."""
     if (path / "episodes.csv").is_file():
         return convergence(path)
+    if (path / "results.csv").is_file():
+        return sweep(path)
     if (path / STEPS_FILE).is_file():
         return episode(path)
     if (path / SUMMARY_FILE).is_file():

@@ -229,8 +229,9 @@ def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | 
     df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(out_dir / "results.csv", index=False)
     (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df))
     files = [out_dir / "results.csv", out_dir / "results.md"]
-    files.append(plots.temperature_comparison(df, out_dir / "temperatures.png"))
-    files.append(plots.power_comparison(df, out_dir / "power.png"))
+    shown = plots.with_references(df, plots.find_references(out_dir))  # a lone policy beside the references
+    files.append(plots.temperature_comparison(shown, out_dir / "temperatures.png"))
+    files.append(plots.power_comparison(shown, out_dir / "power.png"))
     if histogram is None:
         controller = df["controller"].iloc[-1]
         weathers = list(df[df.controller == controller]["weather"])

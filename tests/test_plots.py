@@ -1,0 +1,43 @@
+"""Sweep figures keep every artist inside the canvas and give each controller one colour."""
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import pandas as pd
+import pytest
+
+from parallel_eplus.evaluation import plots
+
+REFERENCE = Path(__file__).resolve().parent.parent / "results" / "reference" / "results.csv"
+
+
+def _inside(fig) -> list[str]:
+    """Artists whose drawn extent leaves the canvas (matplotlib's tight bounding box, in inches)."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    tight, canvas = fig.get_tightbbox(renderer), fig.bbox_inches
+    out = []
+    if tight.x0 < -0.01 or tight.y0 < -0.01 or tight.x1 > canvas.x1 + 0.01 or tight.y1 > canvas.y1 + 0.01:
+        out.append(f"figure content {tight} beyond canvas {canvas}")
+    return out
+
+
+@pytest.mark.parametrize("draw", [plots.temperature_comparison, plots.power_comparison])
+def test_sweep_figures_not_clipped(draw, tmp_path, monkeypatch):
+    df = pd.read_csv(REFERENCE)
+    policy = df[df.controller == "Rule-based"].assign(controller="TRPO+RBC demand, 22.35 C, a long label (CA-CO-FL)")
+    df = pd.concat([df, policy], ignore_index=True)
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: figures.append(fig) or path)
+    draw(df, tmp_path / "figure.png")
+    assert _inside(figures[0]) == []
+    plt.close(figures[0])
+
+
+def test_references_added_and_colours_fixed():
+    refs = pd.read_csv(REFERENCE)
+    lone = refs[refs.controller == "Rule-based"].assign(controller="TRPO (CA)")
+    shown = plots.with_references(lone, refs)
+    assert list(dict.fromkeys(shown.controller)) == ["Baseline", "Rule-based", "TRPO (CA)"]
+    assert plots.controller_color("Baseline") != plots.controller_color("Rule-based")
+    assert plots.controller_color("TRPO (CA)") == plots.controller_color("TRPO (CA)")
