@@ -103,7 +103,7 @@ def make_venv(request):
     ray = pytest.importorskip("ray")
     from parallel_eplus.envs.ray_vector_env import RayVectorEnv
 
-    ray.init(num_cpus=2, include_dashboard=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False)
     try:
         yield lambda cfg, shares: RayVectorEnv(cfg, shares, workers_per_actor=1)
     finally:
@@ -183,3 +183,32 @@ def test_pipelined_worker_that_crashes_or_hangs_restarts_alone(tmp_path, no_leak
         assert info["weather"] == "CA" and info["time"].hour == 0  # a fresh episode on the same weather
     finally:
         venv.close()
+
+
+def test_ray_backend_starts_its_own_ray_despite_a_stale_cluster(tmp_path, no_leaks, monkeypatch):
+    """A cluster ended by Ctrl-C leaves ray_current_cluster behind; with no address we still start our own Ray."""
+    ray = pytest.importorskip("ray")
+    import tempfile
+
+    from parallel_eplus.envs.ray_vector_env import RayVectorEnv
+
+    root = tempfile.mkdtemp(
+        prefix="rt", dir="/tmp"
+    )  # Ray's own temp folder, private to this test (short: socket paths)
+    os.makedirs(os.path.join(root, "ray"))
+    with open(os.path.join(root, "ray", "ray_current_cluster"), "w") as f:
+        f.write("127.0.0.1:1\n")  # nothing listens there
+    monkeypatch.setenv("RAY_TMPDIR", root)
+    monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:1")
+    assert not ray.is_initialized()
+    venv = RayVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path)), [["CA"]], workers_per_actor=1)
+    try:
+        assert ray.is_initialized()
+        venv.start_all(range(1))
+        assert venv.observations().shape == (1, 6)
+    finally:
+        venv.close()
+    assert not ray.is_initialized()
+    import shutil
+
+    shutil.rmtree(root, ignore_errors=True)
