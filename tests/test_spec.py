@@ -52,3 +52,9 @@ def test_malformed_toml(tmp_path):
     bad.write_text('name = "x\n')
     with pytest.raises(SpecError, match="malformed TOML"):
         load_spec(bad)
+
+
+def test_temp_spec_is_the_setpoint_half():
+    temp = load_spec(SPEC.with_name("datacenter-2zone-temp.toml"))
+    assert [a.name for a in temp.actions] == [a.name for a in model.control_model("temp").actions]
+    assert temp.observations == load_spec(SPEC).observations
