@@ -8,11 +8,10 @@ Not wired into the env yet: see docs/buildings.md (to come) and issue 22.
 from __future__ import annotations
 
 import difflib
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-import tomllib
 
 REWARD_KEYS = ("center", "lower", "upper", "gaussian_weight", "band_weight", "power_weight")
 
