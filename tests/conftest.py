@@ -27,8 +27,25 @@ def our_processes() -> list[str]:
     return [ln for ln in out.stdout.splitlines() if ln.strip() and _started_by_us(ln.split()[0])]
 
 
+def _held_by_another_run(path: str) -> bool:
+    """Whether a process outside this test session has a file in `path` open: the pipes of a training
+    run sharing the machine, which are not ours to count."""
+    prefix = path.rstrip("/") + "/"
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit() or int(proc.name) == os.getpid() or _started_by_us(proc.name):
+            continue
+        try:
+            if any(os.readlink(fd).startswith(prefix) for fd in (proc / "fd").iterdir()):
+                return True
+        except OSError:  # gone meanwhile, or not ours to read
+            continue
+    return False
+
+
 def our_pipe_dirs(tmp: str = "/tmp") -> set[str]:
-    return {d for d in os.listdir(tmp) if d.startswith("parallel-eplus-") and "episodes" not in d}
+    """Pipe directories under `tmp`, less those another run on the machine has open."""
+    names = {d for d in os.listdir(tmp) if d.startswith("parallel-eplus-") and "episodes" not in d}
+    return {d for d in names if not _held_by_another_run(os.path.join(tmp, d))}
 
 
 @pytest.fixture
