@@ -59,7 +59,7 @@ start)
     echo "started pid $(cat "$WORK/$RUN.pid"), code $COMMIT, log $WORK/$RUN.log"
     ;;
 status)
-    tail -c 2000 "$WORK/$RUN.log" | tr '\r' '\n' | grep -v '^$' | tail -3
+    tail -c 2000 "$WORK/$RUN.log" | tr '\r' '\n' | grep -av '^$' | tail -3
     echo "newest checkpoint: $(latest)"
     ;;
 stop)
