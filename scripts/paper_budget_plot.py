@@ -33,7 +33,7 @@ def _means(csv: Path, controller: str) -> tuple[float, float]:
 
 def checkpoints() -> pd.DataFrame:
     paper_csv = ROOT / "results" / "paper" / "results.csv"
-    points = [(1_015_808, *_means(paper_csv, "TRPO (CA-CO-FL)"))]
+    points = [(1_015_808, *_means(paper_csv, "TRPO (CA-CO-FL) 1M"))]
     for d in sorted(OUT.glob("[0-9]*"), key=lambda p: int(p.name)):
         df = pd.read_csv(d / "results.csv")
         points.append((int(d.name), *_means(d / "results.csv", df["controller"].iloc[0])))
