@@ -25,17 +25,47 @@ def action_space(n: int) -> gym.spaces.Box:
 
 
 class EnergyPlusEnv(gym.Env):
-    """The paper's environment: 6 observations, 2 or 4 normalized actions, its reward.
+    """The paper's data center under learned cooling control: one EnergyPlus process per episode.
 
-    `time_features=True` appends hour and day of week as sine/cosine pairs (`model.TIME_FEATURES`);
-    `schedule_features=True` then the IT-load schedule's present value and its steps (`model.SCHEDULE_FEATURES`).
-    `residual_scale > 0`: the action corrects the rule-based controller's by up to that much (rbc.py):
-    each normalized action (`residual_space="action"`) or, with `"demand"`, each zone's flow demand
-    (two elements, up to `residual_scale` kg/s).
+    ## Description
+    EnergyPlus's two-zone data center (`2ZoneDataCenterHVAC_wEconomizer`, West and East zones, each with
+    its own air loop) with the built-in setpoint managers and fan control replaced by the agent
+    (Moriyama et al. 2018). `reset()` starts a new EnergyPlus process on the next weather file and a
+    private pair of named pipes; every `step()` runs one zone timestep (15 minutes) under the action.
 
-    `reset()` starts a new EnergyPlus process (stopping a running one) and returns the state at the
-    start of the run period; each `step()` runs one 15-minute zone timestep under the given action.
-    The episode ends (`terminated=True`) after the run period's last timestep.
+    ## Action Space
+    `Box(-1, 1, (4,))`, scaled linearly to physical units (`buildings/model.py` `ACTIONS`): West and
+    East supply-air setpoints (10–40 °C, written to four setpoint nodes per zone), West and East supply
+    fan mass flow (1.75–7.0 kg/s). `model="temp"`: the two setpoints only. With `residual_scale > 0`
+    the action corrects the rule-based controller's (`residual_space="action"`: each element;
+    `"demand"`: two elements, each zone's flow demand, up to `residual_scale` kg/s). A non-finite
+    action raises `ValueError` naming the element.
+
+    ## Observation Space
+    `Box(float32)` of the paper's six (`model.SENSORS`): outdoor, West and East zone temperatures (°C;
+    −20 to 50) and total, IT and HVAC electric power (W). `time_features=True` appends hour and day of
+    week as sine/cosine pairs; `schedule_features=True` the IT-load schedule's value and steps
+    (`model.TIME_FEATURES`, `model.SCHEDULE_FEATURES`; each in [−1, 1]). `info` carries every raw
+    value by name, the simulated `time` and the `weather`.
+
+    ## Rewards
+    The paper's: a Gaussian plus a trapezoid around 23.5 °C (band 23–24 °C) per zone, minus
+    λ_P × total power (`buildings/reward.py`, constants in `RewardConfig`; `reward=` overrides them).
+
+    ## Starting State
+    The weather file's January 1, 00:00, after EnergyPlus's sizing and warmup under each action's
+    `initial` value.
+
+    ## Episode End
+    `terminated=True` after the run period's last timestep (`run_days`, a year by default); `info`
+    then holds `episode_summary` (power, temperatures, % in band) and `episode_dir`. Never truncated.
+    A crashed or silent EnergyPlus raises `EnergyPlusError` within `step_timeout_s`.
+
+    ## Arguments
+    `weather`: a short name (CA, CO, FL, IL, VA), an EPW path, or a list cycled episode by episode;
+    `run_days`; `output_dir` and `keep_episodes` for episode records; `reward`; `idf` to override the
+    model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features`;
+    `residual_scale`, `residual_space`, `rbc_target_c`.
     """
 
     metadata = {"render_modes": []}
