@@ -34,7 +34,7 @@ def test_datacenter_spec_matches_model():
 
 def test_bad_spec_reports_every_problem(tmp_path):
     text = SPEC.read_text().replace("low = 1.75", "low = 40.0").replace('power = "power_w"', 'power = "powr_w"')
-    text = text.replace("band_weight = 0.1", "band_wieght = 0.1").replace('idf = "../../../idf/', 'idf = "/nowhere/')
+    text = text.replace("band_weight = 0.1", "band_wieght = 0.1").replace('idf = "2Zone', 'idf = "/nowhere/2Zone')
     bad = tmp_path / "bad.toml"
     bad.write_text(text)
     with pytest.raises(SpecError) as e:

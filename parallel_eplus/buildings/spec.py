@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from parallel_eplus.buildings import resources
+
 REWARD_KEYS = ("center", "lower", "upper", "gaussian_weight", "band_weight", "power_weight")
 
 
@@ -77,6 +79,29 @@ def _close(value: str, names) -> str:
     return f'; close: "{match[0]}"' if match else ""
 
 
+def _resolve(spec: Path, text: str, where: str, errors: list[str]) -> Path:
+    """A file the spec names: relative to the spec, absolute, or a bare name among the built-in files.
+
+    Bare names find the package's own models for its own specs only; weathers also among the built-in ones
+    (the EnergyPlus wheel's), so `CA = "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw"` works in any spec.
+    """
+    path = (spec.parent / Path(text).expanduser()).resolve()
+    if path.is_file():
+        return path
+    weather = text.lower().endswith(".epw")
+    if Path(text).name == text and (weather or resources.is_builtin_spec(spec)):
+        try:
+            return resources.weather_file(text) if weather else resources.model_file(text)
+        except FileNotFoundError:
+            pass
+        dirs = [spec.parent, *(resources.weather_dirs() if weather else resources.model_dirs())]
+        looked = ", ".join(dict.fromkeys(map(str, dirs)))
+    else:
+        looked = str(path.parent)
+    errors.append(f'{where}: "{text}" not found (looked in {looked})')
+    return path
+
+
 def load_spec(path: str | Path) -> BuildingSpec:
     """Read and validate a spec; raises SpecError listing every problem (file, key, value)."""
     path = Path(path).resolve()
@@ -108,10 +133,8 @@ def load_spec(path: str | Path) -> BuildingSpec:
 
     name = need(data, "name", "")
     idf_text = need(data, "idf", "")
-    idf = (path.parent / idf_text).resolve() if idf_text else path
-    if idf_text and not idf.is_file():
-        errors.append(f'idf: "{idf_text}" not found (looked in {path.parent})')
-    weathers = {k: (path.parent / v).resolve() for k, v in data.get("weathers", {}).items()}
+    idf = _resolve(path, idf_text, "idf", errors) if idf_text else path
+    weathers = {k: _resolve(path, v, f"weathers.{k}", errors) for k, v in data.get("weathers", {}).items()}
 
     observations = []
     for i, t in enumerate(data.get("observations", [])):
