@@ -72,6 +72,7 @@ class BuildingSpec:
     time_features: bool = False
     schedule_features: bool = False
     timesteps_per_hour: int | None = None  # None: the IDF's Timestep
+    baseline_idf: Path | None = None  # the model with its own controls, for evaluation; None: `idf` itself
 
 
 def _close(value: str, names) -> str:
@@ -135,6 +136,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
     idf_text = need(data, "idf", "")
     idf = _resolve(path, idf_text, "idf", errors) if idf_text else path
     weathers = {k: _resolve(path, v, f"weathers.{k}", errors) for k, v in data.get("weathers", {}).items()}
+    baseline_idf = _resolve(path, data["baseline_idf"], "baseline_idf", errors) if "baseline_idf" in data else None
 
     observations = []
     for i, t in enumerate(data.get("observations", [])):
@@ -211,6 +213,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
         bool(data.get("time_features", False)),
         bool(data.get("schedule_features", False)),
         data.get("timesteps_per_hour"),
+        baseline_idf,
     )
 
 
