@@ -314,7 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
     bsub = bd.add_subparsers(dest="building_command", required=True)
     bi = bsub.add_parser("init", help="run MODEL.idf briefly and write a commented starter spec")
     bi.add_argument("idf", type=Path, metavar="MODEL.idf")
-    bi.add_argument("--weather", type=Path, help="an .epw for the short run and the spec (default: San Francisco)")
+    bi.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or an .epw path, for the run and the spec")
     bi.add_argument("-o", "--output", type=Path, help="the spec to write (default: MODEL.toml beside the model)")
     bi.add_argument("--name", help="the building's name in the spec (default: from the file name)")
     bi.set_defaults(func=cmd_building_init)

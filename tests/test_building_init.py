@@ -63,6 +63,10 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
     out.write_text(uncomment_actions(text, r"^# zone .* cooling( \(|$)"))
     actions = load_spec(out).actions
     assert [a.actuators[0].control for a in actions] == ["Cooling Setpoint"] * 5
+    out.write_text(uncomment_actions(text, r"^# all 5 thermostats' cooling"))
+    (together,) = load_spec(out).actions
+    assert together.name == "cooling_setpoint_c" and len(together.actuators) == 5
+    assert "Air Node" not in text  # zone air nodes' setpoints are the thermostat's, not candidates
     # Every candidate names an actuator EnergyPlus listed for this model.
     listed = {(r[1], r[2], r[3].upper()) for r in survey(PROTOTYPE, weather, days=0).rows if r[0] == "Actuator"}
     for a in actions:

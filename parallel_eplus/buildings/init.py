@@ -32,7 +32,6 @@ REQUESTS = (
     ("Fan Air Mass Flow Rate", "*"),
 )
 NO_SETPOINT = -900.0  # EnergyPlus marks a node without a setpoint with -999
-DEFAULT_WEATHER = "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw"
 
 
 @dataclass
@@ -150,10 +149,24 @@ def _observation(name: str, variable: str, key: str, low: float, high: float, no
 
 
 def _candidate(name, component, control, key, low, high, initial, unit, note) -> list[str]:
+    """One commented [[actions]] block; `key` may be a list (one action moving several actuators together)."""
     lines = [f"# {note}", "# [[actions]]", f"# name = {_str(name)}", f'# unit = "{unit}"']
     lines += [f"# low = {_num(low)}", f"# high = {_num(high)}", f"# initial = {_num(initial)}"]
-    lines.append(f"# actuators = [{{ component = {_str(component)}, control = {_str(control)}, key = {_str(key)} }}]")
+    one = "{{ component = {}, control = {}, key = {} }}"
+    if isinstance(key, list):
+        lines.append("# actuators = [")
+        lines += [f"#   {one.format(_str(component), _str(control), _str(k))}," for k in key]
+        lines.append("# ]")
+    else:
+        lines.append(f"# actuators = [{one.format(_str(component), _str(control), _str(key))}]")
     return [*lines, ""]
+
+
+def _zone_air_nodes(idf: Path) -> set[str]:
+    """Zone air nodes (ZoneHVAC:EquipmentConnections' fifth field): their setpoint is the thermostat's, not a knob."""
+    text = re.sub(r"!.*", "", idf.read_text(encoding="latin-1"))
+    found = re.findall(r"ZoneHVAC:EquipmentConnections\s*,([^;]*);", text, re.I)
+    return {f.split(",")[4].strip().upper() for f in found if len(f.split(",")) > 4}
 
 
 def seen_text(v: tuple[float, float] | None) -> str:
@@ -232,7 +245,18 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         raise ValueError(f"{idf}: EnergyPlus offered no zone temperature or facility power to observe")
     temps = temps or [n for n in obs if n.endswith("_temp_c") and n != "outdoor_temp_c"] or ite
     lines += ["# ---- candidate actions (uncomment at least one) ----", ""]
-    for key in s.keys("Actuator", "Zone Temperature Control", "Cooling Setpoint"):
+    zones = s.keys("Actuator", "Zone Temperature Control", "Cooling Setpoint")
+    if len(zones) > 1:  # what a user most often wants: one knob per setpoint for the whole building
+        every = [o(k) for k in zones]
+        lines += _candidate(
+            "cooling_setpoint_c", "Zone Temperature Control", "Cooling Setpoint", every, 22.0, 30.0, 24.0, "C",
+            f"all {len(zones)} thermostats' cooling setpoints together",
+        )  # fmt: skip
+        lines += _candidate(
+            "heating_setpoint_c", "Zone Temperature Control", "Heating Setpoint", every, 15.0, 21.5, 21.0, "C",
+            f"all {len(zones)} thermostats' heating setpoints together (keep below cooling)",
+        )  # fmt: skip
+    for key in zones:
         base, z = _snake(o(key)), o(key)
         c = seen("Zone Thermostat Cooling Setpoint Temperature", key)
         h = seen("Zone Thermostat Heating Setpoint Temperature", key)
@@ -244,15 +268,20 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
             f"{base}_heating_setpoint_c", "Zone Temperature Control", "Heating Setpoint", z, 15.0, 23.0,
             _clamp(h[1], 15.0, 23.0) if h else 21.0, "C", f"zone {z} heating (below cooling)" + seen_text(h),
         )  # fmt: skip
-    node_note = "the model sets it now (a SetpointManager?): disable that in the copy you train on, or it may win"
+    lines += [
+        "# Node setpoints below are set by the model now (its SetpointManagers): disable the manager of a node",
+        "# the agent takes over in the copy you train on, or it may overwrite the agent's value.",
+        "",
+    ]
+    zone_nodes = _zone_air_nodes(idf)
     for key in s.keys("OutputVariable", "System Node Setpoint Temperature"):
         v = seen("System Node Setpoint Temperature", key)
-        if not v or v[0] < NO_SETPOINT:
+        if not v or v[0] < NO_SETPOINT or v == (0.0, 0.0) or key in zone_nodes:
             continue
         low, high = min(10.0, math.floor(v[0])), max(30.0, math.ceil(v[1]))
         lines += _candidate(
             _snake(o(key)) + "_setpoint_c", "System Node Setpoint", "Temperature Setpoint", o(key), low, high,
-            _clamp((v[0] + v[1]) / 2, low, high), "C", f"node {o(key)}: seen {v[0]:.1f}..{v[1]:.1f} C; {node_note}",
+            _clamp((v[0] + v[1]) / 2, low, high), "C", f"node {o(key)}" + seen_text(v),
         )  # fmt: skip
     for key in s.keys("Actuator", "Fan", "Fan Air Mass Flow Rate"):
         v = seen("Fan Air Mass Flow Rate", key)
@@ -300,17 +329,17 @@ def summary(s: Survey) -> list[str]:
 
 
 def init_spec(
-    idf: Path, weather: Path | None = None, out: Path | None = None, name: str | None = None
+    idf: Path, weather: str | Path | None = None, out: Path | None = None, name: str | None = None
 ) -> tuple[Path, list[str]]:
-    """Survey `idf` and write its starter spec (default: beside the IDF, `<stem>.toml`): its path and a summary."""
-    from parallel_eplus.buildings.resources import weather_file
+    """Survey `idf` and write its starter spec (default: beside the IDF, `<stem>.toml`): its path and a summary.
+
+    `weather`: a short name (CA, CO, FL, IL, VA) or an .epw path; default San Francisco."""
+    from parallel_eplus.buildings.weather import resolve_weather
 
     idf = Path(idf).expanduser().resolve()
     if not idf.is_file():
         raise FileNotFoundError(f"model file not found: {idf}")
-    weather = Path(weather).expanduser().resolve() if weather else weather_file(DEFAULT_WEATHER)
-    if not weather.is_file():
-        raise FileNotFoundError(f"weather file not found: {weather}")
+    weather = resolve_weather(weather or "CA")
     out = Path(out or idf.with_suffix(".toml")).expanduser().resolve()
     if out.exists():
         raise ValueError(f"{out} exists: choose another file with -o, or move it away")
