@@ -31,6 +31,7 @@ REQUESTS = (
     ("Zone Thermostat Heating Setpoint Temperature", "*"),
     ("Fan Air Mass Flow Rate", "*"),
 )
+RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim
 NO_SETPOINT = -900.0  # EnergyPlus marks a node without a setpoint with -999
 
 
@@ -70,7 +71,7 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
             for r in result.rows:
                 if r[0] == "OutputVariable" and any(r[1] == v for v, _ in REQUESTS):
                     handles[(r[1], r[2])] = api.exchange.get_variable_handle(s, r[1], r[2])
-        if api.exchange.warmup_flag(s):
+        if api.exchange.warmup_flag(s) or (weather_periods and api.exchange.kind_of_sim(s) != RUN_PERIOD_WEATHER):
             return
         for k, h in handles.items():
             value = api.exchange.get_variable_value(s, h)
@@ -80,6 +81,7 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
         if steps[0] >= days * 24 * result.timesteps_per_hour:
             api.runtime.stop_simulation(s)
 
+    weather_periods = _simulation_control(idf)[1]  # then the design days before the year are not the survey
     api.runtime.callback_end_zone_timestep_after_zone_reporting(state, on_step)
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-init-") as out:
         code = api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(idf)])
@@ -136,10 +138,11 @@ def weather_key(weather: Path) -> str:
     return parts[1] if len(parts) > 2 and len(parts[0]) == 3 and len(parts[1]) == 2 else weather.stem
 
 
-def _runs_weather_periods(idf: Path) -> bool:
+def _simulation_control(idf: Path) -> tuple[bool, bool]:
+    """(runs the sizing periods as environments, runs the weather-file run periods), as EnergyPlus defaults."""
     m = re.search(r"^\s*SimulationControl\s*,([^;]*);", re.sub(r"!.*", "", idf.read_text(encoding="latin-1")), re.M)
-    fields = [f.strip().lower() for f in m.group(1).split(",")] if m else []
-    return len(fields) < 5 or fields[4] != "no"
+    fields = [f.strip().lower() for f in m.group(1).split(",")] + [""] * 5 if m else [""] * 5
+    return fields[3] == "yes", fields[4] != "no"
 
 
 def _observation(name: str, variable: str, key: str, low: float, high: float, note: str = "") -> list[str]:
@@ -193,10 +196,13 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         "# should own, check the bounds (they come from one day of the model's own control), then run",
         "# `parallel-eplus building check` on this file. Keys are matched case-insensitively by EnergyPlus.",
     ]
-    if not _runs_weather_periods(idf):
+    sizing_periods, weather_periods = _simulation_control(idf)
+    if sizing_periods or not weather_periods:
         lines += [
-            "# NOTE: this model's SimulationControl does not run weather-file run periods (only design days);",
-            "# set its fifth field 'Run Simulation for Weather File Run Periods' to Yes in the copy you train on.",
+            "# NOTE: in the copy you train on, set SimulationControl's 'Run Simulation for Sizing Periods' to No and",
+            "# 'Run Simulation for Weather File Run Periods' to Yes, so that an episode is the weather year",
+            f"# (now: sizing periods {'Yes' if sizing_periods else 'No'}, weather periods "
+            f"{'Yes' if weather_periods else 'No'}; sizing calculations are separate fields and stay on).",
         ]
     lines += [
         f"name = {_str(name)}",
@@ -346,4 +352,5 @@ def init_spec(
     s = survey(idf, weather)
     text = starter_spec(idf, weather, out, s, name)
     out.write_text(text, encoding="utf-8")
-    return out, summary(s)
+    written = f"{text.count('# [[actions]]')} candidate actions written, commented; observations: {text.count('[[obs')}"
+    return out, [*summary(s), written]
