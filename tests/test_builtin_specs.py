@@ -57,7 +57,7 @@ def run_day(spec: BuildingSpec, actions: dict[str, float] | None = None, idf: Pa
 
     api.runtime.callback_after_predictor_after_hvac_managers(state, before_hvac)
     api.runtime.callback_end_zone_timestep_after_zone_reporting(state, after_zone)
-    with tempfile.TemporaryDirectory(prefix="parallel-eplus-spec-") as out:
+    with tempfile.TemporaryDirectory(prefix="eplus-spec-check-") as out:
         weather = next(iter(spec.weathers.values()))
         api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(idf or spec.idf)])
     api.state_manager.delete_state(state)

@@ -83,7 +83,7 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
 
     weather_periods = _simulation_control(idf)[1]  # then the design days before the year are not the survey
     api.runtime.callback_end_zone_timestep_after_zone_reporting(state, on_step)
-    with tempfile.TemporaryDirectory(prefix="parallel-eplus-init-") as out:
+    with tempfile.TemporaryDirectory(prefix="eplus-init-") as out:
         code = api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(idf)])
         err = Path(out, "eplusout.err")
         tail = err.read_text(errors="replace")[-1500:] if err.is_file() else ""
