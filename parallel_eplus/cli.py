@@ -169,6 +169,15 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_building_init(args: argparse.Namespace) -> int:
+    from parallel_eplus.buildings.init import init_spec
+
+    out, summary = init_spec(args.idf, args.weather, args.output, args.name)
+    print("\n".join(summary))
+    print(f"written: {out} (a starter: uncomment the actions the agent should own)")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from parallel_eplus.evaluation.bench import BenchConfig, format_table, replay_run, run
 
@@ -300,6 +309,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",
     )  # fmt: skip
     be.set_defaults(func=cmd_bench)
+
+    bd = sub.add_parser("building", help="building specs: start one from an EnergyPlus model")
+    bsub = bd.add_subparsers(dest="building_command", required=True)
+    bi = bsub.add_parser("init", help="run MODEL.idf briefly and write a commented starter spec")
+    bi.add_argument("idf", type=Path, metavar="MODEL.idf")
+    bi.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or an .epw path, for the run and the spec")
+    bi.add_argument("-o", "--output", type=Path, help="the spec to write (default: MODEL.toml beside the model)")
+    bi.add_argument("--name", help="the building's name in the spec (default: from the file name)")
+    bi.set_defaults(func=cmd_building_init)
 
     pl = sub.add_parser(
         "plot", help="RUN_DIR: convergence; EPISODE_DIR: its time series; SWEEP_DIR: figures from results.csv"

@@ -16,6 +16,13 @@ Changes, in order:
    The PUE EMS program and its verbose EMS dictionary (a large .edd) go with them.
 3. Agent variant: the two SetpointManager:SingleZone:Cooling objects are commented out, so the
    agent's actuators own the controlled nodes' setpoints.
+
+It also derives the other buildings' variants from their committed models in idf/ (see those specs):
+4. *_year.idf (the CRAC data center, the DOE small office): SimulationControl runs the weather-file run period
+   only, not the sizing periods as environments before it (sizing calculations stay on), as the 2-zone model
+   does: an episode is the weather year. (The DOE file otherwise runs only its two design days.)
+5. 1ZoneDataCenterCRAC_wApproachTemp_agent.idf: the _year change, and SetpointManager:Warmest "Supply air
+   control" commented out: with it active the supply-node actuator has no effect (docs/notes/new-buildings.md).
 """
 
 from __future__ import annotations
@@ -29,6 +36,11 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SOURCE = ROOT.parent / "shared" / "reference" / "2ZoneDataCenterHVAC_wEconomizer-baseline-22.2.idf"
 BASELINE = ROOT / "idf" / "2ZoneDataCenterHVAC_wEconomizer.idf"
 AGENT = ROOT / "idf" / "2ZoneDataCenterHVAC_wEconomizer_agent.idf"
+CRAC = ROOT / "idf" / "1ZoneDataCenterCRAC_wApproachTemp.idf"
+CRAC_YEAR = ROOT / "idf" / "1ZoneDataCenterCRAC_wApproachTemp_year.idf"
+CRAC_AGENT = ROOT / "idf" / "1ZoneDataCenterCRAC_wApproachTemp_agent.idf"
+OFFICE = ROOT / "idf" / "RefBldgSmallOfficeNew2004_Chicago.idf"
+OFFICE_YEAR = ROOT / "idf" / "RefBldgSmallOfficeNew2004_Chicago_year.idf"
 
 HEADER = """\
 ! Derived by scripts/make_models.py from the 2ZoneDataCenterHVAC_wEconomizer baseline model as
@@ -152,9 +164,48 @@ def agent_variant(baseline: str) -> str:
     return text
 
 
+def _derived(source: Path, change: str) -> str:
+    return (
+        f"! Derived by scripts/make_models.py from {source.name} (beside this file): {change}\n"
+        "! Do not edit by hand: change the script and re-run it.\n"
+    )
+
+
+def year_only(text: str) -> str:
+    """Run the weather file's year and not the design days as environments (sizing calculations stay on)."""
+    return _sub_once(
+        r"^(    )(?:YES|Yes),( +)!- Run Simulation for Sizing Periods\n"
+        r"    (?:NO, |Yes,)( +!- Run Simulation for Weather File Run Periods)",
+        r"\1No, \2!- Run Simulation for Sizing Periods\n\1Yes,\3",
+        text,
+        1,
+    )
+
+
+def crac_agent(text: str) -> str:
+    """Comment out the Warmest manager so the supply-node actuator owns the CRAC's supply temperature."""
+    pattern = r"^  SetpointManager:Warmest,\n    Supply air control,(?:.*\n)*?.*;.*\n"
+
+    def comment(m: re.Match[str]) -> str:
+        note = "  ! Disabled in the agent variant: parallel-eplus actuators own this setpoint.\n"
+        return note + "".join("!" + line[1:] for line in m.group(0).splitlines(keepends=True))
+
+    text, n = re.subn(pattern, comment, year_only(text), flags=re.MULTILINE)
+    if n != 1:
+        raise SystemExit(f"make_models: expected 1 SetpointManager:Warmest 'Supply air control', found {n}")
+    return _derived(CRAC, "weather year only; SetpointManager:Warmest 'Supply air control' disabled.") + text
+
+
 def build(source: Path) -> dict[Path, str]:
     baseline = transition(source.read_text(encoding="latin-1"))
-    return {BASELINE: baseline, AGENT: agent_variant(baseline)}
+    crac, office = CRAC.read_text(encoding="latin-1"), OFFICE.read_text(encoding="latin-1")
+    return {
+        BASELINE: baseline,
+        AGENT: agent_variant(baseline),
+        CRAC_YEAR: _derived(CRAC, "weather year only.") + year_only(crac),
+        CRAC_AGENT: crac_agent(crac),
+        OFFICE_YEAR: _derived(OFFICE, "weather year only.") + year_only(office),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:

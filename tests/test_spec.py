@@ -15,7 +15,7 @@ SPEC = Path(model.__file__).parent / "specs" / "datacenter-2zone.toml"
 
 def test_datacenter_spec_matches_model():
     spec = load_spec(SPEC)
-    assert spec.idf == model.AGENT_IDF
+    assert spec.idf == model.AGENT_IDF and spec.baseline_idf == model.BASELINE_IDF
     assert [(o.name, o.variable, o.key, o.low, o.high) for o in spec.observations] == [
         (s.name, s.variable, s.key, s.low, s.high) for s in model.SENSORS
     ]
@@ -34,7 +34,7 @@ def test_datacenter_spec_matches_model():
 
 def test_bad_spec_reports_every_problem(tmp_path):
     text = SPEC.read_text().replace("low = 1.75", "low = 40.0").replace('power = "power_w"', 'power = "powr_w"')
-    text = text.replace("band_weight = 0.1", "band_wieght = 0.1").replace('idf = "../../../idf/', 'idf = "/nowhere/')
+    text = text.replace("band_weight = 0.1", "band_wieght = 0.1").replace('\nidf = "2Zone', '\nidf = "/nowhere/2Zone')
     bad = tmp_path / "bad.toml"
     bad.write_text(text)
     with pytest.raises(SpecError) as e:
@@ -44,7 +44,8 @@ def test_bad_spec_reports_every_problem(tmp_path):
     assert 'reward.power: "powr_w" is not an observation name; close: "power_w"' in msg
     assert 'reward.band_wieght: unknown reward parameter; close: "band_weight"' in msg
     assert "actions[3].low: 40.0 is not below high 7.0" in msg
-    assert "idf: " in msg and "5 problem(s)" in msg
+    assert "idf: " in msg and "6 problem(s)" in msg
+    assert 'baseline_idf: "2ZoneDataCenterHVAC_wEconomizer.idf" not found' in msg  # bare names: built-in specs only
 
 
 def test_malformed_toml(tmp_path):

@@ -13,10 +13,11 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-IDF_DIR = ROOT / "idf"
-BASELINE_IDF = IDF_DIR / "2ZoneDataCenterHVAC_wEconomizer.idf"
-AGENT_IDF = IDF_DIR / "2ZoneDataCenterHVAC_wEconomizer_agent.idf"
+from parallel_eplus.buildings.resources import SOURCE_ROOT as ROOT  # noqa: F401 (scripts and tests in a checkout)
+from parallel_eplus.buildings.resources import model_file
+
+BASELINE_IDF = model_file("2ZoneDataCenterHVAC_wEconomizer.idf")
+AGENT_IDF = model_file("2ZoneDataCenterHVAC_wEconomizer_agent.idf")
 
 TIMESTEPS_PER_HOUR = 4  # the model's Timestep object: one control step is 15 minutes
 STEPS_PER_DAY = 24 * TIMESTEPS_PER_HOUR

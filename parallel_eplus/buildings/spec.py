@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from parallel_eplus.buildings import resources
+
 REWARD_KEYS = ("center", "lower", "upper", "gaussian_weight", "band_weight", "power_weight")
 
 
@@ -70,11 +72,35 @@ class BuildingSpec:
     time_features: bool = False
     schedule_features: bool = False
     timesteps_per_hour: int | None = None  # None: the IDF's Timestep
+    baseline_idf: Path | None = None  # the model with its own controls, for evaluation; None: `idf` itself
 
 
 def _close(value: str, names) -> str:
     match = difflib.get_close_matches(value, list(names), n=1)
     return f'; close: "{match[0]}"' if match else ""
+
+
+def _resolve(spec: Path, text: str, where: str, errors: list[str]) -> Path:
+    """A file the spec names: relative to the spec, absolute, or a bare name among the built-in files.
+
+    Bare names find the package's own models for its own specs only; weathers also among the built-in ones
+    (the EnergyPlus wheel's), so `CA = "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw"` works in any spec.
+    """
+    path = (spec.parent / Path(text).expanduser()).resolve()
+    if path.is_file():
+        return path
+    weather = text.lower().endswith(".epw")
+    if Path(text).name == text and (weather or resources.is_builtin_spec(spec)):
+        try:
+            return resources.weather_file(text) if weather else resources.model_file(text)
+        except FileNotFoundError:
+            pass
+        dirs = [spec.parent, *(resources.weather_dirs() if weather else resources.model_dirs())]
+        looked = ", ".join(dict.fromkeys(map(str, dirs)))
+    else:
+        looked = str(path.parent)
+    errors.append(f'{where}: "{text}" not found (looked in {looked})')
+    return path
 
 
 def load_spec(path: str | Path) -> BuildingSpec:
@@ -108,10 +134,9 @@ def load_spec(path: str | Path) -> BuildingSpec:
 
     name = need(data, "name", "")
     idf_text = need(data, "idf", "")
-    idf = (path.parent / idf_text).resolve() if idf_text else path
-    if idf_text and not idf.is_file():
-        errors.append(f'idf: "{idf_text}" not found (looked in {path.parent})')
-    weathers = {k: (path.parent / v).resolve() for k, v in data.get("weathers", {}).items()}
+    idf = _resolve(path, idf_text, "idf", errors) if idf_text else path
+    weathers = {k: _resolve(path, v, f"weathers.{k}", errors) for k, v in data.get("weathers", {}).items()}
+    baseline_idf = _resolve(path, data["baseline_idf"], "baseline_idf", errors) if "baseline_idf" in data else None
 
     observations = []
     for i, t in enumerate(data.get("observations", [])):
@@ -188,6 +213,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
         bool(data.get("time_features", False)),
         bool(data.get("schedule_features", False)),
         data.get("timesteps_per_hour"),
+        baseline_idf,
     )
 
 

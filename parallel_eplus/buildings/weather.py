@@ -4,11 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from parallel_eplus.buildings.model import ROOT
+from parallel_eplus.buildings.resources import weather_file
 
-WEATHER_DIR = ROOT / "weather"
-
-# Paper, Section 5.1.2. The files come from the pyenergyplus-lbnl wheel (TMY3).
+# Paper, Section 5.1.2. The files come from the pyenergyplus-lbnl wheel (TMY3); see resources.py.
 WEATHER_FILES: dict[str, str] = {
     "CA": "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw",
     "CO": "USA_CO_Golden-NREL.724666_TMY3.epw",
@@ -22,8 +20,8 @@ def resolve_weather(weather: str | Path) -> Path:
     """A code (CA, CO, FL, IL, VA) or a path to an .epw file; fails before anything is spawned."""
     text = str(weather)
     if text.upper() in WEATHER_FILES:
-        path = WEATHER_DIR / WEATHER_FILES[text.upper()]
-    elif text.lower().endswith(".epw"):
+        return weather_file(WEATHER_FILES[text.upper()])
+    if text.lower().endswith(".epw"):
         path = Path(text).expanduser()
     else:
         raise ValueError(f"unknown weather {text!r}: use a code ({', '.join(WEATHER_FILES)}) or a path to an .epw file")

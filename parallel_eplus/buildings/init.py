@@ -1,0 +1,356 @@
+"""`parallel-eplus building init`: a starter spec from any EnergyPlus model, in minutes rather than an afternoon.
+
+The model runs briefly through the EnergyPlus API (one simulated day after warm-up); EnergyPlus's own list of
+what can be read and actuated (`list_available_api_data_csv`) and the values seen in that day give the
+observations (outdoor, zone temperatures, facility power) and the likely actions (zone thermostat setpoints,
+node setpoints, fan flows) as commented candidates, with bounds a user then edits. What it writes loads with
+`load_spec`; the candidates are commented because choosing what the agent owns is the user's decision.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import re
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+# Variables requested for every key before the run: EnergyPlus lists (and reads) only requested variables.
+REQUESTS = (
+    ("Site Outdoor Air Drybulb Temperature", "Environment"),
+    ("Zone Mean Air Temperature", "*"),
+    ("Facility Total Electricity Demand Rate", "Whole Building"),
+    ("Facility Total HVAC Electricity Demand Rate", "Whole Building"),
+    ("Facility Total Building Electricity Demand Rate", "Whole Building"),
+    ("ITE Air Inlet Dry-Bulb Temperature", "*"),
+    ("System Node Setpoint Temperature", "*"),
+    ("Zone Thermostat Cooling Setpoint Temperature", "*"),
+    ("Zone Thermostat Heating Setpoint Temperature", "*"),
+    ("Fan Air Mass Flow Rate", "*"),
+)
+RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim
+NO_SETPOINT = -900.0  # EnergyPlus marks a node without a setpoint with -999
+
+
+@dataclass
+class Survey:
+    """What EnergyPlus says about a model: its API listing and each requested variable's range in a short run."""
+
+    rows: list[list[str]]  # list_available_api_data_csv, section markers dropped
+    seen: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)  # (variable, KEY) -> (min, max)
+    timesteps_per_hour: int = 0
+    days: float = 0.0
+
+    def keys(self, kind: str, *names: str) -> list[str]:
+        return list(dict.fromkeys(r[-2] for r in self.rows if r[0] == kind and tuple(r[1 : 1 + len(names)]) == names))
+
+
+def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
+    """Run the model through the API until `days` simulated days after warm-up (or its end) and report."""
+    from pyenergyplus.api import EnergyPlusAPI
+
+    api = EnergyPlusAPI()
+    state = api.state_manager.new_state()
+    api.runtime.set_console_output_status(state, False)
+    for variable, key in REQUESTS:
+        api.exchange.request_variable(state, variable, key)
+    result = Survey([])
+    handles: dict[tuple[str, str], int] = {}
+    steps = [0]
+
+    def on_step(s) -> None:
+        if not api.exchange.api_data_fully_ready(s):
+            return
+        if not result.rows:
+            text = api.exchange.list_available_api_data_csv(s).decode(errors="replace")
+            result.rows = [r for r in csv.reader(io.StringIO(text)) if r and not r[0].startswith("**")]
+            result.timesteps_per_hour = api.exchange.num_time_steps_in_hour(s)
+            for r in result.rows:
+                if r[0] == "OutputVariable" and any(r[1] == v for v, _ in REQUESTS):
+                    handles[(r[1], r[2])] = api.exchange.get_variable_handle(s, r[1], r[2])
+        if api.exchange.warmup_flag(s) or (weather_periods and api.exchange.kind_of_sim(s) != RUN_PERIOD_WEATHER):
+            return
+        for k, h in handles.items():
+            value = api.exchange.get_variable_value(s, h)
+            low, high = result.seen.get(k, (math.inf, -math.inf))
+            result.seen[k] = (min(low, value), max(high, value))
+        steps[0] += 1
+        if steps[0] >= days * 24 * result.timesteps_per_hour:
+            api.runtime.stop_simulation(s)
+
+    weather_periods = _simulation_control(idf)[1]  # then the design days before the year are not the survey
+    api.runtime.callback_end_zone_timestep_after_zone_reporting(state, on_step)
+    with tempfile.TemporaryDirectory(prefix="eplus-init-") as out:
+        code = api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(idf)])
+        err = Path(out, "eplusout.err")
+        tail = err.read_text(errors="replace")[-1500:] if err.is_file() else ""
+    api.state_manager.delete_state(state)
+    if not result.rows:
+        raise ValueError(f"{idf}: EnergyPlus stopped before its first timestep (exit code {code}):\n{tail}")
+    result.days = steps[0] / (24 * result.timesteps_per_hour)
+    return result
+
+
+def _idf_names(idf: Path) -> dict[str, str]:
+    """Every field value in the IDF by its upper-case form: EnergyPlus lists keys upper-case, users wrote them."""
+    text = re.sub(r"!.*", "", idf.read_text(encoding="latin-1"))
+    names: dict[str, str] = {}
+    for value in re.split(r"[,;]", text):
+        value = value.strip()
+        names.setdefault(value.upper(), value)
+    return names
+
+
+def _snake(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")
+
+
+def _str(text: str | Path) -> str:
+    return json.dumps(str(text))  # a TOML basic string
+
+
+def _path(target: Path, spec_dir: Path, weather: bool = False) -> str:
+    """Relative to the spec when beside or below it; a built-in weather by its bare name; else absolute."""
+    from parallel_eplus.buildings.resources import weather_file
+
+    target = target.resolve()
+    if target.is_relative_to(spec_dir.resolve()):
+        return target.relative_to(spec_dir.resolve()).as_posix()
+    try:
+        if weather and weather_file(target.name) == target:
+            return target.name
+    except FileNotFoundError:
+        pass
+    return str(target)
+
+
+def _num(x: float) -> str:
+    text = f"{x:.6g}"
+    return text + ".0" if text.lstrip("-").isdigit() else text
+
+
+def weather_key(weather: Path) -> str:
+    """USA_CA_San.Francisco...epw -> CA (the paper's short names); otherwise the file's stem."""
+    parts = weather.stem.split("_")
+    return parts[1] if len(parts) > 2 and len(parts[0]) == 3 and len(parts[1]) == 2 else weather.stem
+
+
+def _simulation_control(idf: Path) -> tuple[bool, bool]:
+    """(runs the sizing periods as environments, runs the weather-file run periods), as EnergyPlus defaults."""
+    m = re.search(r"^\s*SimulationControl\s*,([^;]*);", re.sub(r"!.*", "", idf.read_text(encoding="latin-1")), re.M)
+    fields = [f.strip().lower() for f in m.group(1).split(",")] + [""] * 5 if m else [""] * 5
+    return fields[3] == "yes", fields[4] != "no"
+
+
+def _observation(name: str, variable: str, key: str, low: float, high: float, note: str = "") -> list[str]:
+    lines = ["[[observations]]" + (f"  # {note}" if note else "")]
+    lines += [f"name = {_str(name)}", f"variable = {_str(variable)}", f"key = {_str(key)}", f"low = {_num(low)}"]
+    return [*lines, f"high = {_num(high)}", ""]
+
+
+def _candidate(name, component, control, key, low, high, initial, unit, note) -> list[str]:
+    """One commented [[actions]] block; `key` may be a list (one action moving several actuators together)."""
+    lines = [f"# {note}", "# [[actions]]", f"# name = {_str(name)}", f'# unit = "{unit}"']
+    lines += [f"# low = {_num(low)}", f"# high = {_num(high)}", f"# initial = {_num(initial)}"]
+    one = "{{ component = {}, control = {}, key = {} }}"
+    if isinstance(key, list):
+        lines.append("# actuators = [")
+        lines += [f"#   {one.format(_str(component), _str(control), _str(k))}," for k in key]
+        lines.append("# ]")
+    else:
+        lines.append(f"# actuators = [{one.format(_str(component), _str(control), _str(key))}]")
+    return [*lines, ""]
+
+
+def _zone_air_nodes(idf: Path) -> set[str]:
+    """Zone air nodes (ZoneHVAC:EquipmentConnections' fifth field): their setpoint is the thermostat's, not a knob."""
+    text = re.sub(r"!.*", "", idf.read_text(encoding="latin-1"))
+    found = re.findall(r"ZoneHVAC:EquipmentConnections\s*,([^;]*);", text, re.I)
+    return {f.split(",")[4].strip().upper() for f in found if len(f.split(",")) > 4}
+
+
+def seen_text(v: tuple[float, float] | None) -> str:
+    return f" (seen {v[0]:.1f}..{v[1]:.1f} C)" if v else ""
+
+
+def _clamp(x: float, low: float, high: float) -> float:
+    return round(min(max(x, low), high), 2)
+
+
+def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | None = None) -> str:
+    """The commented TOML text of a starter spec for `idf` from a survey `s`."""
+    orig = _idf_names(idf)
+    o = lambda key: orig.get(key.upper(), key)  # noqa: E731
+    spec_dir = out.parent
+    seen = lambda variable, key: s.seen.get((variable, key.upper()))  # noqa: E731
+    name = name or _snake(idf.stem).replace("_", "-")
+    n_act = sum(r[0] == "Actuator" for r in s.rows)
+    n_var = sum(r[0] == "OutputVariable" for r in s.rows)
+    lines = [
+        f"# Starter spec for {idf.name}, written by `parallel-eplus building init` after {s.days:.1f} simulated day(s)",
+        f"# on {weather.name}. EnergyPlus listed {n_act} actuators and {n_var} output variables: the",
+        "# observations below are the usual ones; the actions are commented candidates. Uncomment what the agent",
+        "# should own, check the bounds (they come from one day of the model's own control), then run",
+        "# `parallel-eplus building check` on this file. Keys are matched case-insensitively by EnergyPlus.",
+    ]
+    sizing_periods, weather_periods = _simulation_control(idf)
+    if sizing_periods or not weather_periods:
+        lines += [
+            "# NOTE: in the copy you train on, set SimulationControl's 'Run Simulation for Sizing Periods' to No and",
+            "# 'Run Simulation for Weather File Run Periods' to Yes, so that an episode is the weather year",
+            f"# (now: sizing periods {'Yes' if sizing_periods else 'No'}, weather periods "
+            f"{'Yes' if weather_periods else 'No'}; sizing calculations are separate fields and stay on).",
+        ]
+    lines += [
+        f"name = {_str(name)}",
+        f"idf = {_str(_path(idf, spec_dir))}",
+        f"# timesteps_per_hour: the IDF's Timestep ({s.timesteps_per_hour} per hour) is the control step",
+        "",
+        "[weathers]  # short names for --weathers; any .epw path works too",
+        f"{weather_key(weather)} = {_str(_path(weather, spec_dir, weather=True))}",
+        "",
+    ]
+    obs: list[str] = []
+    outdoor = "Site Outdoor Air Drybulb Temperature"
+    if seen(outdoor, "Environment"):
+        lines += _observation("outdoor_temp_c", outdoor, "Environment", -20.0, 50.0)
+        obs.append("outdoor_temp_c")
+    zone_keys = [
+        k for k in s.keys("OutputVariable", "Zone Mean Air Temperature") if seen("Zone Mean Air Temperature", k)
+    ]
+    controlled = set(s.keys("Actuator", "Zone Temperature Control", "Cooling Setpoint"))
+    temps = []
+    for key in zone_keys:
+        n = _snake(o(key)) + "_temp_c"
+        lines += _observation(
+            n, "Zone Mean Air Temperature", o(key), -20.0, 50.0, "" if key in controlled else "no thermostat"
+        )
+        obs.append(n)
+        if key in controlled:
+            temps.append(n)
+    ite = []
+    for key in s.keys("OutputVariable", "ITE Air Inlet Dry-Bulb Temperature"):
+        n = _snake(o(key)) + "_inlet_c"
+        lines += _observation(n, "ITE Air Inlet Dry-Bulb Temperature", o(key), -20.0, 60.0, "IT equipment air inlet")
+        obs.append(n)
+        ite.append(n)
+    power = None
+    for variable, n in (
+        ("Facility Total Electricity Demand Rate", "power_w"),
+        ("Facility Total Building Electricity Demand Rate", "building_power_w"),
+        ("Facility Total HVAC Electricity Demand Rate", "hvac_power_w"),
+    ):
+        if seen(variable, "Whole Building"):
+            lines += _observation(n, variable, "Whole Building", 0.0, 1e9)
+            obs.append(n)
+            power = power or n
+    if not obs or power is None:
+        raise ValueError(f"{idf}: EnergyPlus offered no zone temperature or facility power to observe")
+    temps = temps or [n for n in obs if n.endswith("_temp_c") and n != "outdoor_temp_c"] or ite
+    lines += ["# ---- candidate actions (uncomment at least one) ----", ""]
+    zones = s.keys("Actuator", "Zone Temperature Control", "Cooling Setpoint")
+    if len(zones) > 1:  # what a user most often wants: one knob per setpoint for the whole building
+        every = [o(k) for k in zones]
+        lines += _candidate(
+            "cooling_setpoint_c", "Zone Temperature Control", "Cooling Setpoint", every, 22.0, 30.0, 24.0, "C",
+            f"all {len(zones)} thermostats' cooling setpoints together",
+        )  # fmt: skip
+        lines += _candidate(
+            "heating_setpoint_c", "Zone Temperature Control", "Heating Setpoint", every, 15.0, 21.5, 21.0, "C",
+            f"all {len(zones)} thermostats' heating setpoints together (keep below cooling)",
+        )  # fmt: skip
+    for key in zones:
+        base, z = _snake(o(key)), o(key)
+        c = seen("Zone Thermostat Cooling Setpoint Temperature", key)
+        h = seen("Zone Thermostat Heating Setpoint Temperature", key)
+        lines += _candidate(
+            f"{base}_cooling_setpoint_c", "Zone Temperature Control", "Cooling Setpoint", z, 22.0, 30.0,
+            _clamp(c[0], 22.0, 30.0) if c else 24.0, "C", f"zone {z} cooling" + seen_text(c),
+        )  # fmt: skip
+        lines += _candidate(
+            f"{base}_heating_setpoint_c", "Zone Temperature Control", "Heating Setpoint", z, 15.0, 23.0,
+            _clamp(h[1], 15.0, 23.0) if h else 21.0, "C", f"zone {z} heating (below cooling)" + seen_text(h),
+        )  # fmt: skip
+    lines += [
+        "# Node setpoints below are set by the model now (its SetpointManagers): disable the manager of a node",
+        "# the agent takes over in the copy you train on, or it may overwrite the agent's value.",
+        "",
+    ]
+    zone_nodes = _zone_air_nodes(idf)
+    for key in s.keys("OutputVariable", "System Node Setpoint Temperature"):
+        v = seen("System Node Setpoint Temperature", key)
+        if not v or v[0] < NO_SETPOINT or v == (0.0, 0.0) or key in zone_nodes:
+            continue
+        low, high = min(10.0, math.floor(v[0])), max(30.0, math.ceil(v[1]))
+        lines += _candidate(
+            _snake(o(key)) + "_setpoint_c", "System Node Setpoint", "Temperature Setpoint", o(key), low, high,
+            _clamp((v[0] + v[1]) / 2, low, high), "C", f"node {o(key)}" + seen_text(v),
+        )  # fmt: skip
+    for key in s.keys("Actuator", "Fan", "Fan Air Mass Flow Rate"):
+        v = seen("Fan Air Mass Flow Rate", key)
+        top = round(v[1], 2) if v and v[1] > 0 else 1.0
+        note = f"fan {o(key)}: at most {top} kg/s in the short run; check its maximum flow in the IDF"
+        lines += _candidate(
+            _snake(o(key)) + "_kg_s", "Fan", "Fan Air Mass Flow Rate", o(key), round(0.25 * top, 2), top, top, "kg/s",
+            note,
+        )  # fmt: skip
+    lines += [
+        "[reward]  # the paper's form: a bonus near `center`, a penalty outside [lower, upper], minus power",
+        f"temperatures = [{', '.join(map(_str, temps))}]",
+    ]
+    if ite and temps != ite:
+        lines.append(f"# temperatures = [{', '.join(map(_str, ite))}]  # data centers: the IT inlet air")
+    lines += [
+        f"power = {_str(power)}",
+        "band = [22.0, 25.0]  # reported as % in band; also set center/lower/upper to your comfort range",
+        "# center = 23.5",
+        "# lower = 23.0",
+        "# upper = 24.0",
+        "# power_weight = 1e-5  # per W: scale to the building's power",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def summary(s: Survey) -> list[str]:
+    """What EnergyPlus offers, by kind: the long list behind the spec's few candidates."""
+    counts: dict[str, int] = {}
+    for r in s.rows:
+        if r[0] == "Actuator":
+            counts[f"{r[1]} / {r[2]}"] = counts.get(f"{r[1]} / {r[2]}", 0) + 1
+    top = sorted(counts.items(), key=lambda kv: -kv[1])
+    lines = [f"{sum(counts.values())} actuators in {len(counts)} kinds; most common:"]
+    lines += [f"  {n:5d}  {kind}" for kind, n in top[:8]]
+    for kind in ("Zone Temperature Control / Cooling Setpoint", "System Node Setpoint / Temperature Setpoint",
+                 "Fan / Fan Air Mass Flow Rate"):  # fmt: skip
+        lines.append(f"  {counts.get(kind, 0):5d}  {kind}  (candidates)")
+    variables = [r for r in s.rows if r[0] == "OutputVariable"]
+    lines.append(f"{len(variables)} output variables (the model's own Output:Variable requests and ours), "
+                 f"{sum(r[0] == 'OutputMeter' for r in s.rows)} meters, "
+                 f"{sum(r[0] == 'InternalVariable' for r in s.rows)} internal variables")  # fmt: skip
+    return lines
+
+
+def init_spec(
+    idf: Path, weather: str | Path | None = None, out: Path | None = None, name: str | None = None
+) -> tuple[Path, list[str]]:
+    """Survey `idf` and write its starter spec (default: beside the IDF, `<stem>.toml`): its path and a summary.
+
+    `weather`: a short name (CA, CO, FL, IL, VA) or an .epw path; default San Francisco."""
+    from parallel_eplus.buildings.weather import resolve_weather
+
+    idf = Path(idf).expanduser().resolve()
+    if not idf.is_file():
+        raise FileNotFoundError(f"model file not found: {idf}")
+    weather = resolve_weather(weather or "CA")
+    out = Path(out or idf.with_suffix(".toml")).expanduser().resolve()
+    if out.exists():
+        raise ValueError(f"{out} exists: choose another file with -o, or move it away")
+    s = survey(idf, weather)
+    text = starter_spec(idf, weather, out, s, name)
+    out.write_text(text, encoding="utf-8")
+    written = f"{text.count('# [[actions]]')} candidate actions written, commented; observations: {text.count('[[obs')}"
+    return out, [*summary(s), written]

@@ -1,0 +1,64 @@
+"""Where the built-in buildings' files are: the one module that knows, installed from a wheel or run from a checkout.
+
+The repository keeps EnergyPlus models in its top-level `idf/` folder and weather in `weather/`, where users
+know them. A wheel carries `idf/` as package data, `parallel_eplus/buildings/models/` (pyproject.toml maps the
+folder), found through `importlib.resources`. The weathers are not copied into the wheel: the EnergyPlus wheel we
+depend on ships the paper's five EPWs byte for byte (`pyenergyplus/data/weather/`), so they are found there.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+# A source checkout (editable install, tests, scripts): the folders beside the package.
+SOURCE_ROOT = Path(__file__).resolve().parents[2]
+SPECS = "specs"  # built-in building specs, always inside the package
+
+
+def _package_dir(name: str) -> Path:
+    return Path(str(resources.files("parallel_eplus.buildings") / name))
+
+
+def _energyplus_weather_dir() -> Path | None:
+    try:
+        return Path(str(resources.files("pyenergyplus") / "data" / "weather"))
+    except ModuleNotFoundError:
+        return None
+
+
+def model_dirs() -> list[Path]:
+    """Folders holding the built-in EnergyPlus models, the wheel's first."""
+    return [d for d in (_package_dir("models"), SOURCE_ROOT / "idf") if d.is_dir()]
+
+
+def weather_dirs() -> list[Path]:
+    """Folders holding the built-in weathers: the checkout's `weather/`, then the EnergyPlus wheel's."""
+    return [d for d in (SOURCE_ROOT / "weather", _energyplus_weather_dir()) if d is not None and d.is_dir()]
+
+
+def spec_dir() -> Path:
+    return _package_dir(SPECS)
+
+
+def _find(name: str, dirs: list[Path], what: str) -> Path:
+    for d in dirs:
+        if (d / name).is_file():
+            return (d / name).resolve()
+    looked = ", ".join(map(str, dirs))
+    raise FileNotFoundError(f"{what} {name!r} not found among the built-in files (looked in {looked})")
+
+
+def model_file(name: str) -> Path:
+    """A built-in EnergyPlus model (`.idf`) by file name."""
+    return _find(name, model_dirs(), "model file")
+
+
+def weather_file(name: str) -> Path:
+    """A built-in weather (`.epw`) by file name."""
+    return _find(name, weather_dirs(), "weather file")
+
+
+def is_builtin_spec(path: Path) -> bool:
+    """Whether a spec file is one of the package's own (bare file names in it are built-in files)."""
+    return Path(path).resolve().parent == spec_dir().resolve()

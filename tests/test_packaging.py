@@ -1,0 +1,120 @@
+"""The package works installed from its wheel, from any directory: built-in files travel as package data."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tomllib
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from parallel_eplus.buildings import resources
+from parallel_eplus.buildings.spec import load_spec
+
+ROOT = resources.SOURCE_ROOT
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+
+
+def test_every_subpackage_is_listed_for_the_wheel():
+    """pyproject.toml lists packages (the idf/ mapping rules out `find`): a new one must be added there."""
+    found = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "parallel_eplus").rglob("__init__.py")}
+    listed = set(PYPROJECT["tool"]["setuptools"]["packages"])
+    assert found - listed == set(), "add these to [tool.setuptools] packages in pyproject.toml"
+
+
+def test_builtin_specs_name_files_an_install_has():
+    """Every built-in spec's model ships (idf/ is mapped into the wheel); its weathers are in the EnergyPlus wheel."""
+    energyplus_weather = resources.weather_dirs()[-1]
+    assert energyplus_weather.parts[-3:] == ("pyenergyplus", "data", "weather")
+    specs = sorted(resources.spec_dir().glob("*.toml"))
+    assert specs
+    for path in specs:
+        spec = load_spec(path)
+        assert spec.idf.parent == ROOT / "idf", path
+        for weather in spec.weathers.values():
+            assert (energyplus_weather / weather.name).is_file(), f"{path.name}: {weather.name} would not install"
+
+
+def test_spec_paths_relative_absolute_or_builtin(tmp_path):
+    builtin = resources.spec_dir() / "datacenter-2zone.toml"
+    text = "".join(ln for ln in builtin.read_text().splitlines(True) if not ln.startswith("baseline_idf"))
+    idf = resources.model_file("2ZoneDataCenterHVAC_wEconomizer_agent.idf")
+    (tmp_path / "models").mkdir()
+    shutil.copy(idf, tmp_path / "models" / "mine.idf")
+    relative = tmp_path / "relative.toml"
+    relative.write_text(text.replace('idf = "2ZoneDataCenterHVAC_wEconomizer_agent.idf"', 'idf = "models/mine.idf"'))
+    assert load_spec(relative).idf == tmp_path / "models" / "mine.idf"
+    absolute = tmp_path / "absolute.toml"
+    absolute.write_text(text.replace('idf = "2ZoneDataCenterHVAC_wEconomizer_agent.idf"', f'idf = "{idf}"'))
+    assert load_spec(absolute).idf == idf
+    # A bare model name is a built-in model only in a built-in spec; weathers resolve by bare name anywhere.
+    copied = tmp_path / "copied.toml"
+    copied.write_text(text)
+    with pytest.raises(ValueError, match=r'idf: "2ZoneDataCenterHVAC_wEconomizer_agent.idf" not found \(looked in '):
+        load_spec(copied)
+    spec = load_spec(absolute)
+    assert spec.weathers["CA"] == resources.weather_file("USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw")
+    missing = tmp_path / "missing.toml"
+    missing.write_text(absolute.read_text().replace("USA_CA_San", "USA_CA_Sna"))
+    with pytest.raises(ValueError, match=r'weathers.CA: "USA_CA_Sna.Francisco.Intl.AP.724940_TMY3.epw" not found'):
+        load_spec(missing)
+
+
+def _wheel(tmp_path: Path) -> Path:
+    """Build from a copy of the tracked sources, as a release would, leaving the checkout untouched."""
+    src = tmp_path / "src"
+    files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
+    for name in files:
+        if name.startswith(("parallel_eplus/", "idf/")) or name in ("pyproject.toml", "README.md"):
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
+    for path in (ROOT / "parallel_eplus").rglob("*"):  # and this branch's files not committed yet
+        if path.is_file() and "__pycache__" not in path.parts:
+            (src / path.relative_to(ROOT)).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(path, src / path.relative_to(ROOT))
+    out = tmp_path / "dist"
+    cmd = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", out, src]
+    subprocess.run(cmd, check=True, capture_output=True)
+    (wheel,) = out.glob("parallel_eplus-*.whl")
+    return wheel
+
+
+@pytest.mark.slow
+def test_wheel_installs_and_runs_an_episode_from_another_directory(tmp_path, no_leaks):
+    wheel = _wheel(tmp_path)
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "parallel_eplus/buildings/models/2ZoneDataCenterHVAC_wEconomizer_agent.idf" in names
+    assert "parallel_eplus/buildings/specs/datacenter-2zone.toml" in names
+    assert not any(n.endswith(".epw") for n in names)  # the EnergyPlus wheel ships the paper's weathers
+
+    # A fresh venv that sees this environment's dependencies (torch, EnergyPlus) but not its editable install:
+    # a path in a .pth file is appended to sys.path without running that directory's own .pth hooks.
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", venv], check=True)
+    py = venv / "bin" / "python"
+    site = subprocess.run(
+        [py, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], capture_output=True, text=True
+    ).stdout.strip()
+    Path(site, "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    subprocess.run([py, "-m", "pip", "install", "--no-deps", "-q", wheel], check=True, env=env, capture_output=True)
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    where = subprocess.run(
+        [py, "-c", "import parallel_eplus.buildings.model as m; print(m.__file__); print(m.AGENT_IDF)"],
+        cwd=elsewhere, env=env, capture_output=True, text=True, check=True,
+    ).stdout.split()  # fmt: skip
+    assert all(w.startswith(site) for w in where), where
+    run = subprocess.run(
+        [venv / "bin" / "parallel-eplus", "simulate", "--days", "1", "--quiet", "--weather", "CA"],
+        cwd=elsewhere, env=env, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "zone samples in 22-25 C" in run.stdout
+    assert sorted(p.name for p in elsewhere.iterdir()) == []  # nothing written where the user stands
