@@ -178,6 +178,23 @@ def cmd_building_init(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_building_check(args: argparse.Namespace) -> int:
+    from parallel_eplus.buildings.check import check_spec
+    from parallel_eplus.buildings.spec import load_spec
+
+    spec = load_spec(args.spec)
+    result = check_spec(spec, args.weather, use_cache=not args.no_cache)
+    if not result.ok:
+        print(f"{spec.path}: {len(result.problems)} problem(s) against {spec.idf.name}:", file=sys.stderr)
+        print("  " + "\n  ".join(result.problems), file=sys.stderr)
+        return 1
+    n_act = sum(len(a.actuators) for a in spec.actions)
+    how = "cached" if result.cached else f"{result.seconds:.1f} s"
+    print(f"{spec.name}: ok: {len(spec.observations)} observations, {len(spec.actions)} actions ({n_act} actuators) "
+          f"resolved against {spec.idf.name}; {result.timesteps_per_hour} control steps per hour ({how})")  # fmt: skip
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from parallel_eplus.evaluation.bench import BenchConfig, format_table, replay_run, run
 
@@ -310,7 +327,7 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     be.set_defaults(func=cmd_bench)
 
-    bd = sub.add_parser("building", help="building specs: start one from an EnergyPlus model")
+    bd = sub.add_parser("building", help="building specs: start one from a model (init), check one against it (check)")
     bsub = bd.add_subparsers(dest="building_command", required=True)
     bi = bsub.add_parser("init", help="run MODEL.idf briefly and write a commented starter spec")
     bi.add_argument("idf", type=Path, metavar="MODEL.idf")
@@ -318,6 +335,11 @@ def build_parser() -> argparse.ArgumentParser:
     bi.add_argument("-o", "--output", type=Path, help="the spec to write (default: MODEL.toml beside the model)")
     bi.add_argument("--name", help="the building's name in the spec (default: from the file name)")
     bi.set_defaults(func=cmd_building_init)
+    bc = bsub.add_parser("check", help="resolve every variable, meter and actuator of SPEC against its model")
+    bc.add_argument("spec", type=Path, metavar="SPEC.toml")
+    bc.add_argument("--weather", help="short name or .epw for the check's run (default: the spec's first)")
+    bc.add_argument("--no-cache", action="store_true", help="run EnergyPlus even if this spec passed before")
+    bc.set_defaults(func=cmd_building_check)
 
     pl = sub.add_parser(
         "plot", help="RUN_DIR: convergence; EPISODE_DIR: its time series; SWEEP_DIR: figures from results.csv"
