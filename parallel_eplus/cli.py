@@ -69,6 +69,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.training.config import TrainConfig, TRPOSettings
+    from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
@@ -99,11 +100,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.resume and "--timesteps" not in sys.argv:
         cfg.timesteps = 0  # 0: keep the resumed run's own total
     try:
-        final = train(cfg, resume=args.resume, progress=not args.quiet)
+        final = train(cfg, resume=args.resume, progress=not args.quiet, overwrite=args.overwrite)
     except KeyboardInterrupt:
         return 130
     run_dir = final.parent
-    print(f"model: {final} (observation statistics: {run_dir / 'vecnormalize.pkl'})")
+    print(f"model: {final} (observation statistics: {normalization_file(final)})")
     print(f"episode records: {run_dir / 'episodes.csv'}")
     tensorboard = Path(sys.executable).parent / "tensorboard"
     print(f"TensorBoard: {tensorboard} --logdir {cfg.tensorboard_dir}   (then open http://localhost:6006)")
@@ -245,6 +246,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--run-name", help="default: trpo-<weathers>-<time>")
     tr.add_argument("--resume", help="a checkpoint .zip or a run directory to continue")
     tr.add_argument(
+        "--overwrite", action="store_true",
+        help="reuse a taken --run-name: the old run and its TensorBoard folder move aside to <name>.old-<time>",
+    )  # fmt: skip
+    tr.add_argument(
         "--init-from", type=Path,
         help="start a new run from a saved model.zip's weights and observation statistics (fine-tuning)",
     )  # fmt: skip
@@ -317,12 +322,13 @@ def main(argv: list[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     from parallel_eplus.errors import EnergyPlusError, Interrupts
+    from parallel_eplus.io import DiskFullError
 
     try:
         with Interrupts():  # every command cleans up on Ctrl-C or SIGTERM, started in the background or not
             return args.func(args)
-    except (EnergyPlusError, ValueError, FileNotFoundError) as e:
-        log.error("%s", e)
+    except (EnergyPlusError, ValueError, FileNotFoundError, DiskFullError) as e:
+        log.error("%s", e.strerror if isinstance(e, DiskFullError) else e)
         return 2
     except KeyboardInterrupt:
         log.warning("interrupted")

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from parallel_eplus import io
 from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import RewardConfig
@@ -226,8 +227,8 @@ def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | 
     from parallel_eplus.evaluation import plots
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(out_dir / "results.csv", index=False)
-    (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df))
+    io.write_text(out_dir / "results.csv", df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(index=False))
+    io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df))
     files = [out_dir / "results.csv", out_dir / "results.md"]
     shown = plots.with_references(df, plots.find_references(out_dir))  # a lone policy beside the references
     files.append(plots.temperature_comparison(shown, out_dir / "temperatures.png"))
