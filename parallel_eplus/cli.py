@@ -192,6 +192,25 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_clean(args: argparse.Namespace) -> int:
+    from parallel_eplus.engine import pipe_sweep
+
+    leftovers = pipe_sweep.leftover_processes()
+    for p in leftovers:
+        print(f"leftover EnergyPlus process {p.pid} (its trainer is gone; pipe {p.pipe_dir})")
+    if leftovers and args.kill:
+        pipe_sweep.kill(leftovers)
+        print(f"killed {len(leftovers)} leftover EnergyPlus process(es)")
+    elif leftovers:
+        print("stop them with: parallel-eplus clean --kill")
+    stale = pipe_sweep.stale_pipe_dirs(unowned=True)
+    for d in stale if args.dry_run else pipe_sweep.sweep(unowned=True):
+        print(f"{'stale' if args.dry_run else 'removed'} pipe directory: {d}")
+    if not leftovers and not stale:
+        print("nothing to clean: no pipe directory or EnergyPlus process of a process that is gone")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="parallel-eplus", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -311,6 +330,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pl.add_argument("path", type=Path)
     pl.set_defaults(func=cmd_plot)
+
+    cl = sub.add_parser(
+        "clean", help="remove pipe directories left by killed runs; list (or --kill) their leftover EnergyPlus"
+    )
+    cl.add_argument("--dry-run", action="store_true", help="only list the stale pipe directories")
+    cl.add_argument("--kill", action="store_true", help="also stop leftover EnergyPlus processes (SIGKILL)")
+    cl.set_defaults(func=cmd_clean)
     return parser
 
 

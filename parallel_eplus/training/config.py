@@ -87,6 +87,7 @@ class TrainConfig:
     ray_address: str | None = None
     workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
     max_restarts: int = 3
+    step_timeout_s: float = 60.0  # a worker silent this long is hung: its episode restarts (SimulationConfig)
     # True: every worker waits for the slowest at each step (SB3's way; a seed fixes the run bit for bit).
     # False: each local worker gets its next action as soon as its observation arrives (rollout.py).
     lockstep: bool = False

@@ -20,7 +20,7 @@ from tqdm import tqdm
 from parallel_eplus import io
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
-from parallel_eplus.errors import Interrupts
+from parallel_eplus.errors import EnergyPlusError, Interrupts
 from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather
 from parallel_eplus.training.checkpoints import AtomicCheckpoint, resume_point, save_checkpoint
 from parallel_eplus.training.config import TrainConfig
@@ -53,6 +53,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         residual_scale=cfg.residual_scale,
         residual_space=cfg.residual_space,
         rbc_target_c=cfg.rbc_target_c,
+        step_timeout_s=cfg.step_timeout_s,
     )
     shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
@@ -135,9 +136,10 @@ def train(
         try:
             with Interrupts():
                 model.learn(remaining, callback=callbacks, reset_num_timesteps=False, log_interval=1)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, EnergyPlusError) as e:
             path = save_checkpoint(model, env, run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip", True)
-            log.warning("interrupted at step %d; checkpoint saved: %s", model.num_timesteps, path)
+            cause = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped by the EnergyPlus failure below"
+            log.warning("%s at step %d; checkpoint saved: %s", cause, model.num_timesteps, path)
             log.warning("resume with: parallel-eplus train --resume %s", path)
             raise
         final = save_checkpoint(model, env, run_dir / MODEL_FILE, replay_buffer=True)
