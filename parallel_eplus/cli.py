@@ -99,6 +99,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     if args.resume and "--timesteps" not in sys.argv:
         cfg.timesteps = 0  # 0: keep the resumed run's own total
+    if "--batch-size" not in sys.argv and cfg.workers > 0:  # the default, split evenly across the workers
+        cfg.batch_size = -(-cfg.batch_size // cfg.workers) * cfg.workers
     try:
         final = train(cfg, resume=args.resume, progress=not args.quiet, overwrite=args.overwrite)
     except KeyboardInterrupt:
@@ -131,6 +133,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     )
 
     weathers = parse_weathers(args.weathers)  # bad input fails here, before anything runs
+    if args.workers < 1 or not 1 <= args.run_days <= 365:
+        raise ValueError("--workers must be at least 1 and --run-days within 1..365")
     controllers = []
     if args.baseline:
         controllers.append(Controller(BASELINE_LABEL, "baseline"))

@@ -70,7 +70,8 @@ def policy_controller(spec: str) -> Controller:
     path = Path(path_text)
     if path.is_dir():
         path = path / "model.zip"
-    from parallel_eplus.training.policy_files import policy_features, require_policy_files, run_dir_of
+    from parallel_eplus.engine.config import policy_action_names
+    from parallel_eplus.training.policy_files import check_actions, policy_features, require_policy_files, run_dir_of
 
     require_policy_files(path)
     config = run_dir_of(path) / "config.json"
@@ -80,6 +81,12 @@ def policy_controller(spec: str) -> Controller:
         algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     time_features, schedule_features = policy_features(path)
+    space = saved.get("residual_space", "action")
+    sim = SimulationConfig(model=saved.get("model", "temp_fan"), residual_scale=residual, residual_space=space)
+    what = f"model {sim.model}" + (f" with residual space {space}" if residual else "")
+    check_actions(path, len(policy_action_names(sim)), what)
+    if sim.model != "temp_fan":
+        raise ValueError(f"{path}: trained on model {sim.model!r}; the evaluation sweep runs temp_fan")
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,

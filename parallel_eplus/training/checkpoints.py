@@ -15,7 +15,7 @@ from pathlib import Path
 from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus import io
-from parallel_eplus.training.norm_stats import save_stats
+from parallel_eplus.training.norm_stats import read_stats, save_stats
 from parallel_eplus.training.policy_files import (
     normalization_file,
     replay_buffer_file,
@@ -70,6 +70,11 @@ def problem(model_zip: Path) -> str | None:
     stats = normalization_file(model_zip)
     if not stats.is_file() or stats.stat().st_size == 0:
         return f"its statistics {stats.name} are missing or empty"
+    if stats.suffix == ".npz":  # cheap to read in full (a legacy .pkl is read, with its warning, on resume)
+        try:
+            read_stats(stats)
+        except ValueError as e:
+            return str(e)
     return None
 
 
@@ -81,7 +86,9 @@ def resume_point(path: Path) -> Path:
         why = problem(path)
         if why is None:
             return path
-        earlier = [p for p in saves_newest_first(run_dir_of(path)) if p != path and problem(p) is None]
+        saves = saves_newest_first(run_dir_of(path))
+        older = saves[saves.index(path) + 1 :] if path in saves else saves
+        earlier = [p for p in older if problem(p) is None]
         offer = f"the previous intact one is {earlier[0]}: pass it to --resume" if earlier else "none earlier is intact"
         raise ValueError(f"--resume {path}: {why}; {offer}")
     if not path.is_dir():

@@ -75,14 +75,44 @@ def _saved_policy(model_zip: Path):
     return policy
 
 
+def saved_shapes(model_zip: Path) -> tuple[int, int]:
+    """(observations, actions) of a saved model, read from its JSON metadata without unpickling anything."""
+    import json
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(model_zip) as z:
+            data = json.loads(z.read("data"))
+        return int(data["observation_space"]["_shape"][0]), int(data["action_space"]["_shape"][0])
+    except (zipfile.BadZipFile, KeyError, ValueError, TypeError, IndexError) as e:
+        raise ValueError(f"{model_zip}: not a saved policy ({type(e).__name__}: {e})") from None
+
+
 def require_policy_files(model_zip: Path, context: str = "") -> Path:
-    """A saved policy is two files: the model and its observation statistics; returns the latter."""
+    """A saved policy is two files that belong together: the model and its observation statistics; returns
+    the latter. Statistics copied from another run (another observation count) are refused."""
     if not model_zip.is_file():
         raise FileNotFoundError(f"{context}policy not found: {model_zip}")
     stats = normalization_file(model_zip)
     if not stats.is_file():
         raise FileNotFoundError(f"{context}observation statistics missing beside the policy: {stats}")
+    n_obs, _ = saved_shapes(model_zip)
+    n_stats = read_stats(stats).n_observations
+    if n_stats != n_obs:
+        raise ValueError(
+            f"{context}{stats} holds statistics of {n_stats} observations but {model_zip.name} observes {n_obs}: "
+            "they come from different runs (keep each model.zip with its own statistics)"
+        )
     return stats
+
+
+def check_actions(model_zip: Path, expected: int, what: str) -> None:
+    """Refuse a policy whose action count is not what the simulation it would drive takes."""
+    _, n_act = saved_shapes(model_zip)
+    if n_act != expected:
+        raise ValueError(
+            f"{model_zip} acts on {n_act} values but {what} takes {expected}: a policy for another model or building"
+        )
 
 
 def _check_init_from(model_zip: Path, features: tuple[bool, bool]) -> None:

@@ -101,6 +101,7 @@ def train(
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
         _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
     if checkpoint is None:
+        cfg.check_new_run()
         claim_run_name(cfg, overwrite)
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
