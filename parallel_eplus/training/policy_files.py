@@ -63,16 +63,11 @@ def run_dir_of(checkpoint: Path) -> Path:
 
 
 def _saved_policy(model_zip: Path):
-    """The policy network of a saved model, whichever algorithm trained it (SAC's includes its critics)."""
-    from stable_baselines3.common.save_util import load_from_zip_file
+    """The policy network of a saved model, whichever algorithm trained it (SAC's includes its critics), built
+    without unpickling anything from the file (safe_load.py): a shared policy cannot run code."""
+    from parallel_eplus.training.safe_load import load_policy_network
 
-    data, params, _ = load_from_zip_file(model_zip, device="cpu")
-    policy = data["policy_class"](
-        data["observation_space"], data["action_space"], lambda _: 0.0, **data["policy_kwargs"]
-    )
-    policy.load_state_dict(params["policy"])
-    policy.set_training_mode(False)
-    return policy
+    return load_policy_network(model_zip)
 
 
 def saved_shapes(model_zip: Path) -> tuple[int, int]:

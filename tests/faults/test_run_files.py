@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import pickle
 import subprocess
@@ -104,3 +105,62 @@ def test_an_atomic_write_that_fails_leaves_the_previous_file_and_no_temporary(tm
     assert target.read_text() == "a\n1\n" and sorted(tmp_path.iterdir()) == [target]
     io.append_text(target, "2\n")
     assert target.read_text() == "a\n1\n2\n"
+
+
+@pytest.mark.parametrize(
+    "name, algorithm", [("paper-ca", "trpo"), ("ppo-ca-co-fl-time", "ppo"), ("residual-demand", "trpo")]
+)
+def test_a_policy_loads_without_unpickling_and_acts_as_sb3s_own_load(name, algorithm):
+    from parallel_eplus.training.policy_files import _saved_policy
+    from parallel_eplus.training.rollout import ALGORITHMS
+
+    model_zip = LEGACY.parent / name / "model.zip"
+    safe, full = _saved_policy(model_zip), ALGORITHMS[algorithm].load(model_zip, device="cpu").policy
+    obs = np.random.default_rng(0).normal(size=(8, safe.observation_space.shape[0])).astype(np.float32)
+    np.testing.assert_array_equal(safe.predict(obs, deterministic=True)[0], full.predict(obs, deterministic=True)[0])
+    assert safe.action_space == full.action_space and safe.observation_space.shape == full.observation_space.shape
+
+
+class _Payload:
+    """What a hostile model file could carry: unpickling it runs a command."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        import os
+
+        return (os.system, (f"touch {self.marker}",))
+
+
+def test_opening_a_shared_policy_runs_none_of_its_code(tmp_path):
+    import base64
+    import json
+    import shutil
+    import zipfile
+
+    from sb3_contrib import TRPO
+
+    marker = tmp_path / "code-ran"
+    hostile = tmp_path / "hostile"
+    hostile.mkdir()
+    with zipfile.ZipFile(LEGACY / "model.zip") as src, zipfile.ZipFile(hostile / "model.zip", "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "data":
+                meta = json.loads(data)
+                meta["lr_schedule"][":serialized:"] = base64.b64encode(pickle.dumps(_Payload(marker))).decode()
+                data = json.dumps(meta).encode()
+            dst.writestr(item, data)
+    shutil.copy(LEGACY / "config.json", hostile)
+    with open(LEGACY / "vecnormalize.pkl", "rb") as f:  # the statistics as data
+        from parallel_eplus.training.norm_stats import save_stats
+
+        save_stats(pickle.load(f), hostile / "vecnormalize.npz")
+
+    act = load_policy(hostile / "model.zip")  # what `evaluate --policy` opens
+    assert act(OBS).shape == (1, 4)
+    assert not marker.exists(), "loading the policy ran code from the file"
+    with contextlib.suppress(Exception):  # the same file through SB3's own load does run it: the test has teeth
+        TRPO.load(hostile / "model.zip", device="cpu")
+    assert marker.exists()
