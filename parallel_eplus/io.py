@@ -71,3 +71,15 @@ def append_text(target: str | os.PathLike, text: str) -> Path:
     target = Path(target)
     old = target.read_bytes() if target.is_file() else b""
     return write_bytes(target, old + text.encode())
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Temporary files in `folder` left by a writer that was killed mid-write (its PID is gone)."""
+    removed = []
+    for tmp in Path(folder).glob(".*.tmp-*"):
+        pid = tmp.name.rsplit("-", 1)[1]
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists():
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+                removed.append(tmp)
+    return removed

@@ -93,6 +93,8 @@ def resume_point(path: Path) -> Path:
         raise ValueError(f"--resume {path}: {why}; {offer}")
     if not path.is_dir():
         raise FileNotFoundError(f"--resume: no such run directory or checkpoint: {path}")
+    for folder in (path, path / "checkpoints"):  # half-written files of a run killed mid-save
+        io.remove_stale_temporaries(folder)
     saves = saves_newest_first(path)
     if not saves:
         raise FileNotFoundError(f"--resume: no checkpoint or model.zip in {path}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import pickle
 import subprocess
 import sys
@@ -164,3 +165,13 @@ def test_opening_a_shared_policy_runs_none_of_its_code(tmp_path):
     with contextlib.suppress(Exception):  # the same file through SB3's own load does run it: the test has teeth
         TRPO.load(hostile / "model.zip", device="cpu")
     assert marker.exists()
+
+
+def test_temporaries_of_a_killed_writer_are_removed_and_a_live_ones_kept(tmp_path):
+    dead_pid = subprocess.Popen(["true"])  # a PID that has exited
+    dead_pid.wait()
+    stale, live = tmp_path / f".model.zip.tmp-{dead_pid.pid}", tmp_path / f".model.zip.tmp-{os.getpid()}"
+    stale.write_bytes(b"half")
+    live.write_bytes(b"being written")
+    assert io.remove_stale_temporaries(tmp_path) == [stale]
+    assert live.exists() and not stale.exists()
