@@ -124,6 +124,7 @@ def train(
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
         model.lockstep = cfg.lockstep
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
+        start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers
         end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
@@ -138,6 +139,8 @@ def train(
             with Interrupts():
                 model.learn(remaining, callback=callbacks, reset_num_timesteps=False, log_interval=1)
         except (KeyboardInterrupt, EnergyPlusError) as e:
+            if isinstance(e, EnergyPlusError) and model.num_timesteps == start_steps:
+                raise  # nothing learned since the last save
             path = save_checkpoint(model, env, run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip", True)
             cause = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped by the EnergyPlus failure below"
             log.warning("%s at step %d; checkpoint saved: %s", cause, model.num_timesteps, path)

@@ -22,7 +22,7 @@ from parallel_eplus.engine import pipe_sweep
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.training.train import train
 
-from ..conftest import our_pipe_dirs, our_processes
+from ..conftest import our_processes
 from ..test_train import small_config
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -82,6 +82,10 @@ def _strike_later(episodes_csv: Path, sig: int, hit: list, until=lambda: False, 
     return stop
 
 
+def _pipe_dirs_of(pid: int) -> set[str]:
+    return {d for d in os.listdir("/tmp") if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
+
+
 def _energyplus_children(pid: int) -> list[int]:
     out = subprocess.run(["pgrep", "-P", str(pid), "-f", pipe_sweep.CALLBACK_MODULE], capture_output=True, text=True)
     return [int(p) for p in out.stdout.split()]
@@ -90,7 +94,6 @@ def _energyplus_children(pid: int) -> list[int]:
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
 def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_checkpoint(tmp_path, sig):
-    pipes_before = our_pipe_dirs()
     run = tmp_path / "runs" / "cut"
     proc = subprocess.Popen(_train_cmd("cut"), cwd=tmp_path, env=ENV, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
@@ -100,7 +103,7 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
     gone = _wait_for(lambda: our_processes() == [], 15, "every EnergyPlus process gone")
     print(f"{sig.name}: EnergyPlus processes gone {gone:.1f} s after the trainer exited")
     last = _checkpoints(run)[-1]
-    left = our_pipe_dirs() - pipes_before
+    left = _pipe_dirs_of(proc.pid)  # (other runs share the machine: only the trainer's own count)
     if sig == signal.SIGTERM:
         assert proc.returncode == 130 and "checkpoint saved" in out, out
         assert left == set()
@@ -112,18 +115,19 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
         assert all(d in listed for d in left), listed
 
     steps = int(last.stem.split("_")[1])
-    resumed = subprocess.run(_train_cmd("cut", steps + 192)[:-3] + ["--resume", "runs/cut", "--quiet"], cwd=tmp_path,
-                             env=ENV, capture_output=True, text=True, timeout=300)  # fmt: skip
-    assert resumed.returncode == 0, resumed.stderr
-    assert f"resuming cut from runs/cut/checkpoints/{last.name} at step {steps}" in resumed.stderr
-    assert our_pipe_dirs() - pipes_before == set()  # the resumed run's first pipe swept the dead run's
+    cmd = _train_cmd("cut", steps + 192)[:-3] + ["--resume", "runs/cut", "--quiet"]
+    resumed = subprocess.Popen(cmd, cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    _, err = resumed.communicate(timeout=300)
+    assert resumed.returncode == 0, err
+    assert f"resuming cut from runs/cut/checkpoints/{last.name} at step {steps}" in err
+    assert _pipe_dirs_of(proc.pid) == set()  # the resumed run's first pipe swept the dead run's
+    assert _pipe_dirs_of(resumed.pid) == set()
     assert our_processes() == []
     assert pd.read_csv(run / "episodes.csv")["timesteps"].max() > steps
 
 
 @pytest.mark.slow
 def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clean_lists(tmp_path):
-    pipes_before = our_pipe_dirs()
     run = tmp_path / "runs" / "frozen"
     proc = subprocess.Popen(_train_cmd("frozen"), cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)  # fmt: skip
@@ -144,7 +148,7 @@ def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clea
     _wait_for(lambda: our_processes() == [], 10, "the stopped worker gone")
     cleaned = subprocess.run(_cli("clean"), capture_output=True, text=True, check=True).stdout
     assert "removed pipe directory" in cleaned
-    assert our_pipe_dirs() - pipes_before == set()
+    assert _pipe_dirs_of(proc.pid) == set()
 
 
 @pytest.mark.slow
