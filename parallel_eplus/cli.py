@@ -69,6 +69,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.training.config import TrainConfig, TRPOSettings
+    from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
@@ -98,12 +99,14 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     if args.resume and "--timesteps" not in sys.argv:
         cfg.timesteps = 0  # 0: keep the resumed run's own total
+    if "--batch-size" not in sys.argv and cfg.workers > 0:  # the default, split evenly across the workers
+        cfg.batch_size = -(-cfg.batch_size // cfg.workers) * cfg.workers
     try:
-        final = train(cfg, resume=args.resume, progress=not args.quiet)
+        final = train(cfg, resume=args.resume, progress=not args.quiet, overwrite=args.overwrite)
     except KeyboardInterrupt:
         return 130
     run_dir = final.parent
-    print(f"model: {final} (observation statistics: {run_dir / 'vecnormalize.pkl'})")
+    print(f"model: {final} (observation statistics: {normalization_file(final)})")
     print(f"episode records: {run_dir / 'episodes.csv'}")
     tensorboard = Path(sys.executable).parent / "tensorboard"
     print(f"TensorBoard: {tensorboard} --logdir {cfg.tensorboard_dir}   (then open http://localhost:6006)")
@@ -130,6 +133,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     )
 
     weathers = parse_weathers(args.weathers)  # bad input fails here, before anything runs
+    if args.workers < 1 or not 1 <= args.run_days <= 365:
+        raise ValueError("--workers must be at least 1 and --run-days within 1..365")
     controllers = []
     if args.baseline:
         controllers.append(Controller(BASELINE_LABEL, "baseline"))
@@ -217,6 +222,25 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_clean(args: argparse.Namespace) -> int:
+    from parallel_eplus.engine import pipe_sweep
+
+    leftovers = pipe_sweep.leftover_processes()
+    for p in leftovers:
+        print(f"leftover EnergyPlus process {p.pid} (its trainer is gone; pipe {p.pipe_dir})")
+    if leftovers and args.kill:
+        pipe_sweep.kill(leftovers)
+        print(f"killed {len(leftovers)} leftover EnergyPlus process(es)")
+    elif leftovers:
+        print("stop them with: parallel-eplus clean --kill")
+    stale = pipe_sweep.stale_pipe_dirs(unowned=True)
+    for d in stale if args.dry_run else pipe_sweep.sweep(unowned=True):
+        print(f"{'stale' if args.dry_run else 'removed'} pipe directory: {d}")
+    if not leftovers and not stale:
+        print("nothing to clean: no pipe directory or EnergyPlus process of a process that is gone")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="parallel-eplus", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -270,6 +294,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument("--run-name", help="default: trpo-<weathers>-<time>")
     tr.add_argument("--resume", help="a checkpoint .zip or a run directory to continue")
+    tr.add_argument(
+        "--overwrite", action="store_true",
+        help="reuse a taken --run-name: the old run and its TensorBoard folder move aside to <name>.old-<time>",
+    )  # fmt: skip
     tr.add_argument(
         "--init-from", type=Path,
         help="start a new run from a saved model.zip's weights and observation statistics (fine-tuning)",
@@ -346,6 +374,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pl.add_argument("path", type=Path)
     pl.set_defaults(func=cmd_plot)
+
+    cl = sub.add_parser(
+        "clean", help="remove pipe directories left by killed runs; list (or --kill) their leftover EnergyPlus"
+    )
+    cl.add_argument("--dry-run", action="store_true", help="only list the stale pipe directories")
+    cl.add_argument("--kill", action="store_true", help="also stop leftover EnergyPlus processes (SIGKILL)")
+    cl.set_defaults(func=cmd_clean)
     return parser
 
 
@@ -357,12 +392,13 @@ def main(argv: list[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     from parallel_eplus.errors import EnergyPlusError, Interrupts
+    from parallel_eplus.io import DiskFullError
 
     try:
         with Interrupts():  # every command cleans up on Ctrl-C or SIGTERM, started in the background or not
             return args.func(args)
-    except (EnergyPlusError, ValueError, FileNotFoundError) as e:
-        log.error("%s", e)
+    except (EnergyPlusError, ValueError, FileNotFoundError, DiskFullError) as e:
+        log.error("%s", e.strerror if isinstance(e, DiskFullError) else e)
         return 2
     except KeyboardInterrupt:
         log.warning("interrupted")

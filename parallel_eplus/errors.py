@@ -50,3 +50,7 @@ class Interrupts:
         for s, handler in self._old.items():
             signal.signal(s, handler)
         return False
+
+
+class RunExistsError(ValueError):
+    """A new training run was given the name of an existing one (training/run_names.py)."""

@@ -19,12 +19,14 @@ from pathlib import Path
 import torch as th
 from sb3_contrib import TRPO
 
+from parallel_eplus.training.policy_files import normalization_file
+
 log = logging.getLogger("recentre")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("model_dir", type=Path, help="holds model.zip and vecnormalize.pkl")
+    parser.add_argument("model_dir", type=Path, help="holds model.zip and its statistics (vecnormalize.npz or .pkl)")
     parser.add_argument("out_dir", type=Path)
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
@@ -37,7 +39,8 @@ def main() -> None:
         model.policy.action_net.bias[:2] -= mean[:2]
     args.out_dir.mkdir(parents=True, exist_ok=True)
     model.save(args.out_dir / "model.zip")
-    shutil.copy(args.model_dir / "vecnormalize.pkl", args.out_dir / "vecnormalize.pkl")
+    stats = normalization_file(args.model_dir / "model.zip")
+    shutil.copy(stats, args.out_dir / stats.name)
     log.info("written: %s", args.out_dir / "model.zip")
 
 

@@ -19,7 +19,7 @@ $PE train --workers "$WORKERS" --weathers CA --timesteps "$TIMESTEPS" --run-name
 mkdir -p results/paper/models
 for run in paper-ca paper-ca-co-fl; do
     mkdir -p "results/paper/models/$run"
-    cp "runs/$run/model.zip" "runs/$run/vecnormalize.pkl" "runs/$run/config.json" "runs/$run/episodes.csv" \
+    cp "runs/$run/model.zip" "runs/$run/vecnormalize.npz" "runs/$run/config.json" "runs/$run/episodes.csv" \
         "results/paper/models/$run/"
     $PE plot "runs/$run" && cp "runs/$run/convergence.png" "results/paper/convergence-$run.png"
 done

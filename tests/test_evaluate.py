@@ -137,7 +137,7 @@ def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alo
         runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
     )  # fmt: skip
     final = train(cfg, progress=False)
-    before = final.read_bytes(), (final.parent / "vecnormalize.pkl").read_bytes()
+    before = final.read_bytes(), (final.parent / "vecnormalize.npz").read_bytes()
     out = tmp_path / "eval"
     cmd = [sys.executable, "-m", "parallel_eplus.cli", "evaluate", "--policy", str(final), "--online",
            "--online-batch", "32", "--weathers", "CA,IL", "--run-days", "1", "--workers", "2",
@@ -148,4 +148,4 @@ def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alo
     online = df[df["controller"] == "TRPO (CA), online"]
     assert sorted(online["weather"]) == ["CA", "IL"] and (online["steps"] == 96).all()
     assert online["reward_mean"].notna().all()
-    assert (final.read_bytes(), (final.parent / "vecnormalize.pkl").read_bytes()) == before
+    assert (final.read_bytes(), (final.parent / "vecnormalize.npz").read_bytes()) == before

@@ -44,7 +44,9 @@ def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path
     cfg = small_config(tmp_path, "short")
     final = train(cfg, progress=False)
     run = tmp_path / "runs" / "short"
-    assert final == run / "model.zip" and (run / "vecnormalize.pkl").is_file()
+    assert final == run / "model.zip" and (run / "vecnormalize.npz").is_file()
+    assert not list(run.rglob("*.pkl"))  # data-only statistics beside the model and in every checkpoint
+    assert sorted((run / "checkpoints").glob("model_vecnormalize_*_steps.npz"))
     assert (run / "config.json").is_file() and (run / "episodes.csv").is_file()
     assert sorted((run / "checkpoints").glob("model_*_steps.zip"))
     tags = scalars(tmp_path / "tb" / "short")
@@ -122,7 +124,7 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
 
 @pytest.mark.slow
 def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
-    import pickle
+    from parallel_eplus.training.norm_stats import read_stats
 
     base = train(small_config(tmp_path, "base", weathers=["CA"], timesteps=768, time_features=True), progress=False)
     with pytest.raises(ValueError, match="--time-features"):  # fewer observations: refused before EnergyPlus starts
@@ -144,8 +146,7 @@ def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
     final = train(tuned, progress=False)
     counts = []
     for model in (base, final):
-        with open(model.parent / "vecnormalize.pkl", "rb") as f:
-            counts.append(pickle.load(f).obs_rms.count)
+        counts.append(read_stats(model.parent / "vecnormalize.npz").obs_count)
     assert counts[1] > counts[0] + 500  # inherited the statistics, then kept updating them
     saved = TrainConfig.from_json((final.parent / "config.json").read_text())
     assert saved.init_from == str(base) and saved.reward == reward and saved.batch_size == 512

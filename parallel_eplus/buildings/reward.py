@@ -27,6 +27,11 @@ class RewardConfig:
     band_weight: float = 0.1  # lambda_2
     power_weight: float = 1e-5  # lambda_P, per W
 
+    def __post_init__(self):
+        bad = {k: v for k, v in asdict(self).items() if not math.isfinite(v)}
+        if bad:
+            raise ValueError(f"reward constants must be finite numbers: {bad}")
+
     @classmethod
     def from_any(cls, value: RewardConfig | Mapping[str, Any] | str | Path | None) -> RewardConfig:
         """Accept a RewardConfig, a mapping of overrides, or a path to a JSON file of overrides."""
@@ -35,7 +40,12 @@ class RewardConfig:
         if isinstance(value, RewardConfig):
             return value
         if isinstance(value, (str, Path)):
-            value = json.loads(Path(value).read_text())
+            try:
+                value = json.loads(Path(value).read_text())
+            except json.JSONDecodeError as e:
+                raise ValueError(f"reward file {value}: not JSON ({e})") from None
+            if not isinstance(value, dict):
+                raise ValueError('a reward file holds a JSON object of constants, e.g. {"power_weight": 2e-5}')
         known = {f.name for f in fields(cls)}
         unknown = set(value) - known
         if unknown:

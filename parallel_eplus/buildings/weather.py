@@ -27,6 +27,9 @@ def resolve_weather(weather: str | Path) -> Path:
         raise ValueError(f"unknown weather {text!r}: use a code ({', '.join(WEATHER_FILES)}) or a path to an .epw file")
     if not path.is_file():
         raise FileNotFoundError(f"weather file not found: {path}")
+    with open(path, "rb") as f:
+        if not f.read(12).removeprefix(b"\xef\xbb\xbf").upper().startswith(b"LOCATION"):
+            raise ValueError(f"{path} is not an EnergyPlus weather file (an .epw starts with a LOCATION line)")
     return path.resolve()
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.engine import pipe_sweep
 from parallel_eplus.errors import ProtocolError
 
 DATA = 0
@@ -144,12 +145,15 @@ class PipePair:
     """Two FIFOs in a private 0700 directory: `act` (env -> EnergyPlus) and `obs` (EnergyPlus -> env).
 
     Each instance makes its own directory with mkdtemp, so names never collide however many envs run
-    in one process or on one machine. `close()` removes the FIFOs and the directory.
+    in one process or on one machine. `close()` removes the FIFOs and the directory; the directory names
+    its owner, so one left by a killed process is swept later (pipe_sweep.py).
     """
 
     def __init__(self, parent_dir: str | os.PathLike | None = None):
-        self.dir = Path(tempfile.mkdtemp(prefix="parallel-eplus-", dir=parent_dir))
+        pipe_sweep.sweep_once()
+        self.dir = Path(tempfile.mkdtemp(prefix=f"{pipe_sweep.PREFIX}{os.getpid()}-", dir=parent_dir))
         os.chmod(self.dir, 0o700)
+        pipe_sweep.write_owner(self.dir)
         self.act_path = self.dir / "act"
         self.obs_path = self.dir / "obs"
         os.mkfifo(self.act_path, 0o600)

@@ -313,7 +313,8 @@ def training_rate(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
     from parallel_eplus.training.train import train
 
     tc = TrainConfig(
-        workers=cfg.workers, weathers=[cfg.weather], timesteps=cfg.train_steps, batch_size=cfg.batch_size,
+        workers=cfg.workers, weathers=[cfg.weather], timesteps=cfg.train_steps,
+        batch_size=-(-cfg.batch_size // cfg.workers) * cfg.workers,  # split evenly across the workers
         run_name="bench", runs_dir=str(workdir / "runs"), tensorboard_dir=str(workdir / "tb"),
         checkpoint_every=10**9, keep_episodes=0,
     )  # fmt: skip

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import pandas as pd
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.buildings.weather import parse_weathers, weather_label
@@ -49,6 +48,7 @@ def run_online_episode(
     import torch as th
 
     from parallel_eplus.training.config import TrainConfig
+    from parallel_eplus.training.norm_stats import read_stats
     from parallel_eplus.training.policy_files import normalization_file, run_dir_of
     from parallel_eplus.training.rollout import ALGORITHMS
     from parallel_eplus.training.train import make_vec_env
@@ -67,8 +67,7 @@ def run_online_episode(
     th.set_num_threads(1)
     venv = make_vec_env(cfg)
     try:
-        env = VecNormalize.load(str(normalization_file(controller.path)), venv)
-        env.training = True  # the statistics keep updating, as in training
+        env = read_stats(normalization_file(controller.path)).wrap(venv, training=True)  # keeps updating
         # n_steps is the rollout buffer's size: set before SB3 builds it.
         model = ALGORITHMS[saved.algorithm].load(controller.path, env=env, device="cpu", n_steps=cfg.n_steps)
         model.lockstep = True

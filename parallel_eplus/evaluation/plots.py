@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from parallel_eplus import io  # noqa: E402
 from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
 from parallel_eplus.engine.episode import STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
 
@@ -52,7 +53,8 @@ def _figure(figsize):
 
 
 def _save(fig, path: Path) -> Path:
-    fig.savefig(path, dpi=120)
+    with io.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format=Path(path).suffix[1:])
     plt.close(fig)
     return path
 

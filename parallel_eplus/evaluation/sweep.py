@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from parallel_eplus import io
 from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import RewardConfig
@@ -69,7 +70,8 @@ def policy_controller(spec: str) -> Controller:
     path = Path(path_text)
     if path.is_dir():
         path = path / "model.zip"
-    from parallel_eplus.training.policy_files import policy_features, require_policy_files, run_dir_of
+    from parallel_eplus.engine.config import policy_action_names
+    from parallel_eplus.training.policy_files import check_actions, policy_features, require_policy_files, run_dir_of
 
     require_policy_files(path)
     config = run_dir_of(path) / "config.json"
@@ -79,6 +81,12 @@ def policy_controller(spec: str) -> Controller:
         algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     time_features, schedule_features = policy_features(path)
+    space = saved.get("residual_space", "action")
+    sim = SimulationConfig(model=saved.get("model", "temp_fan"), residual_scale=residual, residual_space=space)
+    what = f"model {sim.model}" + (f" with residual space {space}" if residual else "")
+    check_actions(path, len(policy_action_names(sim)), what)
+    if sim.model != "temp_fan":
+        raise ValueError(f"{path}: trained on model {sim.model!r}; the evaluation sweep runs temp_fan")
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
@@ -226,8 +234,8 @@ def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | 
     from parallel_eplus.evaluation import plots
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(out_dir / "results.csv", index=False)
-    (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df))
+    io.write_text(out_dir / "results.csv", df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(index=False))
+    io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df))
     files = [out_dir / "results.csv", out_dir / "results.md"]
     shown = plots.with_references(df, plots.find_references(out_dir))  # a lone policy beside the references
     files.append(plots.temperature_comparison(shown, out_dir / "temperatures.png"))

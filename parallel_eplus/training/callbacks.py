@@ -9,6 +9,7 @@ import pandas as pd
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
+from parallel_eplus import io
 from parallel_eplus.training.config import STEPS_PER_YEAR
 
 
@@ -70,7 +71,8 @@ class EpisodeMetrics(BaseCallback):
         if episode_return is not None:
             self.logger.record_mean(f"episode/{weather}/return", episode_return)
         row = {"timesteps": self.num_timesteps, **summary}
-        pd.DataFrame([row]).to_csv(self.episodes_csv, mode="a", header=not self.episodes_csv.exists(), index=False)
+        line = pd.DataFrame([row]).to_csv(header=not self.episodes_csv.exists(), index=False)
+        io.append_text(self.episodes_csv, line)  # a crash mid-write keeps the earlier rows whole
         if self.progress is not None:
             self.progress.set_postfix(episodes=self.episodes, last=f"{weather} {summary.get('power_kw', 0):.0f} kW")
 

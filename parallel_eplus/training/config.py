@@ -87,6 +87,7 @@ class TrainConfig:
     ray_address: str | None = None
     workers_per_actor: int | None = None  # Ray: EnergyPlus workers per actor (default: all on one)
     max_restarts: int = 3
+    step_timeout_s: float = 60.0  # a worker silent this long is hung: its episode restarts (SimulationConfig)
     # True: every worker waits for the slowest at each step (SB3's way; a seed fixes the run bit for bit).
     # False: each local worker gets its next action as soon as its observation arrives (rollout.py).
     lockstep: bool = False
@@ -109,6 +110,10 @@ class TrainConfig:
             raise ValueError("--workers must be at least 1")
         if self.batch_size < self.workers:
             raise ValueError("--batch-size must be at least the number of workers")
+        if not 1 <= self.run_days <= 365:
+            raise ValueError(f"--run-days must be within 1..365 (episodes start on Jan 1), got {self.run_days}")
+        if self.timesteps < 0 or self.checkpoint_every < 1:
+            raise ValueError("--timesteps must be >= 0 and --checkpoint-every >= 1")
         if self.init_from is not None:
             self.init_from = str(Path(self.init_from).resolve())
         if self.algorithm not in ("trpo", "ppo", "sac"):
@@ -127,6 +132,14 @@ class TrainConfig:
         self.runs_dir = str(Path(self.runs_dir).resolve())
         self.tensorboard_dir = str(Path(self.tensorboard_dir).resolve())
         return self
+
+    def check_new_run(self) -> None:
+        """What only a new run must satisfy (a resumed run keeps its saved settings)."""
+        if self.algorithm != "sac" and self.batch_size % self.workers:
+            b, w = self.batch_size, self.workers
+            raise ValueError(
+                f"--batch-size {b} does not split evenly across {w} workers: use {b - b % w} or {b + w - b % w}"
+            )
 
     @property
     def run_dir(self) -> Path:

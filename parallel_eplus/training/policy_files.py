@@ -9,9 +9,11 @@ import torch as th
 from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus.buildings.model import observation_names
+from parallel_eplus.training.norm_stats import read_stats
 
 MODEL_FILE = "model.zip"
-NORMALIZE_FILE = "vecnormalize.pkl"
+NORMALIZE_FILE = "vecnormalize.npz"  # data only (norm_stats.py)
+LEGACY_SUFFIX = ".pkl"  # SB3's pickled VecNormalize, as saved before 0.3: still read, with a warning
 
 
 def _latest_checkpoint(path: Path) -> Path:
@@ -19,19 +21,35 @@ def _latest_checkpoint(path: Path) -> Path:
     when the run finished after it (SB3 ends on a whole batch, past the last checkpoint)."""
     if path.is_file():
         return path
-    checkpoints = sorted((path / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
-    saves = checkpoints[-1:] + [p for p in [path / MODEL_FILE] if p.is_file()]
+    saves = saves_newest_first(path)
     if not saves:
         raise FileNotFoundError(f"no checkpoint or {MODEL_FILE} in {path}")
-    return max(saves, key=lambda p: p.stat().st_mtime_ns)
+    return saves[0]
 
 
-def normalization_file(model_zip: Path) -> Path:
-    """The VecNormalize statistics saved beside a model or checkpoint."""
+def saves_newest_first(run_dir: Path) -> list[Path]:
+    """A run's checkpoints and final model, the newest first (by steps, the final model by its time)."""
+    checkpoints = sorted((run_dir / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
+    final = run_dir / MODEL_FILE
+    if final.is_file():  # after the last checkpoint when the run finished, before it when resumed past it
+        newer = [c for c in checkpoints if c.stat().st_mtime_ns > final.stat().st_mtime_ns]
+        checkpoints.insert(len(checkpoints) - len(newer), final)
+    return checkpoints[::-1]
+
+
+def stats_target(model_zip: Path) -> Path:
+    """Where the data-only statistics of a model or checkpoint are written."""
     if model_zip.name == MODEL_FILE:
         return model_zip.with_name(NORMALIZE_FILE)
     steps = model_zip.stem.split("_")[1]
-    return model_zip.with_name(f"model_vecnormalize_{steps}_steps.pkl")
+    return model_zip.with_name(f"model_vecnormalize_{steps}_steps.npz")
+
+
+def normalization_file(model_zip: Path) -> Path:
+    """The statistics saved beside a model or checkpoint: the .npz, else a legacy .pkl if only that exists."""
+    target = stats_target(model_zip)
+    legacy = target.with_suffix(LEGACY_SUFFIX)
+    return legacy if not target.is_file() and legacy.is_file() else target
 
 
 def replay_buffer_file(model_zip: Path) -> Path:
@@ -45,26 +63,51 @@ def run_dir_of(checkpoint: Path) -> Path:
 
 
 def _saved_policy(model_zip: Path):
-    """The policy network of a saved model, whichever algorithm trained it (SAC's includes its critics)."""
-    from stable_baselines3.common.save_util import load_from_zip_file
+    """The policy network of a saved model, whichever algorithm trained it (SAC's includes its critics), built
+    without unpickling anything from the file (safe_load.py): a shared policy cannot run code."""
+    from parallel_eplus.training.safe_load import load_policy_network
 
-    data, params, _ = load_from_zip_file(model_zip, device="cpu")
-    policy = data["policy_class"](
-        data["observation_space"], data["action_space"], lambda _: 0.0, **data["policy_kwargs"]
-    )
-    policy.load_state_dict(params["policy"])
-    policy.set_training_mode(False)
-    return policy
+    return load_policy_network(model_zip)
+
+
+def saved_shapes(model_zip: Path) -> tuple[int, int]:
+    """(observations, actions) of a saved model, read from its JSON metadata without unpickling anything."""
+    import json
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(model_zip) as z:
+            data = json.loads(z.read("data"))
+        return int(data["observation_space"]["_shape"][0]), int(data["action_space"]["_shape"][0])
+    except (zipfile.BadZipFile, KeyError, ValueError, TypeError, IndexError) as e:
+        raise ValueError(f"{model_zip}: not a saved policy ({type(e).__name__}: {e})") from None
 
 
 def require_policy_files(model_zip: Path, context: str = "") -> Path:
-    """A saved policy is two files: the model and its observation statistics; returns the latter."""
+    """A saved policy is two files that belong together: the model and its observation statistics; returns
+    the latter. Statistics copied from another run (another observation count) are refused."""
     if not model_zip.is_file():
         raise FileNotFoundError(f"{context}policy not found: {model_zip}")
     stats = normalization_file(model_zip)
     if not stats.is_file():
         raise FileNotFoundError(f"{context}observation statistics missing beside the policy: {stats}")
+    n_obs, _ = saved_shapes(model_zip)
+    n_stats = read_stats(stats).n_observations
+    if n_stats != n_obs:
+        raise ValueError(
+            f"{context}{stats} holds statistics of {n_stats} observations but {model_zip.name} observes {n_obs}: "
+            "they come from different runs (keep each model.zip with its own statistics)"
+        )
     return stats
+
+
+def check_actions(model_zip: Path, expected: int, what: str) -> None:
+    """Refuse a policy whose action count is not what the simulation it would drive takes."""
+    _, n_act = saved_shapes(model_zip)
+    if n_act != expected:
+        raise ValueError(
+            f"{model_zip} acts on {n_act} values but {what} takes {expected}: a policy for another model or building"
+        )
 
 
 def _check_init_from(model_zip: Path, features: tuple[bool, bool]) -> None:
@@ -86,8 +129,6 @@ def _warm_start(model_zip: Path, model, env: VecNormalize) -> None:
     `--time-features`, say) enter its first layers with zero weights, so the run starts from exactly
     the saved policy's behaviour; their statistics start at mean 0, variance 1 and keep updating.
     """
-    import pickle
-
     state = model.policy.state_dict()
     for key, value in _saved_policy(model_zip).state_dict().items():
         target = state.get(key)
@@ -99,20 +140,15 @@ def _warm_start(model_zip: Path, model, env: VecNormalize) -> None:
         model.policy.load_state_dict(state)
     except RuntimeError as e:  # another network shape
         raise ValueError(f"--init-from {model_zip}: its network does not fit this run's: {e}") from e
-    with open(normalization_file(model_zip), "rb") as f:
-        stats = pickle.load(f).obs_rms
-    n = len(stats.mean)
-    env.obs_rms.mean[:n], env.obs_rms.var[:n], env.obs_rms.count = stats.mean, stats.var, stats.count
+    stats = read_stats(normalization_file(model_zip))
+    n = stats.n_observations
+    env.obs_rms.mean[:n], env.obs_rms.var[:n], env.obs_rms.count = stats.obs_mean, stats.obs_var, stats.obs_count
 
 
 def policy_features(model_zip: str | Path) -> tuple[bool, bool]:
     """Whether a saved policy observes (`model.TIME_FEATURES`, `model.SCHEDULE_FEATURES`), read from
     the size of its observation statistics."""
-    import pickle
-
-    with open(normalization_file(Path(model_zip)), "rb") as f:
-        norm: VecNormalize = pickle.load(f)
-    n = norm.observation_space.shape[0]
+    n = read_stats(normalization_file(Path(model_zip))).n_observations
     options = [(t, s) for t in (False, True) for s in (False, True)]
     found = [o for o in options if len(observation_names(*o)) == n]
     if not found:
@@ -125,13 +161,9 @@ def load_policy(model_zip: str | Path):
     model_zip = Path(model_zip)
     stats = require_policy_files(model_zip)
     saved = _saved_policy(model_zip)
-    import pickle
-
     from parallel_eplus.training.rollout import NumpyPolicy
 
-    with open(stats, "rb") as f:
-        norm: VecNormalize = pickle.load(f)
-    norm.training = False
+    norm = read_stats(stats)
     low, high = saved.action_space.low, saved.action_space.high
     fast = NumpyPolicy(saved) if NumpyPolicy.supports(saved) else None
 

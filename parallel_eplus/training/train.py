@@ -1,6 +1,6 @@
 """The learner: sb3-contrib TRPO with the paper's settings over N EnergyPlus workers.
 
-Run output: `runs/<run-name>/` (config.json, checkpoints/, model.zip + vecnormalize.pkl, episodes.csv
+Run output: `runs/<run-name>/` (config.json, checkpoints/, model.zip + vecnormalize.npz, episodes.csv
 and the newest episode directories) and `tensorboard_logs/<run-name>/` (TensorBoard events).
 """
 
@@ -12,26 +12,28 @@ from pathlib import Path
 
 import pandas as pd
 import torch as th
-from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+from stable_baselines3.common.callbacks import CallbackList
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
+from parallel_eplus import io
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
-from parallel_eplus.errors import Interrupts
+from parallel_eplus.errors import EnergyPlusError, Interrupts
 from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather
+from parallel_eplus.training.checkpoints import AtomicCheckpoint, resume_point, save_checkpoint
 from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.norm_stats import read_stats
 from parallel_eplus.training.policy_files import (
     MODEL_FILE,
-    NORMALIZE_FILE,
     _check_init_from,
-    _latest_checkpoint,
     _warm_start,
     normalization_file,
     replay_buffer_file,
     run_dir_of,
 )
+from parallel_eplus.training.run_names import claim_run_name
 from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 log = logging.getLogger(__name__)
@@ -51,6 +53,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         residual_scale=cfg.residual_scale,
         residual_space=cfg.residual_space,
         rbc_target_c=cfg.rbc_target_c,
+        step_timeout_s=cfg.step_timeout_s,
     )
     shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
@@ -76,15 +79,19 @@ def train(
     resume: str | Path | None = None,
     progress: bool = True,
     timer: UpdateTimer | None = None,
+    overwrite: bool = False,
 ) -> Path:
-    """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first."""
+    """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first.
+
+    A new run whose name is taken is refused, or with `overwrite` the old one is moved aside (run_names.py).
+    """
     from parallel_eplus.training.rollout import ALGORITHMS
 
     checkpoint = None
     if resume is not None and cfg.init_from is not None:
         raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
     if resume is not None:
-        checkpoint = _latest_checkpoint(Path(resume))
+        checkpoint = resume_point(Path(resume))
         saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
@@ -93,16 +100,19 @@ def train(
     cfg = cfg.resolved()
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
         _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
+    if checkpoint is None:
+        cfg.check_new_run()
+        claim_run_name(cfg, overwrite)
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.json").write_text(cfg.to_json())
+    io.write_text(run_dir / "config.json", cfg.to_json())
     th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
 
     venv = make_vec_env(cfg)
     bar = None
     try:
         if checkpoint is not None:
-            env = VecNormalize.load(str(normalization_file(checkpoint)), venv)
+            env = read_stats(normalization_file(checkpoint)).wrap(venv)
             model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu")
             _load_replay_buffer(model, checkpoint)
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
@@ -114,6 +124,7 @@ def train(
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
         model.lockstep = cfg.lockstep
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
+        start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers
         end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
@@ -122,29 +133,20 @@ def train(
         callbacks = CallbackList([
             timer or UpdateTimer(),
             EpisodeMetrics(run_dir / "episodes.csv", bar),
-            CheckpointCallback(
-                save_freq=max(cfg.checkpoint_every // cfg.workers, 1),
-                save_path=str(run_dir / "checkpoints"),
-                name_prefix="model",
-                save_vecnormalize=True,
-            ),
+            AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
         ])  # fmt: skip
         try:
             with Interrupts():
                 model.learn(remaining, callback=callbacks, reset_num_timesteps=False, log_interval=1)
-        except KeyboardInterrupt:
-            path = run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            model.save(path)
-            env.save(str(normalization_file(path)))
-            _save_replay_buffer(model, path)
-            log.warning("interrupted at step %d; checkpoint saved: %s", model.num_timesteps, path)
+        except (KeyboardInterrupt, EnergyPlusError) as e:
+            if isinstance(e, EnergyPlusError) and model.num_timesteps == start_steps:
+                raise  # nothing learned since the last save
+            path = save_checkpoint(model, env, run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip", True)
+            cause = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped by the EnergyPlus failure below"
+            log.warning("%s at step %d; checkpoint saved: %s", cause, model.num_timesteps, path)
             log.warning("resume with: parallel-eplus train --resume %s", path)
             raise
-        final = run_dir / MODEL_FILE
-        model.save(final)
-        env.save(str(run_dir / NORMALIZE_FILE))
-        _save_replay_buffer(model, final)
+        final = save_checkpoint(model, env, run_dir / MODEL_FILE, replay_buffer=True)
         counts = episodes_per_weather(run_dir / "episodes.csv")
         log.info("%s: %d steps; episodes per weather: %s", cfg.run_name, model.num_timesteps,
                  ", ".join(f"{w} {n}" for w, n in counts.items()) or "none finished")  # fmt: skip
@@ -153,11 +155,6 @@ def train(
         if bar is not None:
             bar.close()
         venv.close()
-
-
-def _save_replay_buffer(model, model_zip: Path) -> None:
-    if hasattr(model, "save_replay_buffer"):  # off-policy (SAC)
-        model.save_replay_buffer(replay_buffer_file(model_zip))
 
 
 def _load_replay_buffer(model, checkpoint: Path) -> None:

@@ -12,7 +12,7 @@ import pytest
 from parallel_eplus import EnergyPlusEnv, EnergyPlusError
 from parallel_eplus.buildings.model import AGENT_IDF
 
-from .conftest import our_processes
+from ..conftest import our_processes
 
 
 def test_killed_energyplus_raises_promptly_and_leaves_nothing(tmp_path, no_leaks):
