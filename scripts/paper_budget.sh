@@ -10,6 +10,10 @@
 # The run uses its own copy of the package at a fixed commit ($COMMIT, extracted with git archive), so
 # later changes to the working tree cannot disturb a run in progress. A new machine starts from the
 # chunk committed under results/paper/models/$RUN (or, the first time, from the 1M-step paper-ca-co-fl).
+#
+# Done: the run reached 10,522,114 steps on 2026-11-25 (results/paper/README.md). Its committed statistics are
+# now data-only (vecnormalize.npz), which the frozen commit cannot read; to run it again, set COMMIT to a
+# commit at or after 0.3.0 and seed with SEED_FROM.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 REPO=$PWD
@@ -32,7 +36,7 @@ seed_run() {  # the run directory, from the committed chunk if any, else from th
     local steps
     steps=$("$PY" -c "import json,sys,zipfile; print(json.loads(zipfile.ZipFile(sys.argv[1]).read('data'))['num_timesteps'])" "$from/model.zip")
     cp "$from/model.zip" "$RUN_DIR/checkpoints/model_${steps}_steps.zip"
-    cp "$from/vecnormalize.pkl" "$RUN_DIR/checkpoints/model_vecnormalize_${steps}_steps.pkl"
+    cp "$from/vecnormalize.npz" "$RUN_DIR/checkpoints/model_vecnormalize_${steps}_steps.npz"
     cp "$from/episodes.csv" "$RUN_DIR/episodes.csv"
     "$PY" - "$from/config.json" "$RUN_DIR/config.json" "$RUN" "$WORK" <<'EOF'
 import json, sys
@@ -70,7 +74,7 @@ save)
     steps=$(basename "$ckpt" | cut -d_ -f2)
     mkdir -p "$SAVED"
     cp "$ckpt" "$SAVED/model.zip"
-    cp "$RUN_DIR/checkpoints/model_vecnormalize_${steps}_steps.pkl" "$SAVED/vecnormalize.pkl"
+    cp "$RUN_DIR/checkpoints/model_vecnormalize_${steps}_steps.npz" "$SAVED/vecnormalize.npz"
     cp "$RUN_DIR/config.json" "$RUN_DIR/episodes.csv" "$SAVED/"
     echo "saved step $steps to $SAVED"
     ;;

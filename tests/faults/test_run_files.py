@@ -22,7 +22,27 @@ from parallel_eplus.training.train import train
 from ..test_train import small_config
 
 REPO = Path(__file__).resolve().parents[2]
-LEGACY = REPO / "results" / "paper" / "models" / "paper-ca"  # committed before 0.3: vecnormalize.pkl
+COMMITTED = REPO / "results" / "paper" / "models" / "paper-ca"  # data-only statistics since 0.3
+
+
+@pytest.fixture
+def legacy(tmp_path) -> Path:
+    """A policy as saved before 0.3: SB3's pickled VecNormalize beside model.zip."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    class Shape(gym.Env):
+        observation_space = gym.spaces.Box(-np.inf, np.inf, (6,), np.float32)
+        action_space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
+
+    d = tmp_path / "legacy"
+    d.mkdir()
+    for name in ("model.zip", "config.json"):
+        (d / name).write_bytes((COMMITTED / name).read_bytes())
+    read_stats(COMMITTED / "vecnormalize.npz").wrap(DummyVecEnv([Shape]), training=False).save(d / "vecnormalize.pkl")
+    return d
+
+
 OBS = np.array([[12.0, 23.0, 24.0, 120e3, 110e3, 10e3]], dtype=np.float32)
 
 
@@ -66,23 +86,23 @@ def test_the_command_line_refuses_a_taken_run_name_in_one_line(tmp_path):
     assert sorted(p.name for p in (tmp_path / "runs" / "taken").iterdir()) == ["config.json"]
 
 
-def test_committed_pickled_statistics_still_load_with_a_warning(caplog):
-    stats = normalization_file(LEGACY / "model.zip")
+def test_pickled_statistics_still_load_with_a_warning(legacy, caplog):
+    stats = normalization_file(legacy / "model.zip")
     assert stats.name == "vecnormalize.pkl"
     with caplog.at_level(logging.WARNING):
-        act = load_policy(LEGACY / "model.zip")
+        act = load_policy(legacy / "model.zip")
     assert "is a pickle" in caplog.text and "vecnormalize.pkl" in caplog.text
     a = act(OBS)
     assert a.shape == (1, 4) and np.all(np.abs(a) <= 1)
-    assert policy_features(LEGACY / "model.zip") == (False, False)
+    assert policy_features(legacy / "model.zip") == (False, False)
     # The data-only copy normalizes exactly as SB3's pickled VecNormalize does.
     with open(stats, "rb") as f:
         norm = pickle.load(f)
     np.testing.assert_array_equal(read_stats(stats).normalize_obs(OBS), norm.normalize_obs(OBS))
 
 
-def test_statistics_round_trip_as_data_only(tmp_path):
-    with open(normalization_file(LEGACY / "model.zip"), "rb") as f:
+def test_statistics_round_trip_as_data_only(legacy, tmp_path):
+    with open(normalization_file(legacy / "model.zip"), "rb") as f:
         norm = pickle.load(f)
     from parallel_eplus.training.norm_stats import save_stats
 
@@ -115,7 +135,7 @@ def test_a_policy_loads_without_unpickling_and_acts_as_sb3s_own_load(name, algor
     from parallel_eplus.training.policy_files import _saved_policy
     from parallel_eplus.training.rollout import ALGORITHMS
 
-    model_zip = LEGACY.parent / name / "model.zip"
+    model_zip = COMMITTED.parent / name / "model.zip"
     safe, full = _saved_policy(model_zip), ALGORITHMS[algorithm].load(model_zip, device="cpu").policy
     obs = np.random.default_rng(0).normal(size=(8, safe.observation_space.shape[0])).astype(np.float32)
     np.testing.assert_array_equal(safe.predict(obs, deterministic=True)[0], full.predict(obs, deterministic=True)[0])
@@ -145,7 +165,7 @@ def test_opening_a_shared_policy_runs_none_of_its_code(tmp_path):
     marker = tmp_path / "code-ran"
     hostile = tmp_path / "hostile"
     hostile.mkdir()
-    with zipfile.ZipFile(LEGACY / "model.zip") as src, zipfile.ZipFile(hostile / "model.zip", "w") as dst:
+    with zipfile.ZipFile(COMMITTED / "model.zip") as src, zipfile.ZipFile(hostile / "model.zip", "w") as dst:
         for item in src.infolist():
             data = src.read(item)
             if item.filename == "data":
@@ -153,11 +173,8 @@ def test_opening_a_shared_policy_runs_none_of_its_code(tmp_path):
                 meta["lr_schedule"][":serialized:"] = base64.b64encode(pickle.dumps(_Payload(marker))).decode()
                 data = json.dumps(meta).encode()
             dst.writestr(item, data)
-    shutil.copy(LEGACY / "config.json", hostile)
-    with open(LEGACY / "vecnormalize.pkl", "rb") as f:  # the statistics as data
-        from parallel_eplus.training.norm_stats import save_stats
-
-        save_stats(pickle.load(f), hostile / "vecnormalize.npz")
+    shutil.copy(COMMITTED / "config.json", hostile)
+    shutil.copy(COMMITTED / "vecnormalize.npz", hostile)  # the statistics as data
 
     act = load_policy(hostile / "model.zip")  # what `evaluate --policy` opens
     assert act(OBS).shape == (1, 4)

@@ -136,7 +136,7 @@ def _policy(tmp_path: Path, name: str, model_from: str, stats_from: str, config_
     d = tmp_path / name
     d.mkdir()
     shutil.copy(MODELS / model_from / "model.zip", d)
-    shutil.copy(MODELS / stats_from / "vecnormalize.pkl", d)
+    shutil.copy(MODELS / stats_from / "vecnormalize.npz", d)
     shutil.copy(MODELS / config_from / "config.json", d)
     return d / "model.zip"
 
