@@ -10,8 +10,9 @@ import pytest
 from pyenergyplus import dataset
 
 from parallel_eplus.buildings import resources
-from parallel_eplus.buildings.init import init_spec, survey
+from parallel_eplus.buildings.init import init_spec
 from parallel_eplus.buildings.spec import load_spec
+from parallel_eplus.buildings.survey import survey
 from parallel_eplus.cli import main
 
 PROTOTYPE = Path(dataset.modeldir) / "ASHRAE901_OfficeSmall_STD2019_Denver.idf"

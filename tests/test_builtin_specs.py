@@ -14,6 +14,7 @@ import pytest
 
 from parallel_eplus.buildings import resources
 from parallel_eplus.buildings.spec import BuildingSpec, load_spec
+from parallel_eplus.buildings.survey import RUN_PERIOD_WEATHER
 
 SPECS = sorted(resources.spec_dir().glob("*.toml"))
 
@@ -49,6 +50,8 @@ def run_day(spec: BuildingSpec, actions: dict[str, float] | None = None, idf: Pa
 
     def after_zone(s) -> None:
         if not handles or api.exchange.warmup_flag(s) or -1 in handles["obs"].values():
+            return
+        if api.exchange.kind_of_sim(s) != RUN_PERIOD_WEATHER:  # sizing's design days (the office runs two first)
             return
         for name, h in handles["obs"].items():
             samples[name].append(api.exchange.get_variable_value(s, h))

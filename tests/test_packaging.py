@@ -65,6 +65,18 @@ def test_spec_paths_relative_absolute_or_builtin(tmp_path):
         load_spec(missing)
 
 
+def test_spec_file_by_path_or_builtin_name(tmp_path):
+    assert set(resources.builtin_specs()) >= {"datacenter-2zone", "datacenter-crac", "office-small"}
+    assert resources.spec_file("datacenter-crac") == resources.spec_dir() / "datacenter-crac.toml"
+    mine = tmp_path / "mine.toml"
+    mine.write_text("")
+    assert resources.spec_file(mine) == mine
+    with pytest.raises(
+        FileNotFoundError, match=r"'datacenter-crc' not found: give a .toml path or one of .*datacenter-crac"
+    ):
+        resources.spec_file("datacenter-crc")
+
+
 def _wheel(tmp_path: Path) -> Path:
     """Build from a copy of the tracked sources, as a release would, leaving the checkout untouched."""
     src = tmp_path / "src"

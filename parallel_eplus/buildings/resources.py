@@ -59,6 +59,24 @@ def weather_file(name: str) -> Path:
     return _find(name, weather_dirs(), "weather file")
 
 
+def builtin_specs() -> dict[str, Path]:
+    """The package's own building specs by name (the file's stem): `--building datacenter-crac`."""
+    return {p.stem: p for p in sorted(spec_dir().glob("*.toml"))}
+
+
+def spec_file(building: str | Path) -> Path:
+    """A spec by path, or a built-in one by name; fails naming the built-in ones."""
+    path = Path(building).expanduser()
+    if path.is_file():
+        return path.resolve()
+    specs = builtin_specs()
+    if str(building) in specs:
+        return specs[str(building)]
+    raise FileNotFoundError(
+        f"building spec {str(building)!r} not found: give a .toml path or one of {', '.join(specs)}"
+    )
+
+
 def is_builtin_spec(path: Path) -> bool:
     """Whether a spec file is one of the package's own (bare file names in it are built-in files)."""
     return Path(path).resolve().parent == spec_dir().resolve()

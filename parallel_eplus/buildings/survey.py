@@ -1,0 +1,117 @@
+"""What an EnergyPlus model offers an agent: EnergyPlus's own listing and one simulated day of values.
+
+The model runs through the EnergyPlus API until one day of its weather run period has passed (design days and
+warm-up are not counted), with the variables a spec usually observes requested for every key: EnergyPlus lists
+and reads only requested variables. `building init` (buildings/init.py) writes a starter spec from the result.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+# Variables requested for every key before the run: EnergyPlus lists (and reads) only requested variables.
+REQUESTS = (
+    ("Site Outdoor Air Drybulb Temperature", "Environment"),
+    ("Zone Mean Air Temperature", "*"),
+    ("Facility Total Electricity Demand Rate", "Whole Building"),
+    ("Facility Total HVAC Electricity Demand Rate", "Whole Building"),
+    ("Facility Total Building Electricity Demand Rate", "Whole Building"),
+    ("ITE Air Inlet Dry-Bulb Temperature", "*"),
+    ("System Node Setpoint Temperature", "*"),
+    ("Zone Thermostat Cooling Setpoint Temperature", "*"),
+    ("Zone Thermostat Heating Setpoint Temperature", "*"),
+    ("Fan Air Mass Flow Rate", "*"),
+)
+RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim
+NO_SETPOINT = -900.0  # EnergyPlus marks a node without a setpoint with -999
+
+
+@dataclass
+class Survey:
+    """What EnergyPlus says about a model: its API listing and each requested variable's range in a short run."""
+
+    rows: list[list[str]]  # list_available_api_data_csv, section markers dropped
+    seen: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)  # (variable, KEY) -> (min, max)
+    timesteps_per_hour: int = 0
+    days: float = 0.0
+
+    def keys(self, kind: str, *names: str) -> list[str]:
+        return list(dict.fromkeys(r[-2] for r in self.rows if r[0] == kind and tuple(r[1 : 1 + len(names)]) == names))
+
+
+def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
+    """Run the model through the API until `days` simulated days after warm-up (or its end) and report."""
+    from pyenergyplus.api import EnergyPlusAPI
+
+    api = EnergyPlusAPI()
+    state = api.state_manager.new_state()
+    api.runtime.set_console_output_status(state, False)
+    for variable, key in REQUESTS:
+        api.exchange.request_variable(state, variable, key)
+    result = Survey([])
+    handles: dict[tuple[str, str], int] = {}
+    steps = [0]
+
+    def on_step(s) -> None:
+        if not api.exchange.api_data_fully_ready(s):
+            return
+        if not result.rows:
+            text = api.exchange.list_available_api_data_csv(s).decode(errors="replace")
+            result.rows = [r for r in csv.reader(io.StringIO(text)) if r and not r[0].startswith("**")]
+            result.timesteps_per_hour = api.exchange.num_time_steps_in_hour(s)
+            for r in result.rows:
+                if r[0] == "OutputVariable" and any(r[1] == v for v, _ in REQUESTS):
+                    handles[(r[1], r[2])] = api.exchange.get_variable_handle(s, r[1], r[2])
+        if api.exchange.warmup_flag(s) or (weather_periods and api.exchange.kind_of_sim(s) != RUN_PERIOD_WEATHER):
+            return
+        for k, h in handles.items():
+            value = api.exchange.get_variable_value(s, h)
+            low, high = result.seen.get(k, (math.inf, -math.inf))
+            result.seen[k] = (min(low, value), max(high, value))
+        steps[0] += 1
+        if steps[0] >= days * 24 * result.timesteps_per_hour:
+            api.runtime.stop_simulation(s)
+
+    weather_periods = simulation_control(idf)[1]  # then the design days before the year are not the survey
+    api.runtime.callback_end_zone_timestep_after_zone_reporting(state, on_step)
+    with tempfile.TemporaryDirectory(prefix="eplus-init-") as out:
+        code = api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(idf)])
+        err = Path(out, "eplusout.err")
+        tail = err.read_text(errors="replace")[-1500:] if err.is_file() else ""
+    api.state_manager.delete_state(state)
+    if not result.rows:
+        raise ValueError(f"{idf}: EnergyPlus stopped before its first timestep (exit code {code}):\n{tail}")
+    result.days = steps[0] / (24 * result.timesteps_per_hour)
+    return result
+
+
+def simulation_control(idf: Path) -> tuple[bool, bool]:
+    """(runs the sizing periods as environments, runs the weather-file run periods), as EnergyPlus defaults."""
+    m = re.search(r"^\s*SimulationControl\s*,([^;]*);", re.sub(r"!.*", "", idf.read_text(encoding="latin-1")), re.M)
+    fields = [f.strip().lower() for f in m.group(1).split(",")] + [""] * 5 if m else [""] * 5
+    return fields[3] == "yes", fields[4] != "no"
+
+
+def summary(s: Survey) -> list[str]:
+    """What EnergyPlus offers, by kind: the long list behind the spec's few candidates."""
+    counts: dict[str, int] = {}
+    for r in s.rows:
+        if r[0] == "Actuator":
+            counts[f"{r[1]} / {r[2]}"] = counts.get(f"{r[1]} / {r[2]}", 0) + 1
+    top = sorted(counts.items(), key=lambda kv: -kv[1])
+    lines = [f"{sum(counts.values())} actuators in {len(counts)} kinds; most common:"]
+    lines += [f"  {n:5d}  {kind}" for kind, n in top[:8]]
+    for kind in ("Zone Temperature Control / Cooling Setpoint", "System Node Setpoint / Temperature Setpoint",
+                 "Fan / Fan Air Mass Flow Rate"):  # fmt: skip
+        lines.append(f"  {counts.get(kind, 0):5d}  {kind}  (candidates)")
+    variables = [r for r in s.rows if r[0] == "OutputVariable"]
+    lines.append(f"{len(variables)} output variables (the model's own Output:Variable requests and ours), "
+                 f"{sum(r[0] == 'OutputMeter' for r in s.rows)} meters, "
+                 f"{sum(r[0] == 'InternalVariable' for r in s.rows)} internal variables")  # fmt: skip
+    return lines
