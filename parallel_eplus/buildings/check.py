@@ -11,10 +11,8 @@ weather, so `train`, `evaluate` and the env can run it first at almost no cost.
 from __future__ import annotations
 
 import argparse
-import csv
 import difflib
 import hashlib
-import io
 import json
 import os
 import subprocess
@@ -172,6 +170,7 @@ def _probe(request_file: Path, weather: Path) -> None:
     from pyenergyplus.api import EnergyPlusAPI
 
     from parallel_eplus.buildings.init import _idf_names
+    from parallel_eplus.buildings.survey import api_listing
 
     request = json.loads(request_file.read_text())
     _IDF_NAMES.update(_idf_names(Path(request["idf"])))
@@ -186,8 +185,7 @@ def _probe(request_file: Path, weather: Path) -> None:
     def on_step(s) -> None:
         if report or not api.exchange.api_data_fully_ready(s):
             return
-        text = api.exchange.list_available_api_data_csv(s).decode(errors="replace")
-        listing = [r for r in csv.reader(io.StringIO(text)) if r and not r[0].startswith("**")]
+        listing = api_listing(api, s)
         problems = []
         for where, kind, names in request["items"]:
             if kind == "variable":

@@ -45,6 +45,12 @@ class Survey:
         return list(dict.fromkeys(r[-2] for r in self.rows if r[0] == kind and tuple(r[1 : 1 + len(names)]) == names))
 
 
+def api_listing(api, state) -> list[list[str]]:
+    """EnergyPlus's own list of what a running model offers (kind, names..., unit), section markers dropped."""
+    text = api.exchange.list_available_api_data_csv(state).decode(errors="replace")
+    return [r for r in csv.reader(io.StringIO(text)) if r and not r[0].startswith("**")]
+
+
 def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
     """Run the model through the API until `days` simulated days after warm-up (or its end) and report."""
     from pyenergyplus.api import EnergyPlusAPI
@@ -62,8 +68,7 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
         if not api.exchange.api_data_fully_ready(s):
             return
         if not result.rows:
-            text = api.exchange.list_available_api_data_csv(s).decode(errors="replace")
-            result.rows = [r for r in csv.reader(io.StringIO(text)) if r and not r[0].startswith("**")]
+            result.rows = api_listing(api, s)
             result.timesteps_per_hour = api.exchange.num_time_steps_in_hour(s)
             for r in result.rows:
                 if r[0] == "OutputVariable" and any(r[1] == v for v, _ in REQUESTS):
