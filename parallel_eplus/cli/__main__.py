@@ -1,0 +1,7 @@
+"""`python -m parallel_eplus.cli`."""
+
+import sys
+
+from parallel_eplus.cli import main
+
+sys.exit(main())

@@ -1,0 +1,240 @@
+"""The subcommands of `parallel-eplus`: each a thin layer over a library function, imported when it runs."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger("parallel_eplus")
+
+
+def _format_summary(summary: dict) -> str:
+    lines = [
+        f"weather {summary.get('weather')}  model {summary.get('model')}  steps {summary.get('steps', 0):.0f}",
+        f"mean reward           {summary.get('reward_mean', float('nan')):10.3f}",
+        f"mean power total      {summary.get('power_kw', float('nan')):10.1f} kW",
+        f"           IT         {summary.get('it_power_kw', float('nan')):10.1f} kW",
+        f"           HVAC       {summary.get('hvac_power_kw', float('nan')):10.1f} kW",
+    ]
+    for zone in ("west", "east"):
+        z = {k.removeprefix(zone + "_"): v for k, v in summary.items() if k.startswith(zone + "_")}
+        lines.append(
+            f"{zone.title():5s} zone  mean {z['temp_mean']:5.2f} C  std {z['temp_std']:4.2f}"
+            f"  min {z['temp_min']:5.2f}  max {z['temp_max']:5.2f}  in 22-25 C {z['in_band_pct']:5.1f} %"
+        )
+    lines.append(f"zone samples in 22-25 C {summary['in_band_pct']:8.2f} %")
+    return "\n".join(lines)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from parallel_eplus.envs.env import EnergyPlusEnv
+
+    env = EnergyPlusEnv(
+        weather=args.weather,
+        model=args.model,
+        run_days=args.days,
+        output_dir=args.output_dir,
+        reward=args.reward,
+    )
+    try:
+        env.action_space.seed(args.seed)
+        obs, info = env.reset(seed=args.seed)
+        constant = np.zeros(env.action_space.shape, dtype=np.float32)
+        if args.action:
+            constant = np.array([float(v) for v in args.action.split(",")], dtype=np.float32)
+        total = env.sim.steps_per_episode
+        with tqdm(total=total, desc=f"simulate {args.weather}", unit="step", disable=args.quiet) as bar:
+            terminated = False
+            while not terminated:
+                action = env.action_space.sample() if args.policy == "random" else constant
+                obs, reward, terminated, _, info = env.step(action)
+                bar.update()
+        print(_format_summary(info["episode_summary"]))
+        if args.output_dir:
+            print(f"episode records: {info['episode_dir']}")
+    finally:
+        env.close()
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from parallel_eplus.buildings.reward import RewardConfig
+    from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.training.config import TrainConfig, TRPOSettings
+    from parallel_eplus.training.policy_files import normalization_file
+    from parallel_eplus.training.train import train
+
+    cfg = TrainConfig(
+        workers=args.workers,
+        weathers=parse_weathers(args.weathers),
+        model=args.model,
+        timesteps=args.timesteps,
+        run_days=args.run_days,
+        batch_size=args.batch_size,
+        seed=args.seed,
+        run_name=args.run_name,
+        checkpoint_every=args.checkpoint_every,
+        keep_episodes=args.keep_episodes,
+        backend=args.backend,
+        ray_address=args.ray_address,
+        workers_per_actor=args.workers_per_actor,
+        lockstep=args.lockstep,
+        time_features=args.time_features,
+        schedule_features=args.schedule_features,
+        init_from=str(args.init_from) if args.init_from else None,
+        residual_scale=args.residual,
+        residual_space=args.residual_space,
+        rbc_target_c=args.rbc_target,
+        algorithm=args.algorithm,
+        reward=RewardConfig.from_any(args.reward),
+        trpo=TRPOSettings(log_std_init=args.log_std_init),
+    )
+    if args.resume and "--timesteps" not in sys.argv:
+        cfg.timesteps = 0  # 0: keep the resumed run's own total
+    if "--batch-size" not in sys.argv and cfg.workers > 0:  # the default, split evenly across the workers
+        cfg.batch_size = -(-cfg.batch_size // cfg.workers) * cfg.workers
+    try:
+        final = train(cfg, resume=args.resume, progress=not args.quiet, overwrite=args.overwrite)
+    except KeyboardInterrupt:
+        return 130
+    run_dir = final.parent
+    print(f"model: {final} (observation statistics: {normalization_file(final)})")
+    print(f"episode records: {run_dir / 'episodes.csv'}")
+    tensorboard = Path(sys.executable).parent / "tensorboard"
+    print(f"TensorBoard: {tensorboard} --logdir {cfg.tensorboard_dir}   (then open http://localhost:6006)")
+    return 0
+
+
+def _temperatures(text: str, flag: str) -> list[float]:
+    try:
+        return [float(t) for t in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{flag} takes zone temperatures in °C, comma-separated (e.g. 22.7,23.5): {text!r}") from None
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from parallel_eplus.buildings.reward import RewardConfig
+    from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.evaluation.sweep import (
+        BASELINE_LABEL,
+        RBC_LABEL,
+        Controller,
+        policy_controller,
+        run_sweep,
+        write_results,
+    )
+
+    weathers = parse_weathers(args.weathers)  # bad input fails here, before anything runs
+    if args.workers < 1 or not 1 <= args.run_days <= 365:
+        raise ValueError("--workers must be at least 1 and --run-days within 1..365")
+    controllers = []
+    if args.baseline:
+        controllers.append(Controller(BASELINE_LABEL, "baseline"))
+    if args.rbc:
+        controllers.append(Controller(RBC_LABEL, "rbc"))
+    for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
+        controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
+    controllers += [policy_controller(p) for p in args.policy or []]
+    if not controllers:
+        raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
+    histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
+    df = run_sweep(
+        controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward), not args.quiet
+    )
+    if args.online:
+        import pandas as pd
+
+        from parallel_eplus.evaluation.online import run_online
+
+        policies = [c for c in controllers if c.kind == "policy"]
+        if not policies:
+            raise ValueError("--online needs --policy: only a learning policy can keep learning")
+        online = run_online(policies, weathers, args.run_days, args.workers, args.out, args.online_batch)
+        df = pd.concat([df, online], ignore_index=True)
+    files = write_results(df, args.out, histogram)
+    print((args.out / "results.md").read_text())
+    print("written: " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from parallel_eplus.evaluation.plots import plot_path
+
+    written = plot_path(args.path)
+    for path in written if isinstance(written, list) else [written]:
+        print(f"written: {path}")
+    return 0
+
+
+def cmd_building_init(args: argparse.Namespace) -> int:
+    from parallel_eplus.buildings.init import init_spec
+
+    out, summary = init_spec(args.idf, args.weather, args.output, args.name)
+    print("\n".join(summary))
+    print(f"written: {out} (a starter: uncomment the actions the agent should own)")
+    return 0
+
+
+def cmd_building_check(args: argparse.Namespace) -> int:
+    from parallel_eplus.buildings.check import check_spec
+    from parallel_eplus.buildings.spec import load_spec
+
+    spec = load_spec(args.spec)
+    result = check_spec(spec, args.weather, use_cache=not args.no_cache)
+    if not result.ok:
+        print(f"{spec.path}: {len(result.problems)} problem(s) against {spec.idf.name}:", file=sys.stderr)
+        print("  " + "\n  ".join(result.problems), file=sys.stderr)
+        return 1
+    n_act = sum(len(a.actuators) for a in spec.actions)
+    how = "cached" if result.cached else f"{result.seconds:.1f} s"
+    print(f"{spec.name}: ok: {len(spec.observations)} observations, {len(spec.actions)} actions ({n_act} actuators) "
+          f"resolved against {spec.idf.name}; {result.timesteps_per_hour} control steps per hour ({how})")  # fmt: skip
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from parallel_eplus.evaluation.bench import BenchConfig, format_table, replay_run, run
+
+    if args.replay_run:
+        with tempfile.TemporaryDirectory(prefix="parallel-eplus-replay-") as tmp:
+            r = replay_run(args.replay_run, args.workers, Path(tmp))
+        print(
+            f"{args.replay_run}: {r['episodes']} episodes, {r['steps']:.0f} steps. EnergyPlus alone under the same "
+            f"actions, {args.workers} at a time: {r['raw_wall_s'] / 60:.1f} min ({r['raw_steps_per_s']:.0f} steps/s), "
+            "start-ups included; the run's own rate is TensorBoard's time/fps."
+        )
+        return 0
+    cfg = BenchConfig(
+        weather=args.weather, raw_days=args.days, vector_steps=args.vector_steps, train_steps=args.train_steps,
+        workers=args.workers, repeats=args.repeats,
+    )  # fmt: skip
+    results = run(cfg, args.out)
+    print(format_table(results))
+    print(f"written: {args.out}")
+    return 0
+
+
+def cmd_clean(args: argparse.Namespace) -> int:
+    from parallel_eplus.engine import pipe_sweep
+
+    leftovers = pipe_sweep.leftover_processes()
+    for p in leftovers:
+        print(f"leftover EnergyPlus process {p.pid} (its trainer is gone; pipe {p.pipe_dir})")
+    if leftovers and args.kill:
+        pipe_sweep.kill(leftovers)
+        print(f"killed {len(leftovers)} leftover EnergyPlus process(es)")
+    elif leftovers:
+        print("stop them with: parallel-eplus clean --kill")
+    stale = pipe_sweep.stale_pipe_dirs(unowned=True)
+    for d in stale if args.dry_run else pipe_sweep.sweep(unowned=True):
+        print(f"{'stale' if args.dry_run else 'removed'} pipe directory: {d}")
+    if not leftovers and not stale:
+        print("nothing to clean: no pipe directory or EnergyPlus process of a process that is gone")
+    return 0

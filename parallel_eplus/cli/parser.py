@@ -1,0 +1,154 @@
+"""The command line's arguments: every subcommand, option and default in one place."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from parallel_eplus.cli import commands as c
+
+DESCRIPTION = "Train and evaluate RL controllers for buildings against parallel EnergyPlus simulations."
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="parallel-eplus", description=DESCRIPTION)
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    sim = sub.add_parser("simulate", help="run one episode and print the paper's episode statistics")
+    sim.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or a path to an .epw (default CA)")
+    sim.add_argument("--days", type=int, default=7, help="run period length from Jan 1 (default 7)")
+    sim.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    sim.add_argument("--policy", default="constant", choices=["constant", "random"])
+    sim.add_argument("--action", help="the constant action in [-1, 1], comma-separated (default all 0)")
+    sim.add_argument("--output-dir", type=Path, help="keep the episode records here")
+    sim.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--quiet", action="store_true", help="no progress bar")
+    sim.set_defaults(func=c.cmd_simulate)
+
+    tr = sub.add_parser("train", help="train TRPO (or PPO) on parallel EnergyPlus workers (paper settings by default)")
+    tr.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="EnergyPlus processes (default: cores)")
+    tr.add_argument("--weathers", default="CA", help="comma-separated, e.g. CA,CO,FL (default CA)")
+    tr.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    tr.add_argument(
+        "--time-features", action="store_true",
+        help="add hour and day of week (sine/cosine) to the paper's six observations",
+    )  # fmt: skip
+    tr.add_argument(
+        "--schedule-features", action="store_true",
+        help="add the IT-load schedule: the coming step's load, its last and next change, and how far away",
+    )  # fmt: skip
+    tr.add_argument(
+        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac"],
+        help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting; "
+        "sac: Stable-Baselines3's off-policy SAC (training/config.py SACSettings; --batch-size is unused)",
+    )  # fmt: skip
+    tr.add_argument(
+        "--residual", type=float, default=0.0, metavar="SCALE",
+        help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting alone",
+    )  # fmt: skip
+    tr.add_argument(
+        "--residual-space", default="action", choices=["action", "demand"],
+        help="with --residual: correct each normalized action (default) or each zone's flow demand (SCALE in kg/s)",
+    )  # fmt: skip
+    tr.add_argument("--rbc-target", type=float, help="with --residual: the rule-based controller's zone target, C")
+    tr.add_argument(
+        "--log-std-init", type=float, default=0.0,
+        help="the new policy's log standard deviation (default 0, the paper's; --init-from keeps the saved one)",
+    )  # fmt: skip
+    tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
+    tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
+    tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--run-name", help="default: trpo-<weathers>-<time>")
+    tr.add_argument("--resume", help="a checkpoint .zip or a run directory to continue")
+    tr.add_argument(
+        "--overwrite", action="store_true",
+        help="reuse a taken --run-name: the old run and its TensorBoard folder move aside to <name>.old-<time>",
+    )  # fmt: skip
+    tr.add_argument(
+        "--init-from", type=Path,
+        help="start a new run from a saved model.zip's weights and observation statistics (fine-tuning)",
+    )  # fmt: skip
+    tr.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
+    tr.add_argument("--keep-episodes", type=int, default=2, help="full episode directories kept per worker")
+    tr.add_argument("--backend", default="local", choices=["local", "ray"])
+    tr.add_argument("--ray-address", help="an existing Ray cluster (default: start Ray locally)")
+    tr.add_argument("--workers-per-actor", type=int, help="Ray: EnergyPlus workers hosted by each actor")
+    tr.add_argument(
+        "--lockstep", action="store_true",
+        help="step all workers together (a seed then fixes the run bit for bit). Default: each "
+        "local worker gets its next action as soon as its observation arrives",
+    )  # fmt: skip
+    tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar")
+    tr.set_defaults(func=c.cmd_train)
+
+    ev = sub.add_parser("evaluate", help="controllers x weathers sweep: the paper's table and figures")
+    ev.add_argument("--policy", action="append", help="a trained model.zip (or run dir); PATH=LABEL sets the label")
+    ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
+    ev.add_argument("--rbc", action="store_true", help="include the rule-based controller")
+    ev.add_argument(
+        "--rbc-targets", metavar="C,C,...",
+        help="the rule-based controller once per zone target (°C), e.g. 22.7,23.5: what the reward pays for each",
+    )  # fmt: skip
+    ev.add_argument("--weathers", default="CA,CO,FL,IL,VA")
+    ev.add_argument("--run-days", type=int, default=365)
+    ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
+    ev.add_argument("--out", type=Path, default=Path("results") / "latest")
+    ev.add_argument("--histogram", help="CONTROLLER,WEATHER for the West-zone histogram (default: last, VA)")
+    ev.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    ev.add_argument(
+        "--online", action="store_true",
+        help="also the paper's protocol: each --policy (TRPO/PPO) keeps learning, stochastic, on each weather for "
+        "one episode (a copy; the saved model is untouched); rows labelled '..., online'",
+    )  # fmt: skip
+    ev.add_argument("--online-batch", type=int, help="with --online: steps per update (default: the run's own)")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    ev.set_defaults(func=c.cmd_evaluate)
+
+    be = sub.add_parser("bench", help="measure our overhead against raw EnergyPlus on this machine")
+    be.add_argument("--weather", default="CA")
+    be.add_argument("--days", type=int, default=365, help="period for the raw and env runs (default a year)")
+    be.add_argument("--train-steps", type=int, default=16384, help="env steps of TRPO learn (default one batch)")
+    be.add_argument(
+        "--vector-steps", type=int, help="vector steps per worker (default: the same simulated days as training)"
+    )
+    be.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    be.add_argument("--repeats", type=int, default=3, help="repetitions; medians are reported")
+    be.add_argument("--out", type=Path, default=Path("results") / "bench.json")
+    be.add_argument(
+        "--replay-run", type=Path, metavar="RUN_DIR",
+        help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",
+    )  # fmt: skip
+    be.set_defaults(func=c.cmd_bench)
+
+    bd = sub.add_parser("building", help="building specs: start one from a model (init), check one against it (check)")
+    bsub = bd.add_subparsers(dest="building_command", required=True)
+    bi = bsub.add_parser("init", help="run MODEL.idf briefly and write a commented starter spec")
+    bi.add_argument("idf", type=Path, metavar="MODEL.idf")
+    bi.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or an .epw path, for the run and the spec")
+    bi.add_argument("-o", "--output", type=Path, help="the spec to write (default: MODEL.toml beside the model)")
+    bi.add_argument("--name", help="the building's name in the spec (default: from the file name)")
+    bi.set_defaults(func=c.cmd_building_init)
+    bc = bsub.add_parser("check", help="resolve every variable, meter and actuator of SPEC against its model")
+    bc.add_argument("spec", type=Path, metavar="SPEC.toml")
+    bc.add_argument("--weather", help="short name or .epw for the check's run (default: the spec's first)")
+    bc.add_argument("--no-cache", action="store_true", help="run EnergyPlus even if this spec passed before")
+    bc.set_defaults(func=c.cmd_building_check)
+
+    pl = sub.add_parser(
+        "plot", help="RUN_DIR: convergence; EPISODE_DIR: its time series; SWEEP_DIR: figures from results.csv"
+    )
+    pl.add_argument("path", type=Path)
+    pl.set_defaults(func=c.cmd_plot)
+
+    cl = sub.add_parser(
+        "clean", help="remove pipe directories left by killed runs; list (or --kill) their leftover EnergyPlus"
+    )
+    cl.add_argument("--dry-run", action="store_true", help="only list the stale pipe directories")
+    cl.add_argument("--kill", action="store_true", help="also stop leftover EnergyPlus processes (SIGKILL)")
+    cl.set_defaults(func=c.cmd_clean)
+    return parser
