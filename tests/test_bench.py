@@ -12,7 +12,7 @@ from parallel_eplus.buildings.model import ACTIONS
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import read_steps
 from parallel_eplus.engine.simulation import Simulation
-from parallel_eplus.evaluation.bench import BenchConfig, _physical, format_table, raw_rate, run
+from parallel_eplus.bench import BenchConfig, _physical, format_table, raw_rate, run
 
 
 @pytest.mark.slow
@@ -77,7 +77,7 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
 @pytest.mark.slow
 def test_a_training_run_replays_in_raw_energyplus(tmp_path, no_leaks):
     """`bench --replay-run`: every step a run took, with its own model and weather, minus pipes and learner."""
-    from parallel_eplus.evaluation.bench import replay_run
+    from parallel_eplus.bench import replay_run
     from parallel_eplus.training.config import TrainConfig
     from parallel_eplus.training.train import train
 

@@ -200,7 +200,7 @@ def cmd_building_check(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from parallel_eplus.evaluation.bench import BenchConfig, format_table, replay_run, run
+    from parallel_eplus.bench import BenchConfig, format_table, replay_run, run
 
     if args.replay_run:
         with tempfile.TemporaryDirectory(prefix="parallel-eplus-replay-") as tmp:

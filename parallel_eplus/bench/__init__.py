@@ -1,0 +1,137 @@
+"""`parallel-eplus bench`: our overhead against raw EnergyPlus, measured in one run on this machine.
+
+1. raw: EnergyPlus alone (the agent model, a constant action applied by the EnergyPlus-side callback
+   with no pipe exchange), wall seconds from process start to exit;
+2. env: the same period and action stepped through `EnergyPlusEnv` (reset + steps, wall seconds);
+3. vector env: aggregate steps/s with 1 and N workers, and the scaling efficiency, with the workers
+   pipelined (each stepped as soon as it answers, as training steps them) and in lockstep, beside
+   the machine's own: N raw runs at once against one, and N workers each stepped alone in a process
+   of its own (no shared learner: the ceiling any vector env can reach here), and raw EnergyPlus
+   replaying the same actions with no pipes (1 and N processes): what the physics alone costs;
+4. training: env steps/s inside TRPO `learn` with N workers, against the vector env's rate and raw's,
+   and the floor for a million steps here (raw EnergyPlus's time under those actions plus the updates);
+5. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
+
+Random actions in 3 are drawn like an untrained TRPO policy's (N(0, 1) clipped to [-1, 1]), so 3 and
+4 ask EnergyPlus for the same kind of work: control changes EnergyPlus's own cost several-fold.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import resource
+import statistics
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+from parallel_eplus.bench.config import BenchConfig, _exploring_actions
+from parallel_eplus.bench.rates import env_run, independent_rate, training_rate, vector_rate
+from parallel_eplus.bench.raw import _physical, raw_rate, raw_seconds, replay_run
+
+log = logging.getLogger(__name__)
+
+__all__ = ["BenchConfig", "_physical", "format_table", "raw_rate", "replay_run", "run"]
+
+
+def run(cfg: BenchConfig, out: Path | None = None) -> dict:
+    results: dict = {"config": asdict(cfg), "machine": {"cores": os.cpu_count()}}
+    with tempfile.TemporaryDirectory(prefix="parallel-eplus-bench-") as tmp:
+        tmp = Path(tmp)
+        # Back to back within each repeat, and ratios taken per repeat: this machine's speed drifts by
+        # 10-20 % from one minute to the next, which medians of separate series would not cancel.
+        raw, raw_n, envs = [], [], []
+        for i in range(cfg.repeats):
+            raw.append(raw_seconds(cfg, tmp / f"raw{i}"))
+            envs.append(env_run(cfg, tmp / f"env{i}"))
+            # The machine's own ceiling on scaling: N raw runs at once against one alone.
+            raw_n.append(raw_seconds(cfg, tmp / f"rawN{i}", copies=cfg.workers))
+        worker_rss_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        results["raw_s"] = statistics.median(raw)
+        results["raw_n_s"] = statistics.median(raw_n)
+        results["raw_scaling"] = statistics.median(r / n for r, n in zip(raw, raw_n, strict=True))
+        results["env_s"] = statistics.median(e["seconds"] for e in envs)
+        results["env_steps_per_s"] = statistics.median(e["steps_per_s"] for e in envs)
+        results["env_over_raw"] = statistics.median(e["seconds"] / r for e, r in zip(envs, raw, strict=True))
+        results["first_obs_s"] = statistics.median(e["first_obs_s"] for e in envs)
+        one, many, lockstep, alone, phys_1, phys_n = [], [], [], [], [], []
+        for i in range(cfg.repeats):
+            # What the physics costs under the same exploring actions, beside what we make of it.
+            phys_1.append(raw_rate(cfg, tmp / f"p1_{i}", _exploring_actions(cfg, 1)))
+            phys_n.append(raw_rate(cfg, tmp / f"pN_{i}", _exploring_actions(cfg, cfg.workers)))
+            one.append(vector_rate(cfg, 1, tmp / f"v1_{i}"))
+            many.append(vector_rate(cfg, cfg.workers, tmp / f"vN_{i}"))
+            lockstep.append(vector_rate(cfg, cfg.workers, tmp / f"vL_{i}", pipelined=False))
+            alone.append(independent_rate(cfg, tmp / f"alone_{i}"))
+        results["raw_exploring_1_steps_per_s"] = statistics.median(phys_1)
+        results["raw_exploring_n_steps_per_s"] = statistics.median(phys_n)
+        results["vector_1_over_raw"] = statistics.median(r["steps_per_s"] / p for r, p in zip(one, phys_1, strict=True))
+        results["vector_n_over_raw"] = statistics.median(
+            r["steps_per_s"] / p for r, p in zip(many, phys_n, strict=True)
+        )
+        results["vector_1_steps_per_s"] = statistics.median(r["steps_per_s"] for r in one)
+        results["vector_n_steps_per_s"] = statistics.median(r["steps_per_s"] for r in many)
+        results["vector_1_cores_busy"] = statistics.median(r["cores_busy"] for r in one)
+        results["vector_n_cores_busy"] = statistics.median(r["cores_busy"] for r in many)
+        results["scaling_efficiency"] = results["vector_n_steps_per_s"] / (
+            cfg.workers * results["vector_1_steps_per_s"]
+        )
+        results["lockstep_n_steps_per_s"] = statistics.median(r["steps_per_s"] for r in lockstep)
+        results["lockstep_scaling"] = results["lockstep_n_steps_per_s"] / (
+            cfg.workers * results["vector_1_steps_per_s"]
+        )
+        results["independent_n_steps_per_s"] = statistics.median(alone)
+        results["independent_scaling"] = results["independent_n_steps_per_s"] / (
+            cfg.workers * results["vector_1_steps_per_s"]
+        )
+        tr = training_rate(cfg, tmp / "train")
+        results["train_steps_per_s"] = tr["steps_per_s"]
+        results["train_over_vector"] = tr["steps_per_s"] / results["vector_n_steps_per_s"]
+        results["update_s"] = tr["update_s"]
+        results["million_steps_minutes"] = 1e6 / tr["steps_per_s"] / 60
+        results["train_over_raw"] = tr["steps_per_s"] / results["raw_exploring_n_steps_per_s"]
+        # The floor for 1M steps here: EnergyPlus's own time under these actions, plus the updates.
+        results["million_steps_floor_minutes"] = (
+            1e6 / results["raw_exploring_n_steps_per_s"] + 1e6 / cfg.batch_size * tr["update_s"]
+        ) / 60
+        results["worker_peak_rss_mb"] = worker_rss_mb
+        results["learner_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(results, indent=2))
+    return results
+
+
+def format_table(r: dict) -> str:
+    c = r["config"]
+    n = c["workers"]
+    rows = [
+        ("raw EnergyPlus, constant action", f"{r['raw_s']:.2f} s for {c['raw_days']} days", ""),
+        ("EnergyPlusEnv, same action", f"{r['env_s']:.2f} s ({r['env_steps_per_s']:.0f} steps/s)",
+         f"env/raw {r['env_over_raw']:.2f} (target <= 1.25)"),
+        (f"raw EnergyPlus, {n} runs at once", f"{r['raw_n_s']:.2f} s",
+         f"the machine's own scaling {r['raw_scaling']:.2f}"),
+        ("raw EnergyPlus, exploring actions, 1 run", f"{r['raw_exploring_1_steps_per_s']:.0f} steps/s",
+         "the physics alone, start-up excluded"),
+        (f"raw EnergyPlus, exploring actions, {n} at once", f"{r['raw_exploring_n_steps_per_s']:.0f} steps/s", ""),
+        ("vector env, 1 worker", f"{r['vector_1_steps_per_s']:.0f} steps/s",
+         f"{r['vector_1_over_raw']:.2f} of raw; {r['vector_1_cores_busy']:.2f} cores busy"),
+        (f"vector env, {n} workers, pipelined", f"{r['vector_n_steps_per_s']:.0f} steps/s",
+         f"scaling {r['scaling_efficiency']:.2f} (target >= 0.90); {r['vector_n_over_raw']:.2f} of raw"),
+        (f"vector env, {n} workers, lockstep", f"{r['lockstep_n_steps_per_s']:.0f} steps/s",
+         f"scaling {r['lockstep_scaling']:.2f}"),
+        (f"{n} workers stepped alone, at once", f"{r['independent_n_steps_per_s']:.0f} steps/s",
+         f"scaling {r['independent_scaling']:.2f}: the ceiling without lockstep or learner"),
+        (f"TRPO learn, {n} workers", f"{r['train_steps_per_s']:.0f} steps/s",
+         f"train/vector {r['train_over_vector']:.2f} (target >= 0.75); {r['train_over_raw']:.2f} of raw"),
+        ("TRPO update of one 16k batch", f"{r['update_s']:.2f} s", ""),
+        ("1M TRPO steps", f"{r['million_steps_minutes']:.1f} min",
+         f"target <= 15 min; EnergyPlus's own time and the updates: {r['million_steps_floor_minutes']:.1f} min"),
+        ("time to first observation", f"{r['first_obs_s']:.2f} s", "target <= 2 s"),
+        ("peak RSS: EnergyPlus worker / learner", f"{r['worker_peak_rss_mb']:.0f} / {r['learner_peak_rss_mb']:.0f} MB",
+         "worker target <= 300 MB"),
+    ]  # fmt: skip
+    width = max(len(a) for a, _, _ in rows)
+    return "\n".join(f"{a:<{width}}  {b:<28} {t}" for a, b, t in rows)
