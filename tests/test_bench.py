@@ -8,11 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from parallel_eplus.bench import BenchConfig, _physical, format_table, raw_rate, run
 from parallel_eplus.buildings.model import ACTIONS
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import read_steps
 from parallel_eplus.engine.simulation import Simulation
-from parallel_eplus.bench import BenchConfig, _physical, format_table, raw_rate, run
 
 
 @pytest.mark.slow

@@ -1,24 +1,17 @@
-"""One EnergyPlus process at a time behind one pipe pair: the unit the env and the vector env step.
+"""One episode after another on one worker: the unit the env and the vector env step.
 
 `Simulation` owns everything per step that must not be written twice: action checks and scaling, the
-reward, observation clipping, the step record and the error handling. `EnergyPlusEnv` drives one;
-the vector env drives several, writing every action before reading any observation.
+reward, observation clipping, the step record and the error messages. The EnergyPlus process itself (spawn,
+deadlines, exit) is `process.EnergyPlusProcess`. `EnergyPlusEnv` drives one Simulation; the vector env
+drives several, writing every action before reading any observation.
 """
 
 from __future__ import annotations
 
-import contextlib
 import datetime as dt
 import logging
-import math
-import os
-import select
 import shutil
-import subprocess
-import sys
 import tempfile
-import time
-from collections.abc import Container, Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +42,7 @@ from parallel_eplus.engine.episode import (
     write_episode_idf,
     write_records,
 )
+from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
 log = logging.getLogger(__name__)
@@ -75,9 +69,11 @@ class Simulation:
         """`siblings`: how many Simulations one process steps together (sets the default spin)."""
         self.config = config
         auto = config.spin_s is None
-        self.spin_s = pipe.default_spin_s(siblings + 1) if auto else config.spin_s
-        self.child_spin_s = pipe.SPIN_S if auto else config.spin_s
-        self.native_bridge = native.bridge_library() if config.native_bridge else None
+        self.process = EnergyPlusProcess(
+            pipe.default_spin_s(siblings + 1) if auto else config.spin_s,
+            pipe.SPIN_S if auto else config.spin_s,
+            native.bridge_library() if config.native_bridge else None,
+        )
         self.name = name
         self.model = control_model(config.model)
         self.elements = self.model.actions
@@ -108,8 +104,6 @@ class Simulation:
         self.action_names = tuple(e.name for e in self.elements)
         self.base: RuleBasedController | None = None  # the controller a residual action corrects
         self._info: dict = {}
-        self.pipes: pipe.PipePair | None = None
-        self.proc: subprocess.Popen | None = None
         self.episode = 0
         self.episode_dir: Path | None = None
         self.weather = self.weathers[0]
@@ -117,8 +111,32 @@ class Simulation:
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
-        self.deadline = math.inf  # when the frame awaited next is overdue (monotonic s)
         self._closed = False
+
+    # -- the process, as the vector env's `wait_any` and the tests see it -----------------------
+    @property
+    def pipes(self) -> pipe.PipePair | None:
+        return self.process.pipes
+
+    @property
+    def proc(self):
+        return self.process.proc
+
+    @property
+    def deadline(self) -> float:
+        return self.process.deadline
+
+    @property
+    def spin_s(self) -> float:
+        return self.process.spin_s
+
+    @property
+    def native_bridge(self) -> str | None:
+        return self.process.native_bridge
+
+    def running(self) -> bool:
+        """Whether this episode's EnergyPlus process is alive (it exits on its own only after its last step)."""
+        return self.process.running()
 
     # -- episode lifecycle --------------------------------------------------------------------
     def start(self, weather_index: int | None = None) -> tuple[np.ndarray, dict]:
@@ -132,9 +150,6 @@ class Simulation:
         Weathers cycle episode by episode unless `weather_index` picks one.
         """
         self.stop()
-        if self.pipes is None:
-            self.pipes = pipe.PipePair()
-        self.pipes.drain()
         i = self.episode % len(self.weathers) if weather_index is None else weather_index
         self.weather_index = i
         self.episode += 1
@@ -147,24 +162,14 @@ class Simulation:
         self.episode_dir.mkdir(parents=True)
         write_episode_idf(self.idf, self.episode_dir / MODEL_FILE, self.config.run_days)
         link_or_copy(epw, self.episode_dir / epw.name)
-        cmd = [
-            sys.executable, "-m", "parallel_eplus.engine.eplus_callback",
-            "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path),
+        args = [
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
             "--output-dir", str(self.episode_dir), "--model", self.model.name,
-            "--steps", str(self.steps_per_episode),
-            "--initial-action", *map(str, self.initial_action), "--spin-us", str(self.child_spin_s * 1e6),
-            *(["--native", self.native_bridge] if self.native_bridge else []),
+            "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
         ]  # fmt: skip
-        with open(self.episode_dir / "energyplus.log", "wb") as logf:
-            self.proc = subprocess.Popen(
-                cmd, stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT,
-                start_new_session=True,  # Ctrl-C reaches the learner, which stops us cleanly
-            )  # fmt: skip
-        self.pipes.watch(self.proc.pid, lambda: self.proc is not None and self.proc.poll() is None)
+        self.process.spawn(args, self.episode_dir / "energyplus.log", self.config.start_timeout_s)
         self.records = StepRecorder(self.action_names, self.steps_per_episode)
         self._action = self.initial_action.tolist()
-        self.deadline = time.monotonic() + self.config.start_timeout_s  # for the first observation
         self.last_summary = None
         if self.config.residual_scale:  # a fresh integral state per episode
             target = self.config.rbc_target_c
@@ -194,10 +199,9 @@ class Simulation:
                 a = self.base(None, self._info) + correction
             self._action = scale_action(a, self.low, self.high, self.action_names)
         try:
-            self.pipes.send(pipe.encode(self._action))
+            self.process.send(pipe.encode(self._action), self.config.step_timeout_s)
         except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
             raise self._error(f"cannot send the action: {e}") from e
-        self.deadline = time.monotonic() + self.config.step_timeout_s
 
     def receive(self) -> tuple[np.ndarray, float, bool, dict]:
         """(observation, reward, terminated, info) for the action last sent, due `step_timeout_s` after it."""
@@ -238,7 +242,7 @@ class Simulation:
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
         """The frame awaited next, by `self.deadline` (set `limit_s` after the launch or the action)."""
         try:
-            code, values = self.pipes.recv(max(self.deadline - time.monotonic(), 0.0), self.spin_s)
+            code, values = self.process.recv()
         except TimeoutError as e:
             raise self._error(f"EnergyPlus sent no {what} within {limit_s:.0f} s (hung?)") from e
         except ChildProcessError as e:
@@ -258,14 +262,7 @@ class Simulation:
 
     def _finish(self) -> None:
         """The run period is over: let EnergyPlus finish its files, then write the records."""
-        if self.proc is not None:
-            exited = self.pipes.wait_exit(30)
-            if exited is None:
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    exited = self.proc.wait(timeout=30) is not None
-            if not exited:
-                log.warning("EnergyPlus did not exit within 30 s of the last step; killing it")
-            self._kill()
+        self.process.finish()
         self._write_records(complete=True)
 
     def _write_records(self, complete: bool) -> None:
@@ -284,16 +281,7 @@ class Simulation:
         prune_episodes(self.output_dir, self.config.keep_episodes)
 
     def _kill(self) -> None:
-        proc, self.proc = self.proc, None
-        if proc is None:
-            return
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait()
-
-    def running(self) -> bool:
-        """Whether this episode's EnergyPlus process is alive (it exits on its own only after its last step)."""
-        return self.proc is not None and self.proc.poll() is None
+        self.process.kill()
 
     def stop(self) -> None:
         """End a running episode early: kill EnergyPlus and keep the partial record."""
@@ -311,9 +299,7 @@ class Simulation:
             return
         self._closed = True
         self.stop()
-        if self.pipes is not None:
-            self.pipes.close()
-            self.pipes = None
+        self.process.close()
         if self._tmp is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
 
@@ -322,34 +308,4 @@ class Simulation:
             self.close()
 
 
-def wait_any(sims: Sequence[Simulation], indices: Iterable[int], due: Container[int] = ()) -> list[int]:
-    """Those of `sims[i]` (i in `indices`) with something for `receive` or `first_observation`: a frame,
-    an exit, or a deadline passed (plus any in `due`). Blocks until there is at least one.
-
-    For pipelining: serve each simulation as soon as it answers instead of waiting for the slowest. Like
-    a single read, it polls for the simulations' spin time first (none when they and this process have
-    no spare core: see `pipe.default_spin_s`).
-    """
-    indices = list(indices)
-    if not indices:
-        return []
-    spin_until = time.monotonic() + sims[indices[0]].spin_s
-    while True:
-        now = time.monotonic()
-        ready = [
-            i for i in indices
-            if i in due or sims[i].pipes.has_frame() or sims[i].deadline <= now
-            or not (sims[i].pipes.watches_exit or sims[i].running())
-        ]  # fmt: skip
-        if ready:
-            return ready
-        fds = {fd: i for i in indices for fd in sims[i].pipes.fds()}
-        wait = min(sims[i].deadline for i in indices) - now
-        if now < spin_until:
-            os.sched_yield()  # let a process on this core go first, as a single simulation's read does
-            wait = 0.0
-        elif not all(sims[i].pipes.watches_exit for i in indices):
-            wait = min(wait, 0.2)  # no pidfd to wake us when a process dies: look every 0.2 s
-        readable, _, _ = select.select(list(fds), [], [], None if math.isinf(wait) else wait)
-        if readable:
-            return sorted({fds[fd] for fd in readable})
+__all__ = ["Simulation", "wait_any"]

@@ -1,0 +1,128 @@
+"""One EnergyPlus process behind one pipe pair: spawned, answered by a deadline, stopped with nothing left behind.
+
+`Simulation` decides what an episode is (files, actions, reward, records); this module only knows the
+process: how it is started, how a frame is awaited against a deadline, and how it ends. `wait_any` serves
+many of them as each answers, for the vector env and the evaluation sweep.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import select
+import subprocess
+import sys
+import time
+from collections.abc import Container, Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from parallel_eplus.engine import pipe
+
+log = logging.getLogger(__name__)
+
+
+class EnergyPlusProcess:
+    """The EnergyPlus side of one worker, episode after episode, over one pipe pair kept between episodes."""
+
+    def __init__(self, spin_s: float, child_spin_s: float, native_bridge: str | None):
+        self.spin_s = spin_s  # how long our reads spin before blocking
+        self.child_spin_s = child_spin_s  # the same for EnergyPlus's side
+        self.native_bridge = native_bridge
+        self.pipes: pipe.PipePair | None = None
+        self.proc: subprocess.Popen | None = None
+        self.deadline = math.inf  # when the frame awaited next is overdue (monotonic s)
+
+    def spawn(self, args: list[str], log_path: Path, first_frame_s: float) -> None:
+        """Start EnergyPlus (`eplus_callback` with `args`), not waiting: its first frame is due in `first_frame_s`."""
+        if self.pipes is None:
+            self.pipes = pipe.PipePair()
+        self.pipes.drain()
+        cmd = [
+            sys.executable, "-m", "parallel_eplus.engine.eplus_callback",
+            "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path), *args,
+            "--spin-us", str(self.child_spin_s * 1e6),
+            *(["--native", self.native_bridge] if self.native_bridge else []),
+        ]  # fmt: skip
+        with open(log_path, "wb") as logf:
+            self.proc = subprocess.Popen(
+                cmd, stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT,
+                start_new_session=True,  # Ctrl-C reaches the learner, which stops us cleanly
+            )  # fmt: skip
+        self.pipes.watch(self.proc.pid, lambda: self.proc is not None and self.proc.poll() is None)
+        self.deadline = time.monotonic() + first_frame_s
+
+    def send(self, frame: bytes, answer_s: float) -> None:
+        """One action frame; its answer is due in `answer_s`."""
+        self.pipes.send(frame)
+        self.deadline = time.monotonic() + answer_s
+
+    def recv(self) -> tuple[int, np.ndarray]:
+        """The frame awaited next, by the deadline: raises TimeoutError, ChildProcessError or ProtocolError."""
+        return self.pipes.recv(max(self.deadline - time.monotonic(), 0.0), self.spin_s)
+
+    def finish(self, grace_s: float = 30.0) -> None:
+        """After the last step: let EnergyPlus write its files and exit, then make sure it has."""
+        if self.proc is None:
+            return
+        exited = self.pipes.wait_exit(grace_s)
+        if exited is None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                exited = self.proc.wait(timeout=grace_s) is not None
+        if not exited:
+            log.warning("EnergyPlus did not exit within %.0f s of the last step; killing it", grace_s)
+        self.kill()
+
+    def kill(self) -> None:
+        proc, self.proc = self.proc, None
+        if proc is None:
+            return
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+    def running(self) -> bool:
+        """Whether EnergyPlus is alive (it exits on its own only after its last step)."""
+        return self.proc is not None and self.proc.poll() is None
+
+    def close(self) -> None:
+        self.kill()
+        if self.pipes is not None:
+            self.pipes.close()
+            self.pipes = None
+
+
+def wait_any(procs: Sequence, indices: Iterable[int], due: Container[int] = ()) -> list[int]:
+    """Those of `procs[i]` (i in `indices`; anything with `pipes`, `deadline`, `running`, `spin_s`) with
+    something to read: a frame, an exit, or a deadline passed (plus any in `due`). Blocks until one has.
+
+    For pipelining: serve each simulation as soon as it answers instead of waiting for the slowest. Like
+    a single read, it polls for the simulations' spin time first (none when they and this process have
+    no spare core: see `pipe.default_spin_s`).
+    """
+    indices = list(indices)
+    if not indices:
+        return []
+    spin_until = time.monotonic() + procs[indices[0]].spin_s
+    while True:
+        now = time.monotonic()
+        ready = [
+            i for i in indices
+            if i in due or procs[i].pipes.has_frame() or procs[i].deadline <= now
+            or not (procs[i].pipes.watches_exit or procs[i].running())
+        ]  # fmt: skip
+        if ready:
+            return ready
+        fds = {fd: i for i in indices for fd in procs[i].pipes.fds()}
+        wait = min(procs[i].deadline for i in indices) - now
+        if now < spin_until:
+            os.sched_yield()  # let a process on this core go first, as a single simulation's read does
+            wait = 0.0
+        elif not all(procs[i].pipes.watches_exit for i in indices):
+            wait = min(wait, 0.2)  # no pidfd to wake us when a process dies: look every 0.2 s
+        readable, _, _ = select.select(list(fds), [], [], None if math.isinf(wait) else wait)
+        if readable:
+            return sorted({fds[fd] for fd in readable})
