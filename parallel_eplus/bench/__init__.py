@@ -37,6 +37,7 @@ __all__ = ["BenchConfig", "_physical", "format_table", "raw_rate", "replay_run",
 
 
 def run(cfg: BenchConfig, out: Path | None = None) -> dict:
+    """Every measurement, back to back, on this machine; written to `out` as JSON when given."""
     results: dict = {"config": asdict(cfg), "machine": {"cores": os.cpu_count()}}
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-bench-") as tmp:
         tmp = Path(tmp)
@@ -105,6 +106,7 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
 
 
 def format_table(r: dict) -> str:
+    """The benchmark as the table `parallel-eplus bench` prints, targets beside the figures."""
     c = r["config"]
     n = c["workers"]
     rows = [

@@ -10,6 +10,8 @@ import numpy as np
 
 @dataclass
 class BenchConfig:
+    """What one benchmark run measures: its period, weather, workers, repeats and constant action."""
+
     weather: str = "CA"
     raw_days: int = 365  # period for raw and env
     # EnergyPlus's cost under exploring actions varies with the season (a summer step costs up to 1.5-1.7

@@ -29,6 +29,8 @@ CHECK_TIMEOUT_S = 300.0  # sizing a large model can take a minute on a busy mach
 
 @dataclass(frozen=True)
 class CheckResult:
+    """The outcome of one check: every problem (none if it passed), the model's control steps per hour."""
+
     problems: tuple[str, ...]
     timesteps_per_hour: int
     seconds: float
@@ -40,6 +42,7 @@ class CheckResult:
 
 
 def cache_dir() -> Path:
+    """Where passing checks are remembered (`$XDG_CACHE_HOME/parallel-eplus/checks`)."""
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(base) / "parallel-eplus" / "checks"
 
@@ -209,6 +212,7 @@ def _probe(request_file: Path, weather: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The child process of a check: `--probe REQUEST.json --weather EPW` writes report.json beside it."""
     p = argparse.ArgumentParser(prog="python -m parallel_eplus.buildings.check")
     p.add_argument("--probe", type=Path, required=True)
     p.add_argument("--weather", type=Path, required=True)

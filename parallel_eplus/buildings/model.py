@@ -85,6 +85,7 @@ IT_SCHEDULE = "Data Center CPU Loading Schedule"
 
 
 def time_features(t: dt.datetime) -> tuple[float, ...]:
+    """Hour of day and day of week as sine/cosine pairs, each in [-1, 1]."""
     hour = 2 * math.pi * (t.hour + t.minute / 60) / 24
     day = 2 * math.pi * t.weekday() / 7
     return math.sin(hour), math.cos(hour), math.sin(day), math.cos(day)
@@ -114,10 +115,12 @@ def schedule_features(t: dt.datetime, schedule: tuple[tuple[float, float], ...])
 
 
 def observation_names(with_time: bool = False, with_schedule: bool = False) -> tuple[str, ...]:
+    """The observation vector's element names, in order, with the opt-in features."""
     return SENSOR_NAMES + (TIME_FEATURES if with_time else ()) + (SCHEDULE_FEATURES if with_schedule else ())
 
 
 def observation_bounds(with_time: bool = False, with_schedule: bool = False) -> tuple[list[float], list[float]]:
+    """(low, high) of every observation element, as the observation space declares them."""
     extra = len(observation_names(with_time, with_schedule)) - len(SENSORS)
     return [s.low for s in SENSORS] + [-1.0] * extra, [s.high for s in SENSORS] + [1.0] * extra
 
@@ -164,6 +167,7 @@ MODELS: dict[str, ControlModel] = {
 
 
 def control_model(name: str) -> ControlModel:
+    """A control model by name (`temp_fan`, `temp`, `baseline`), or a ValueError listing them."""
     try:
         return MODELS[name]
     except KeyError:

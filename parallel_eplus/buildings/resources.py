@@ -38,6 +38,7 @@ def weather_dirs() -> list[Path]:
 
 
 def spec_dir() -> Path:
+    """The folder of the built-in building specs (in the wheel or the checkout)."""
     return _package_dir(SPECS)
 
 

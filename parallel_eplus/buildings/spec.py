@@ -24,6 +24,8 @@ class SpecError(ValueError):
 
 @dataclass(frozen=True)
 class Observation:
+    """One element of the observation vector: an output variable (with its key) or a meter, and its bounds."""
+
     name: str
     low: float
     high: float
@@ -36,6 +38,8 @@ class Observation:
 
 @dataclass(frozen=True)
 class ActuatorSpec:
+    """One EnergyPlus actuator, named as `list_available_api_data_csv` lists it (component, control, key)."""
+
     component: str
     control: str
     key: str
@@ -43,6 +47,8 @@ class ActuatorSpec:
 
 @dataclass(frozen=True)
 class ActionSpec:
+    """One element of the action: scaled from [-1, 1] to [low, high] and written to every actuator listed."""
+
     name: str
     low: float
     high: float
@@ -53,6 +59,8 @@ class ActionSpec:
 
 @dataclass(frozen=True)
 class RewardSpec:
+    """The paper's reward over any zones: which observations are temperatures and power, and the band."""
+
     temperatures: tuple[str, ...]
     power: str
     band: tuple[float, float]
@@ -61,6 +69,8 @@ class RewardSpec:
 
 @dataclass(frozen=True)
 class BuildingSpec:
+    """One controllable building, as loaded and validated from its TOML file (paths resolved)."""
+
     name: str
     path: Path
     idf: Path

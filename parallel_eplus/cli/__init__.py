@@ -12,6 +12,7 @@ __all__ = ["build_parser", "main"]
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run `parallel-eplus ARGS`; returns the exit code (2: a clear one-line error, 130: interrupted)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(

@@ -12,6 +12,7 @@ DESCRIPTION = "Train and evaluate RL controllers for buildings against parallel 
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """Every subcommand with its options and defaults."""
     parser = argparse.ArgumentParser(prog="parallel-eplus", description=DESCRIPTION)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True)

@@ -16,11 +16,13 @@ from parallel_eplus.engine.simulation import Simulation
 
 
 def observation_space(time_features: bool = False, schedule_features: bool = False) -> gym.spaces.Box:
+    """The paper's six observations, plus the opt-in time and schedule features, as a Box."""
     low, high = observation_bounds(time_features, schedule_features)
     return gym.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
 
 
 def action_space(n: int) -> gym.spaces.Box:
+    """n normalized action elements, each in [-1, 1]."""
     return gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
 
 
@@ -122,6 +124,7 @@ class EnergyPlusEnv(gym.Env):
 
     @property
     def episode_dir(self) -> Path | None:
+        """Where the running (or last) episode writes its files."""
         return self.sim.episode_dir
 
     def close(self) -> None:

@@ -88,6 +88,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         return obs, rewards, terminated, truncated, self._as_dict(infos)
 
     def observations(self) -> np.ndarray:
+        """Every worker's current observation, stacked."""
         return self._obs.copy()
 
     # -- list-of-dicts variants, used by the SB3 adapter and the Ray actors ------------------------
@@ -104,6 +105,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         return infos
 
     def step_lists(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+        """One lockstep vector step: (observations, rewards, terminated, infos) as lists, no auto-reset copies."""
         actions = np.asarray(actions)
         n = self.num_envs
         for i in range(n):

@@ -143,6 +143,7 @@ class TrainConfig:
 
     @property
     def run_dir(self) -> Path:
+        """Where this run's model, checkpoints, config and episode records go."""
         return Path(self.runs_dir) / str(self.run_name)
 
     @property
@@ -151,10 +152,12 @@ class TrainConfig:
         return math.ceil(self.batch_size / self.workers)
 
     def to_json(self) -> str:
+        """The run's settings as saved in its config.json."""
         return json.dumps(asdict(self), indent=2)
 
     @classmethod
     def from_json(cls, text: str) -> TrainConfig:
+        """A run's settings from its config.json (what `--resume` reads)."""
         raw = json.loads(text)
         raw["reward"] = RewardConfig(**raw["reward"])
         raw["trpo"] = TRPOSettings(**{**raw["trpo"], "net_arch": tuple(raw["trpo"]["net_arch"])})
