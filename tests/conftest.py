@@ -42,10 +42,25 @@ def _held_by_another_run(path: str) -> bool:
     return False
 
 
+def _owned_by_another_run(path: str) -> bool:
+    """Whether the directory names its owner (engine/pipe_sweep.py) and that owner is not this session's."""
+    try:
+        pid = (Path(path) / "owner").read_text().split()[0]
+    except (OSError, IndexError):
+        return False
+    return int(pid) != os.getpid() and not _started_by_us(pid)
+
+
 def our_pipe_dirs(tmp: str = "/tmp") -> set[str]:
-    """Pipe directories under `tmp`, less those another run on the machine has open."""
-    names = {d for d in os.listdir(tmp) if d.startswith("parallel-eplus-") and "episodes" not in d}
-    return {d for d in names if not _held_by_another_run(os.path.join(tmp, d))}
+    """Pipe directories under `tmp` (a `parallel-eplus-*` folder with an `act` FIFO), less those of
+    another run on the machine: named as another process's, or held open by one."""
+    names = {
+        d for d in os.listdir(tmp) if d.startswith("parallel-eplus-") and os.path.exists(os.path.join(tmp, d, "act"))
+    }
+    return {
+        d for d in names
+        if not _owned_by_another_run(os.path.join(tmp, d)) and not _held_by_another_run(os.path.join(tmp, d))
+    }  # fmt: skip
 
 
 @pytest.fixture
