@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -77,11 +79,14 @@ def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cyc
 
 
 @pytest.mark.slow
-def test_ray_backend_trains_locally(tmp_path, no_leaks):
+def test_ray_backend_trains_locally(tmp_path, no_leaks, caplog):
     pytest.importorskip("ray")
     cfg = small_config(tmp_path, "ray", weathers=["CA"], timesteps=768, backend="ray", workers_per_actor=1)
-    final = train(cfg, progress=False)
+    with caplog.at_level(logging.INFO, logger="parallel_eplus"):
+        final = train(cfg, progress=False)
     assert final.is_file()
+    assert "Ray cluster: 1 node(s)" in caplog.text  # the resources, then the workers each node got
+    assert re.search(r"\): 2 worker\(s\)", caplog.text), caplog.text
     tags = scalars(tmp_path / "tb" / "ray")
     assert "episode/CA/power_kw" in tags
 

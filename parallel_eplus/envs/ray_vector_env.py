@@ -39,7 +39,30 @@ def _actor_class():
         def close(self):
             self.venv.close()
 
+        def node(self) -> str:
+            import socket
+
+            return f"{socket.gethostname()} ({ray.util.get_node_ip_address()})"
+
     return WorkerGroup
+
+
+def _log_placement(actors, slices, timeout_s: float = 60.0) -> None:
+    """The cluster's resources and how many workers each node got: what a user checks first on a cluster."""
+    import collections
+
+    import ray
+
+    res = ray.cluster_resources()
+    nodes = [n for n in ray.nodes() if n.get("Alive")]
+    log.info("Ray cluster: %d node(s), %.0f CPUs, %.1f GiB memory", len(nodes), res.get("CPU", 0),
+             res.get("memory", 0) / 2**30)  # fmt: skip
+    placed = ray.get([a.node.remote() for a in actors], timeout=timeout_s)
+    per_node: collections.Counter = collections.Counter()
+    for node, sl in zip(placed, slices, strict=True):
+        per_node[node] += sl.stop - sl.start
+    for node, n in per_node.items():
+        log.info("  %s: %d worker(s)", node, n)
 
 
 class RayVectorEnv:
@@ -81,6 +104,7 @@ class RayVectorEnv:
         self._in_flight: dict = {}  # ObjectRef of an actor's step -> actor index
         self._answers: dict[int, tuple] = {}  # worker -> its answer, fetched but not yet received
         log.info("Ray backend: %d workers in %d actors", self.num_envs, len(self.actors))
+        _log_placement(self.actors, self.slices)
 
     def observations(self) -> np.ndarray:
         return self._obs.copy()
