@@ -17,6 +17,9 @@ class SimulationConfig:
 
     weather: str = "CA"  # code or .epw path; a list cycles episode by episode
     model: str = "temp_fan"
+    # A building spec (TOML, buildings/spec.py): its IDF, sensors, actions and reward signals replace the
+    # data center's and `model`'s. None: the data center (buildings/specs/datacenter-2zone.toml).
+    building: str | None = None
     run_days: int = 365
     output_dir: str | None = None  # None: a temporary directory removed on close
     keep_episodes: int | None = None  # newest full episode directories kept; None keeps all
