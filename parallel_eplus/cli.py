@@ -301,6 +301,11 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     be.set_defaults(func=cmd_bench)
 
+    bd = sub.add_parser("building", help="building spec files (buildings/spec.py)")
+    from parallel_eplus.buildings.commands import add_check
+
+    add_check(bd.add_subparsers(dest="building_command", required=True))
+
     pl = sub.add_parser(
         "plot", help="RUN_DIR: convergence; EPISODE_DIR: its time series; SWEEP_DIR: figures from results.csv"
     )

@@ -69,6 +69,10 @@ class EnergyPlusEnv(gym.Env):
         building: str | Path | None = None,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
+        if building is not None:  # a typo costs seconds and a message naming it, not a hung worker
+            from parallel_eplus.buildings.check import check_building
+
+            check_building(building)
         self.config = SimulationConfig(
             weather=weathers[0],
             model=model,
