@@ -40,6 +40,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     env = EnergyPlusEnv(
         weather=args.weather,
         model=args.model,
+        building=args.building,
         run_days=args.days,
         output_dir=args.output_dir,
         reward=args.reward,
@@ -67,14 +68,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
-    from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.training.config import TrainConfig, TRPOSettings
     from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
         workers=args.workers,
-        weathers=parse_weathers(args.weathers),
+        weathers=[w.strip() for w in args.weathers.split(",") if w.strip()],  # checked by TrainConfig
         model=args.model,
+        building=args.building,
         timesteps=args.timesteps,
         run_days=args.run_days,
         batch_size=args.batch_size,
@@ -200,6 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or a path to an .epw (default CA)")
     sim.add_argument("--days", type=int, default=7, help="run period length from Jan 1 (default 7)")
     sim.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    sim.add_argument("--building", help="a building spec (TOML); default: the data center")
     sim.add_argument("--policy", default="constant", choices=["constant", "random"])
     sim.add_argument("--action", help="the constant action in [-1, 1], comma-separated (default all 0)")
     sim.add_argument("--output-dir", type=Path, help="keep the episode records here")
@@ -212,6 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="EnergyPlus processes (default: cores)")
     tr.add_argument("--weathers", default="CA", help="comma-separated, e.g. CA,CO,FL (default CA)")
     tr.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    tr.add_argument("--building", help="a building spec (TOML), checked first; default: the data center")
     tr.add_argument(
         "--time-features", action="store_true",
         help="add hour and day of week (sine/cosine) to the paper's six observations",

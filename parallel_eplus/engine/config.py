@@ -50,4 +50,8 @@ def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
         raise ValueError(f"unknown residual space {config.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
     if config.residual_scale and config.residual_space == "demand":
         return DEMAND_CORRECTIONS
+    if config.building:
+        from parallel_eplus.buildings.building import load_building
+
+        return tuple(e.name for e in load_building(config.building).actions)
     return tuple(e.name for e in control_model(config.model).actions)

@@ -85,7 +85,8 @@ class Simulation:
             raise FileNotFoundError(f"model file not found: {self.idf}")
         self._schedule = it_load_schedule(self.idf) if config.schedule_features else None
         self.weathers = weathers or [config.weather]
-        self.weather_paths = [resolve_weather(w) for w in self.weathers]  # fail before spawning
+        named = self.building.spec.weathers  # the spec's short names, then codes and .epw paths
+        self.weather_paths = [named.get(w) or resolve_weather(w) for w in self.weathers]  # fail before spawning
         self.steps_per_episode = config.run_days * self.building.steps_per_day
         self.low = tuple(e.low for e in self.elements)
         self.high = tuple(e.high for e in self.elements)
