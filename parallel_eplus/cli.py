@@ -120,7 +120,6 @@ def _temperatures(text: str, flag: str) -> list[float]:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
-    from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.evaluation.sweep import (
         BASELINE_LABEL,
         RBC_LABEL,
@@ -130,7 +129,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         write_results,
     )
 
-    weathers = parse_weathers(args.weathers)  # bad input fails here, before anything runs
+    weathers = [w.strip() for w in args.weathers.split(",") if w.strip()]  # checked by run_sweep first
     controllers = []
     if args.baseline:
         controllers.append(Controller(BASELINE_LABEL, "baseline"))
@@ -143,8 +142,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     df = run_sweep(
-        controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward), not args.quiet
-    )
+        controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
+        not args.quiet, args.building,
+    )  # fmt: skip
     if args.online:
         import pandas as pd
 
@@ -274,6 +274,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="the rule-based controller once per zone target (°C), e.g. 22.7,23.5: what the reward pays for each",
     )  # fmt: skip
     ev.add_argument("--weathers", default="CA,CO,FL,IL,VA")
+    ev.add_argument("--building", help="a building spec (TOML), checked first; default: the data center")
     ev.add_argument("--run-days", type=int, default=365)
     ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
     ev.add_argument("--out", type=Path, default=Path("results") / "latest")

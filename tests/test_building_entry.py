@@ -6,6 +6,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import parallel_eplus
 from parallel_eplus.buildings import model
@@ -52,3 +53,22 @@ def test_simulate_building(tmp_path, capsys, no_leaks):
     spec = SPECS / "datacenter-2zone.toml"
     assert main(["simulate", "--building", str(spec), "--days", "1", "--quiet"]) == 0
     assert "power" in capsys.readouterr().out.lower()
+
+
+def test_evaluate_building_baseline(tmp_path, no_leaks):
+    """`evaluate --building` runs the spec's built-in controls; its summary uses the spec's reward signals."""
+    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+
+    spec = SPECS / "datacenter-2zone.toml"
+    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], 1, 1, tmp_path, progress=False, building=spec)
+    ref = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], 1, 1, tmp_path / "ref", progress=False)
+    assert df["power_kw"].tolist() == ref["power_kw"].tolist()
+    assert df["in_band_pct"].tolist() == ref["in_band_pct"].tolist()
+
+
+def test_evaluate_refuses_other_building(tmp_path):
+    from parallel_eplus.evaluation.sweep import Controller, run_sweep
+
+    policy = Controller("p", "policy", tmp_path / "model.zip", building=None)
+    with pytest.raises(ValueError, match="trained on building datacenter-2zone"):
+        run_sweep([policy], ["CA"], 1, 1, tmp_path, progress=False, building=SPECS / "datacenter-2zone-temp.toml")

@@ -44,8 +44,10 @@ class Building:
     def bounds(self) -> tuple[list[float], list[float]]:
         return [s.low for s in self.sensors], [s.high for s in self.sensors]
 
-    def control(self) -> ControlModel:
-        """The spec's agent variant: its IDF, all its actions."""
+    def control(self, model: str = "") -> ControlModel:
+        """The spec's agent variant (its IDF, all its actions), or with "baseline" its built-in controls."""
+        if model == "baseline":
+            return ControlModel("baseline", self.spec.baseline_idf or self.spec.idf, ())
         return ControlModel(self.spec.name, self.spec.idf, self.actions)
 
 

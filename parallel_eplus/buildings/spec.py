@@ -70,6 +70,7 @@ class BuildingSpec:
     time_features: bool = False
     schedule_features: bool = False
     timesteps_per_hour: int | None = None  # None: the IDF's Timestep
+    baseline_idf: Path | None = None  # the model's own controls, for evaluation; None: `idf` without actuators
 
 
 def _close(value: str, names) -> str:
@@ -188,6 +189,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
         bool(data.get("time_features", False)),
         bool(data.get("schedule_features", False)),
         data.get("timesteps_per_hour"),
+        (path.parent / data["baseline_idf"]).resolve() if "baseline_idf" in data else None,
     )
 
 

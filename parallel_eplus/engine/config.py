@@ -50,7 +50,7 @@ def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
         raise ValueError(f"unknown residual space {config.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
     if config.residual_scale and config.residual_space == "demand":
         return DEMAND_CORRECTIONS
-    if config.building:
+    if config.building and config.model != "baseline":
         from parallel_eplus.buildings.building import load_building
 
         return tuple(e.name for e in load_building(config.building).actions)

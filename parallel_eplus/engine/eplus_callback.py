@@ -64,7 +64,7 @@ class Bridge:
         self.obs_fd = obs_fd
         spec = load_building(building)  # None: the data center, whose variants `model` names
         self.sensors = spec.sensors
-        self.elements = spec.actions if building else control_model(model).actions
+        self.elements = spec.actions if building and model != "baseline" else control_model(model).actions
         if len(initial) != len(self.elements):
             raise SystemExit(f"--initial-action needs {len(self.elements)} values, got {len(initial)}")
         self.action = list(initial)

@@ -74,7 +74,7 @@ class Simulation:
         self.native_bridge = native.bridge_library() if config.native_bridge else None
         self.name = name
         self.building = load_building(config.building)  # None: the data center, whose variants `model` names
-        self.model = self.building.control() if config.building else control_model(config.model)
+        self.model = self.building.control(config.model) if config.building else control_model(config.model)
         self.sensor_names = self.building.sensor_names
         self.obs_low, self.obs_high = (np.array(b, dtype=np.float32) for b in self.building.bounds())
         self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
