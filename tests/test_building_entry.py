@@ -6,6 +6,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pandas as pd
 import pytest
 
 import parallel_eplus
@@ -72,3 +73,18 @@ def test_evaluate_refuses_other_building(tmp_path):
     policy = Controller("p", "policy", tmp_path / "model.zip", building=None)
     with pytest.raises(ValueError, match="trained on building datacenter-2zone"):
         run_sweep([policy], ["CA"], 1, 1, tmp_path, progress=False, building=SPECS / "datacenter-2zone-temp.toml")
+
+
+def test_evaluate_generic_building_cli(tmp_path, no_leaks):
+    """A spec with its own names: evaluate reports power and % in band per temperature against its baseline."""
+    text = (SPECS / "datacenter-2zone.toml").read_text().replace("../../../", f"{SPECS.parents[2]}/")
+    text = text.replace("west_temp_c", "zone_a").replace("east_temp_c", "zone_b").replace('"power_w"', '"total_w"')
+    spec = tmp_path / "generic.toml"
+    spec.write_text(text.replace('name = "power_w"', 'name = "total_w"'))
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--building", str(spec), "--baseline", "--weathers", "CA", "--run-days", "1"]
+    assert main([*argv, "--workers", "1", "--out", str(out), "--quiet"]) == 0
+    table = (out / "results.md").read_text()
+    assert "zone_a in band" in table and "zone_b in band" in table
+    df = pd.read_csv(out / "results.csv")
+    assert df["power_kw"].iloc[0] > 0 and 0 <= df["zone_a_in_band_pct"].iloc[0] <= 100

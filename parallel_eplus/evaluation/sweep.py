@@ -240,8 +240,10 @@ def table_markdown(df: pd.DataFrame) -> str:
 
 def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
     """results.csv, results.md and the figures; returns the files written."""
-    from parallel_eplus.evaluation import plots
+    from parallel_eplus.evaluation import building_table, plots
 
+    if building_table.is_generic(df):  # another building: its power and zones, no paper figures
+        return building_table.write_results(df, out_dir, BASELINE_LABEL)
     out_dir.mkdir(parents=True, exist_ok=True)
     df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(out_dir / "results.csv", index=False)
     (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df))
