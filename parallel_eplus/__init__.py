@@ -8,8 +8,11 @@ from gymnasium.envs.registration import register, registry
 
 ENV_ID = "parallel_eplus/DataCenter-v0"
 
-if ENV_ID not in registry:
-    register(id=ENV_ID, entry_point="parallel_eplus.envs.env:EnergyPlusEnv", disable_env_checker=True)
+BUILDING_ENV_ID = "parallel_eplus/Building-v0"  # the same env; pass building=SPEC
+
+for _id in (ENV_ID, BUILDING_ENV_ID):
+    if _id not in registry:
+        register(id=_id, entry_point="parallel_eplus.envs.env:EnergyPlusEnv", disable_env_checker=True)
 
 _LAZY = {
     "EnergyPlusEnv": "envs.env",

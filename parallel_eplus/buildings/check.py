@@ -120,13 +120,25 @@ def check_spec(
 
 
 def require_checked(spec: BuildingSpec | str | Path, weather: str | Path | None = None) -> CheckResult:
-    """`check_spec`, raising SpecError with every problem: what train, evaluate and the env call first."""
+    """`check_spec`, raising SpecError with every problem."""
     spec = spec if isinstance(spec, BuildingSpec) else load_spec(spec)
     result = check_spec(spec, weather)
     if not result.ok:
         lines = "\n  ".join(result.problems)
         raise SpecError(f"{spec.path}: {len(result.problems)} problem(s) against {spec.idf.name}:\n  {lines}")
     return result
+
+
+def check_building(path: str | Path, weather: str | Path | None = None, use_cache: bool = True) -> BuildingSpec:
+    """Load a spec (a path or a built-in name) and check it against its model; the spec, or SpecError."""
+    from parallel_eplus.buildings.resources import spec_file
+
+    spec = load_spec(spec_file(path))
+    result = check_spec(spec, weather, use_cache=use_cache)
+    if not result.ok:
+        lines = "\n  ".join(result.problems)
+        raise SpecError(f"{spec.path}: {len(result.problems)} problem(s) against {spec.idf.name}:\n  {lines}")
+    return spec
 
 
 # --- the child process: EnergyPlus through its API, stopped at the first timestep with data ready ---

@@ -1,7 +1,7 @@
-"""The data-center model: every fact about its sensors, actuators, bounds and files, declared once.
+"""The data-center model as the package's older modules see it: a thin layer over its building spec.
 
-Both sides of the pipe read this module: the env builds its spaces and scales actions from it, and the
-EnergyPlus-side callback looks up the same variable and actuator names.
+The facts (sensors, actuators, bounds, reward band) live once, in specs/datacenter-2zone.toml; this module
+turns them into the names the env, the EnergyPlus-side callback and the rule-based controller import.
 """
 
 from __future__ import annotations
@@ -15,16 +15,20 @@ from pathlib import Path
 
 from parallel_eplus.buildings.resources import SOURCE_ROOT as ROOT  # noqa: F401 (scripts and tests in a checkout)
 from parallel_eplus.buildings.resources import model_file
+from parallel_eplus.buildings.spec import BuildingSpec, load_spec
 
 BASELINE_IDF = model_file("2ZoneDataCenterHVAC_wEconomizer.idf")
 AGENT_IDF = model_file("2ZoneDataCenterHVAC_wEconomizer_agent.idf")
+
+DEFAULT_SPEC = Path(__file__).resolve().parent / "specs" / "datacenter-2zone.toml"
+DEFAULT: BuildingSpec = load_spec(DEFAULT_SPEC)  # the data center: sensors, actuators, bounds, reward band
 
 TIMESTEPS_PER_HOUR = 4  # the model's Timestep object: one control step is 15 minutes
 STEPS_PER_DAY = 24 * TIMESTEPS_PER_HOUR
 ZONES = ("West", "East")
 
 # Zone temperatures counted as "in range" in the paper's results (Section 5).
-COMFORT_BAND_C = (22.0, 25.0)
+COMFORT_BAND_C = DEFAULT.reward.band
 
 
 @dataclass(frozen=True)
@@ -61,17 +65,12 @@ class ActionElement:
     initial: float
 
 
-# Observation in the paper's order and units (Section 4.2.1).
-SENSORS: tuple[Sensor, ...] = (
-    Sensor("outdoor_temp_c", "Site Outdoor Air Drybulb Temperature", "Environment", -20.0, 50.0),
-    Sensor("west_temp_c", "Zone Mean Air Temperature", "West Zone", -20.0, 50.0),
-    Sensor("east_temp_c", "Zone Mean Air Temperature", "East Zone", -20.0, 50.0),
-    Sensor("power_w", "Facility Total Electricity Demand Rate", "Whole Building", 0.0, 1e9),
-    Sensor("it_power_w", "Facility Total Building Electricity Demand Rate", "Whole Building", 0.0, 1e9),
-    Sensor("hvac_power_w", "Facility Total HVAC Electricity Demand Rate", "Whole Building", 0.0, 1e9),
+# Observation in the paper's order and units (Section 4.2.1), read from the building spec.
+SENSORS: tuple[Sensor, ...] = tuple(
+    Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high) for o in DEFAULT.observations
 )
 SENSOR_NAMES = tuple(s.name for s in SENSORS)
-ZONE_TEMP_NAMES = ("west_temp_c", "east_temp_c")
+ZONE_TEMP_NAMES = DEFAULT.reward.temperatures
 
 # Opt-in observation features (off for the paper's reproduction): the IT load follows a fixed daily
 # schedule with steps at 00:00, 06:00, 08:00 and 18:00 that the six sensors cannot anticipate. They
@@ -125,27 +124,23 @@ def observation_bounds(with_time: bool = False, with_schedule: bool = False) -> 
     return [s.low for s in SENSORS] + [-1.0] * extra, [s.high for s in SENSORS] + [1.0] * extra
 
 
-def _setpoint_nodes(zone: str) -> tuple[Actuator, ...]:
-    nodes = (
-        f"{zone} Zone DEC Outlet Node",
-        f"{zone} Zone IEC Outlet Node",
-        f"{zone} Zone CCoil Air Outlet Node",
-        f"{zone} Air Loop Outlet Node",
+def action_elements(spec: BuildingSpec) -> tuple[ActionElement, ...]:
+    """A spec's actions as the engine's `ActionElement`s."""
+    return tuple(
+        ActionElement(
+            a.name,
+            a.unit,
+            a.low,
+            a.high,
+            tuple(Actuator(x.component, x.control, x.key) for x in a.actuators),
+            a.initial,
+        )
+        for a in spec.actions
     )
-    return tuple(Actuator("System Node Setpoint", "Temperature Setpoint", n) for n in nodes)
 
 
-def _fan(zone: str) -> tuple[Actuator, ...]:
-    return (Actuator("Fan", "Fan Air Mass Flow Rate", f"{zone} Zone Supply Fan"),)
-
-
-# Action in the paper's order and ranges (Section 4.2.2).
-ACTIONS: tuple[ActionElement, ...] = (
-    ActionElement("west_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("West"), initial=15.0),
-    ActionElement("east_setpoint_c", "C", 10.0, 40.0, _setpoint_nodes("East"), initial=15.0),
-    ActionElement("west_fan_kg_s", "kg/s", 1.75, 7.0, _fan("West"), initial=6.0),
-    ActionElement("east_fan_kg_s", "kg/s", 1.75, 7.0, _fan("East"), initial=6.0),
-)
+# Action in the paper's order and ranges (Section 4.2.2), read from the building spec.
+ACTIONS: tuple[ActionElement, ...] = action_elements(DEFAULT)
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 from parallel_eplus.buildings.resources import weather_file
@@ -39,11 +40,12 @@ def weather_label(weather: str | Path) -> str:
     return text.upper() if text.upper() in WEATHER_FILES else Path(text).stem
 
 
-def parse_weathers(spec: str) -> list[str]:
-    """'CA,CO,FL' -> ['CA', 'CO', 'FL'], each checked."""
+def parse_weathers(spec: str, known: Mapping[str, Path] | None = None) -> list[str]:
+    """'CA,CO,FL' -> ['CA', 'CO', 'FL'], each checked; `known`: a building spec's own short names."""
     items = [w.strip() for w in spec.split(",") if w.strip()]
     if not items:
         raise ValueError("no weather given")
     for w in items:
-        resolve_weather(w)
+        if w not in (known or {}):
+            resolve_weather(w)
     return items

@@ -39,6 +39,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     env = EnergyPlusEnv(
         weather=args.weather,
         model=args.model,
+        building=args.building,
         run_days=args.days,
         output_dir=args.output_dir,
         reward=args.reward,
@@ -73,8 +74,12 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     cfg = TrainConfig(
         workers=args.workers,
-        weathers=parse_weathers(args.weathers),
+        # a spec's own short names are checked by TrainConfig against the spec
+        weathers=[w.strip() for w in args.weathers.split(",") if w.strip()]
+        if args.building
+        else parse_weathers(args.weathers),
         model=args.model,
+        building=args.building,
         timesteps=args.timesteps,
         run_days=args.run_days,
         batch_size=args.batch_size,
@@ -131,7 +136,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         write_results,
     )
 
-    weathers = parse_weathers(args.weathers)  # bad input fails here, before anything runs
+    # bad input fails here, before anything runs (a spec's own short names: in run_sweep, against the spec)
+    weathers = (
+        [w.strip() for w in args.weathers.split(",") if w.strip()] if args.building else parse_weathers(args.weathers)
+    )
     if args.workers < 1 or not 1 <= args.run_days <= 365:
         raise ValueError("--workers must be at least 1 and --run-days within 1..365")
     controllers = []
@@ -146,8 +154,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     df = run_sweep(
-        controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward), not args.quiet
-    )
+        controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
+        not args.quiet, args.building,
+    )  # fmt: skip
     if args.online:
         import pandas as pd
 

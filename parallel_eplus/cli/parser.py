@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or a path to an .epw (default CA)")
     sim.add_argument("--days", type=int, default=7, help="run period length from Jan 1 (default 7)")
     sim.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    sim.add_argument("--building", help="a building spec (TOML path or built-in name); default: the data center")
     sim.add_argument("--policy", default="constant", choices=["constant", "random"])
     sim.add_argument("--action", help="the constant action in [-1, 1], comma-separated (default all 0)")
     sim.add_argument("--output-dir", type=Path, help="keep the episode records here")
@@ -33,6 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="EnergyPlus processes (default: cores)")
     tr.add_argument("--weathers", default="CA", help="comma-separated, e.g. CA,CO,FL (default CA)")
     tr.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    tr.add_argument(
+        "--building", help="a building spec (TOML path or built-in name), checked first; default: the data center"
+    )
     tr.add_argument(
         "--time-features", action="store_true",
         help="add hour and day of week (sine/cosine) to the paper's six observations",
@@ -96,6 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="the rule-based controller once per zone target (°C), e.g. 22.7,23.5: what the reward pays for each",
     )  # fmt: skip
     ev.add_argument("--weathers", default="CA,CO,FL,IL,VA")
+    ev.add_argument(
+        "--building", help="a building spec (TOML path or built-in name), checked first; default: the data center"
+    )
     ev.add_argument("--run-days", type=int, default=365)
     ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
     ev.add_argument("--out", type=Path, default=Path("results") / "latest")

@@ -17,6 +17,9 @@ class SimulationConfig:
 
     weather: str = "CA"  # code or .epw path; a list cycles episode by episode
     model: str = "temp_fan"
+    # A building spec (TOML, buildings/spec.py): its IDF, sensors, actions and reward signals replace the
+    # data center's and `model`'s. None: the data center (buildings/specs/datacenter-2zone.toml).
+    building: str | None = None
     run_days: int = 365
     output_dir: str | None = None  # None: a temporary directory removed on close
     keep_episodes: int | None = None  # newest full episode directories kept; None keeps all
@@ -47,4 +50,8 @@ def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
         raise ValueError(f"unknown residual space {config.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
     if config.residual_scale and config.residual_space == "demand":
         return DEMAND_CORRECTIONS
+    if config.building and config.model != "baseline":
+        from parallel_eplus.buildings.building import load_building
+
+        return tuple(e.name for e in load_building(config.building).actions)
     return tuple(e.name for e in control_model(config.model).actions)

@@ -74,8 +74,8 @@ def err_tail(episode_dir: Path | None, lines: int = 12) -> str:
 class StepRecorder:
     """Rows of (time, observation, action, reward, components), kept in preallocated arrays."""
 
-    def __init__(self, action_names: tuple[str, ...], capacity: int):
-        self.columns = (*SENSOR_NAMES, *action_names, "reward", *REWARD_PARTS)
+    def __init__(self, action_names: tuple[str, ...], capacity: int, sensor_names: tuple[str, ...] = SENSOR_NAMES):
+        self.columns = (*sensor_names, *action_names, "reward", *REWARD_PARTS)
         self.values = np.empty((capacity, len(self.columns)))
         self.times: list[dt.datetime] = [None] * capacity  # type: ignore[list-item]
         self.n = 0
@@ -99,18 +99,26 @@ def read_steps(episode_dir: str | Path) -> pd.DataFrame:
     return pd.read_parquet(Path(episode_dir) / STEPS_FILE)
 
 
-def summarize(steps: pd.DataFrame) -> dict[str, float]:
-    """The paper's episode statistics (Section 5): power in kW, zone temperatures, share in 22-25 C."""
+def summarize(
+    steps: pd.DataFrame,
+    temperatures: tuple[str, ...] = ZONE_TEMP_NAMES,
+    power: str = "power_w",
+    band: tuple[float, float] = COMFORT_BAND_C,
+) -> dict[str, float]:
+    """The paper's episode statistics (Section 5): power in kW, zone temperatures, share in the band.
+
+    Any building's: `temperatures`, `power` and `band` are its spec's reward signals."""
     out: dict[str, float] = {"steps": float(len(steps))}
     if steps.empty:
         return out
     out["reward_mean"] = float(steps["reward"].mean())
-    out["power_kw"] = float(steps["power_w"].mean() / 1000)
-    out["it_power_kw"] = float(steps["it_power_w"].mean() / 1000)
-    out["hvac_power_kw"] = float(steps["hvac_power_w"].mean() / 1000)
-    low, high = COMFORT_BAND_C
+    out["power_kw"] = float(steps[power].mean() / 1000)
+    for col in ("it_power_w", "hvac_power_w"):  # the data center's power split, where a building has it
+        if col in steps:
+            out[col.replace("_w", "_kw")] = float(steps[col].mean() / 1000)
+    low, high = band
     in_band = []
-    for col in ZONE_TEMP_NAMES:
+    for col in temperatures:
         zone = col.removesuffix("_temp_c")
         t = steps[col]
         out[f"{zone}_temp_mean"] = float(t.mean())
@@ -124,10 +132,10 @@ def summarize(steps: pd.DataFrame) -> dict[str, float]:
     return out
 
 
-def write_records(episode_dir: Path, steps: pd.DataFrame, extra: dict) -> dict:
-    """Write the step table and summary.json; returns the summary."""
+def write_records(episode_dir: Path, steps: pd.DataFrame, extra: dict, **signals) -> dict:
+    """Write the step table and summary.json; returns the summary. `signals`: `summarize`'s keywords."""
     steps.to_parquet(episode_dir / STEPS_FILE, index=False)
-    summary = {**extra, **summarize(steps)}
+    summary = {**extra, **summarize(steps, **signals)}
     (episode_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str))
     return summary
 

@@ -34,7 +34,8 @@ import traceback
 
 import numpy as np
 
-from parallel_eplus.buildings.model import SENSORS, control_model
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.model import control_model
 from parallel_eplus.engine import pipe
 
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
@@ -53,6 +54,7 @@ class Bridge:
         initial: list[float],
         spin_s: float = 0.0,
         replay: np.ndarray | None = None,
+        building: str | None = None,
     ):
         """With no pipes (`--raw`): EnergyPlus alone, for benchmarks. It holds the initial action all run,
         or with `replay` (steps x actions, physical units) takes each step's action from it instead."""
@@ -60,7 +62,9 @@ class Bridge:
         self.x = api.exchange
         self.act_fd = act_fd
         self.obs_fd = obs_fd
-        self.elements = control_model(model).actions
+        spec = load_building(building)  # None: the data center, whose variants `model` names
+        self.sensors = spec.sensors
+        self.elements = spec.actions if building and model != "baseline" else control_model(model).actions
         if len(initial) != len(self.elements):
             raise SystemExit(f"--initial-action needs {len(self.elements)} values, got {len(initial)}")
         self.action = list(initial)
@@ -73,7 +77,7 @@ class Bridge:
         self.error: BaseException | None = None
         self.sensor_handles: list[int] = []
         self.actuator_handles: list[tuple[int, int]] = []  # (handle, action index)
-        self.last_obs: list[float] = [0.0] * len(SENSORS)
+        self.last_obs: list[float] = [0.0] * len(self.sensors)
         self.raw = obs_fd is None
         self._wait = None if act_fd is None else pipe.wait_readable(act_fd)
         self._actions = None if act_fd is None else pipe.FrameReader(act_fd)
@@ -93,7 +97,7 @@ class Bridge:
         if not self.x.api_data_fully_ready(state):
             return False
         missing = []
-        for s in SENSORS:
+        for s in self.sensors:
             h = self.x.get_variable_handle(state, s.variable, s.key)
             if h < 0:
                 missing.append(f"variable '{s.variable}' for '{s.key}'")
@@ -231,6 +235,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--epw", required=True)
     p.add_argument("--output-dir", required=True)
     p.add_argument("--model", default="temp_fan")
+    p.add_argument("--building", help="a building spec (TOML); its sensors and actions replace --model's")
     p.add_argument("--steps", type=int, required=True, help="zone timesteps in the run period")
     p.add_argument("--initial-action", type=float, nargs="*", default=[])
     p.add_argument("--spin-us", type=float, default=0.0, help="poll this long for an action before blocking")
@@ -293,7 +298,9 @@ def main(argv: list[str] | None = None) -> int:
         state = api.state_manager.new_state()
         api.runtime.set_console_output_status(state, False)
         replay = np.load(args.replay) if args.replay else None
-        bridge = Bridge(api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay)
+        bridge = Bridge(
+            api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay, args.building
+        )
         keep = register(api, state, bridge, args.native)
         status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])
         bridge.collect()

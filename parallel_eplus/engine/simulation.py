@@ -16,14 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import (
     ACTIONS,
-    SENSOR_NAMES,
-    SENSORS,
-    STEPS_PER_DAY,
     control_model,
     it_load_schedule,
-    observation_bounds,
     schedule_features,
     time_features,
 )
@@ -46,9 +43,6 @@ from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
 log = logging.getLogger(__name__)
-
-OBS_LOW, OBS_HIGH = (np.array(b, dtype=np.float32) for b in observation_bounds(False))  # sensors only
-_LOWS, _HIGHS = (tuple(b.tolist()) for b in (OBS_LOW, OBS_HIGH))  # the same float32 bounds, as floats
 
 
 _YEAR_STARTS: dict[float, dt.datetime] = {}
@@ -75,15 +69,21 @@ class Simulation:
             native.bridge_library() if config.native_bridge else None,
         )
         self.name = name
-        self.model = control_model(config.model)
+        self.building = load_building(config.building)  # None: the data center, whose variants `model` names
+        self.model = self.building.control(config.model) if config.building else control_model(config.model)
+        self.sensor_names = self.building.sensor_names
+        self.obs_low, self.obs_high = (np.array(b, dtype=np.float32) for b in self.building.bounds())
+        self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
+        self._temps, self._power = self.building.temperatures, self.building.power
         self.elements = self.model.actions
         self.idf = Path(config.idf) if config.idf else self.model.idf
         if not self.idf.is_file():
             raise FileNotFoundError(f"model file not found: {self.idf}")
         self._schedule = it_load_schedule(self.idf) if config.schedule_features else None
         self.weathers = weathers or [config.weather]
-        self.weather_paths = [resolve_weather(w) for w in self.weathers]  # fail before spawning
-        self.steps_per_episode = config.run_days * STEPS_PER_DAY
+        named = self.building.spec.weathers  # the spec's short names, then codes and .epw paths
+        self.weather_paths = [named.get(w) or resolve_weather(w) for w in self.weathers]  # fail before spawning
+        self.steps_per_episode = config.run_days * self.building.steps_per_day
         self.low = tuple(e.low for e in self.elements)
         self.high = tuple(e.high for e in self.elements)
         self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
@@ -165,10 +165,11 @@ class Simulation:
         args = [
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
             "--output-dir", str(self.episode_dir), "--model", self.model.name,
+            *(["--building", str(self.building.spec.path)] if self.config.building else []),
             "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
         ]  # fmt: skip
         self.process.spawn(args, self.episode_dir / "energyplus.log", self.config.start_timeout_s)
-        self.records = StepRecorder(self.action_names, self.steps_per_episode)
+        self.records = StepRecorder(self.action_names, self.steps_per_episode, self.sensor_names)
         self._action = self.initial_action.tolist()
         self.last_summary = None
         if self.config.residual_scale:  # a fresh integral state per episode
@@ -207,7 +208,7 @@ class Simulation:
         """(observation, reward, terminated, info) for the action last sent, due `step_timeout_s` after it."""
         code, values = self._recv("an observation", self.config.step_timeout_s)
         obs, info = self._observation(values)
-        r, parts = reward((info["west_temp_c"], info["east_temp_c"]), info["power_w"], self.config.reward)
+        r, parts = reward(tuple(info[t] for t in self._temps), info[self._power], self.config.reward)
         info.update(parts)
         row = [*values[pipe.TIME_FIELDS :].tolist(), *self._action, r, *parts.values()]
         self.records.add(info["time"], row)
@@ -220,17 +221,17 @@ class Simulation:
 
     # -- internals ----------------------------------------------------------------------------
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
-        if len(values) != pipe.TIME_FIELDS + len(SENSORS):
+        if len(values) != pipe.TIME_FIELDS + len(self.sensor_names):
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
         raw = values[pipe.TIME_FIELDS :]
         sensed = raw.tolist()  # per step, Python floats are cheaper than numpy scalars and small-array ops
-        info = dict(zip(SENSOR_NAMES, sensed, strict=True))
+        info = dict(zip(self.sensor_names, sensed, strict=True))
         info["time"] = _time(values)
         info["weather"] = self.weather
         obs = raw.astype(np.float32)
-        if not all(lo <= v <= hi for lo, v, hi in zip(_LOWS, sensed, _HIGHS, strict=True)):
+        if not all(lo <= v <= hi for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True)):
             info["raw_observation"] = raw.copy()
-            obs = np.clip(obs, OBS_LOW, OBS_HIGH)
+            obs = np.clip(obs, self.obs_low, self.obs_high)
         if self.config.time_features or self._schedule:
             extra = time_features(info["time"]) if self.config.time_features else ()
             if self._schedule:
@@ -276,7 +277,8 @@ class Simulation:
             "run_days": self.config.run_days,
             "complete": complete,
         }
-        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra)
+        signals = {"temperatures": self._temps, "power": self._power, "band": self.building.band}
+        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, **signals)
         self.records = None
         prune_episodes(self.output_dir, self.config.keep_episodes)
 

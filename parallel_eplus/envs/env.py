@@ -9,15 +9,21 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from parallel_eplus.buildings.model import observation_bounds
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES
 from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.buildings.spec import reward_config
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.simulation import Simulation
 
 
-def observation_space(time_features: bool = False, schedule_features: bool = False) -> gym.spaces.Box:
-    """The paper's six observations, plus the opt-in time and schedule features, as a Box."""
-    low, high = observation_bounds(time_features, schedule_features)
+def observation_space(
+    time_features: bool = False, schedule_features: bool = False, building: str | Path | None = None
+) -> gym.spaces.Box:
+    """The building's sensors (None: the data center) and the opt-in features, which lie in [-1, 1]."""
+    low, high = load_building(building).bounds()
+    extra = len(TIME_FEATURES) * time_features + len(SCHEDULE_FEATURES) * schedule_features
+    low, high = low + [-1.0] * extra, high + [1.0] * extra
     return gym.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
 
 
@@ -67,7 +73,9 @@ class EnergyPlusEnv(gym.Env):
     `weather`: a short name (CA, CO, FL, IL, VA), an EPW path, or a list cycled episode by episode;
     `run_days`; `output_dir` and `keep_episodes` for episode records; `reward`; `idf` to override the
     model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features`;
-    `residual_scale`, `residual_space`, `rbc_target_c`.
+    `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
+    (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
+    not apply; its reward parameters are the default `reward`; it is checked against its model first).
     """
 
     metadata = {"render_modes": []}
@@ -88,15 +96,20 @@ class EnergyPlusEnv(gym.Env):
         residual_scale: float = 0.0,
         residual_space: str = "action",
         rbc_target_c: float | None = None,
+        building: str | Path | None = None,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
+        if building is not None:  # a typo costs seconds and a message naming it, not a hung worker
+            from parallel_eplus.buildings.check import check_building
+
+            check_building(building)
         self.config = SimulationConfig(
             weather=weathers[0],
             model=model,
             run_days=run_days,
             output_dir=None if output_dir is None else str(output_dir),
             keep_episodes=keep_episodes,
-            reward=RewardConfig.from_any(reward),
+            reward=reward_config(load_building(building).spec) if reward is None else RewardConfig.from_any(reward),
             start_timeout_s=start_timeout_s,
             step_timeout_s=step_timeout_s,
             idf=None if idf is None else str(idf),
@@ -105,11 +118,12 @@ class EnergyPlusEnv(gym.Env):
             residual_scale=residual_scale,
             residual_space=residual_space,
             rbc_target_c=rbc_target_c,
+            building=None if building is None else str(building),
         )
         self.sim = Simulation(self.config, weathers)
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
-        self.observation_space = observation_space(time_features, schedule_features)
+        self.observation_space = observation_space(time_features, schedule_features, building)
         self.action_space = action_space(len(self.sim.policy_names))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):

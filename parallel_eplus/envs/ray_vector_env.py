@@ -87,7 +87,9 @@ class RayVectorEnv:
                 # (a stale ray_current_cluster file) or in RAY_ADDRESS (only read when no address is given).
                 ray.init(address="local", num_cpus=len(shares), include_dashboard=False, log_to_driver=True)
         self.num_envs = len(shares)
-        self.single_observation_space = observation_space(config.time_features, config.schedule_features)
+        self.single_observation_space = observation_space(
+            config.time_features, config.schedule_features, config.building
+        )
         self.single_action_space = action_space(len(policy_action_names(config)))
         group = _actor_class()
         self.slices: list[slice] = []

@@ -67,7 +67,9 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             self.close()
             raise
         n_actions = len(self.sims[0].policy_names)
-        self.single_observation_space = observation_space(config.time_features, config.schedule_features)
+        self.single_observation_space = observation_space(
+            config.time_features, config.schedule_features, config.building
+        )
         self.single_action_space = action_space(n_actions)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)

@@ -45,6 +45,7 @@ class Controller:
     rbc_target_c: float | None = None  # the rule-based controller's zone target; None: RBCConfig's
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
     residual_space: str = "action"  # what the correction applies to (SimulationConfig)
+    building: str | None = None  # the spec a policy was trained on (its config.json); None: the data center
 
     @property
     def model(self) -> str:
@@ -90,7 +91,7 @@ def policy_controller(spec: str) -> Controller:
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
-        residual_space=saved.get("residual_space", "action"),
+        residual_space=saved.get("residual_space", "action"), building=saved.get("building"),
     )  # fmt: skip
 
 
@@ -117,9 +118,24 @@ def run_sweep(
     out_dir: Path,
     reward: RewardConfig | None = None,
     progress: bool = True,
+    building: str | None = None,
 ) -> pd.DataFrame:
-    """One episode per (controller, weather), up to `workers` at once; returns results.csv's table."""
-    weathers = parse_weathers(",".join(weathers))  # fail before anything runs
+    """One episode per (controller, weather), up to `workers` at once; returns results.csv's table.
+
+    `building`: a spec (checked first); its "baseline" is its model's own controls (`baseline_idf`)."""
+    known = None
+    if building:
+        from parallel_eplus.buildings.check import check_building
+
+        building = str(Path(building).resolve())
+        known = check_building(building).weathers
+    for c in controllers:  # a policy acts only in the building it was trained on
+        if c.kind == "policy" and (c.building or None) != (building or None):
+            raise ValueError(
+                f"{c.path} was trained on building {c.building or 'datacenter-2zone (default)'}, "
+                f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"
+            )
+    weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs
     controllers = unique_labels(controllers)
     jobs = deque((c, w) for c in controllers for w in weathers)
     total_steps = len(jobs) * run_days * STEPS_PER_DAY
@@ -132,7 +148,8 @@ def run_sweep(
             while jobs and len(active) < workers:
                 controller, weather = jobs.popleft()
                 cfg = SimulationConfig(
-                    weather=weather, model=controller.model, run_days=run_days, reward=reward or RewardConfig(),
+                    weather=weather, model=controller.model, building=building, run_days=run_days,
+                    reward=reward or RewardConfig(),
                     time_features=controller.time_features, schedule_features=controller.schedule_features,
                     residual_scale=controller.residual_scale, residual_space=controller.residual_space,
                     rbc_target_c=controller.rbc_target_c,
@@ -231,8 +248,10 @@ def table_markdown(df: pd.DataFrame) -> str:
 
 def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
     """results.csv, results.md and the figures; returns the files written."""
-    from parallel_eplus.evaluation import plots
+    from parallel_eplus.evaluation import building_table, plots
 
+    if building_table.is_generic(df):  # another building: its power and zones, no paper figures
+        return building_table.write_results(df, out_dir, BASELINE_LABEL)
     out_dir.mkdir(parents=True, exist_ok=True)
     io.write_text(out_dir / "results.csv", df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(index=False))
     io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df))

@@ -74,6 +74,7 @@ class TrainConfig:
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     weathers: list[str] = field(default_factory=lambda: ["CA"])
     model: str = "temp_fan"
+    building: str | None = None  # a building spec (TOML); None: the data center (`model` picks its variant)
     timesteps: int = 1_000_000
     run_days: int = 365
     batch_size: int = 16384  # the paper's timesteps_per_batch, split evenly across workers
@@ -105,7 +106,16 @@ class TrainConfig:
 
     def resolved(self) -> TrainConfig:
         """Validate, and fill in the run name."""
-        parse_weathers(",".join(self.weathers))
+        if self.building:
+            from parallel_eplus.buildings.check import check_building
+            from parallel_eplus.buildings.spec import reward_config
+
+            self.building = str(Path(self.building).resolve())
+            spec = check_building(self.building)
+            known = spec.weathers
+            if self.reward == RewardConfig():  # the spec's reward unless the user gave constants
+                self.reward = reward_config(spec)
+        parse_weathers(",".join(self.weathers), known if self.building else None)
         if self.workers < 1:
             raise ValueError("--workers must be at least 1")
         if self.batch_size < self.workers:

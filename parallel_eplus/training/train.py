@@ -44,6 +44,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
     sim = SimulationConfig(
         weather=cfg.weathers[0],
         model=cfg.model,
+        building=cfg.building,
         run_days=cfg.run_days,
         output_dir=str(cfg.run_dir / "episodes"),
         keep_episodes=cfg.keep_episodes,

@@ -1,0 +1,69 @@
+"""A loaded building spec as the engine uses it: sensors, action elements, bounds and reward signals.
+
+Both sides of the pipe build one from the same spec file (the env process from `SimulationConfig.building`,
+the EnergyPlus side from `--building`), so they agree on every name and order by construction.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+from parallel_eplus.buildings import model
+from parallel_eplus.buildings.model import ActionElement, ControlModel, Sensor, action_elements
+from parallel_eplus.buildings.spec import BuildingSpec, SpecError, load_spec
+
+
+@dataclass(frozen=True)
+class Building:
+    spec: BuildingSpec
+    sensors: tuple[Sensor, ...]
+    actions: tuple[ActionElement, ...]
+
+    @property
+    def sensor_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.sensors)
+
+    @property
+    def temperatures(self) -> tuple[str, ...]:
+        return self.spec.reward.temperatures
+
+    @property
+    def power(self) -> str:
+        return self.spec.reward.power
+
+    @property
+    def band(self) -> tuple[float, float]:
+        return self.spec.reward.band
+
+    @property
+    def steps_per_day(self) -> int:
+        return 24 * (self.spec.timesteps_per_hour or model.TIMESTEPS_PER_HOUR)
+
+    def bounds(self) -> tuple[list[float], list[float]]:
+        return [s.low for s in self.sensors], [s.high for s in self.sensors]
+
+    def control(self, model: str = "") -> ControlModel:
+        """The spec's agent variant (its IDF, all its actions), or with "baseline" its built-in controls."""
+        if model == "baseline":
+            return ControlModel("baseline", self.spec.baseline_idf or self.spec.idf, ())
+        return ControlModel(self.spec.name, self.spec.idf, self.actions)
+
+
+@functools.cache
+def _load(path: Path) -> Building:
+    spec = model.DEFAULT if path == model.DEFAULT_SPEC else load_spec(path)
+    meters = [f"observations[{i}].meter" for i, o in enumerate(spec.observations) if o.meter is not None]
+    if meters:  # the engine (and its C bridge) read output variables; EnergyPlus 25.2 does not hand out
+        # Electricity:Facility's meter handle anyway: its variable is "Facility Total Electricity Demand Rate"
+        raise SpecError(f"{path}: {', '.join(meters)}: meters are not read by the engine yet; use variable and key")
+    sensors = tuple(Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high) for o in spec.observations)
+    return Building(spec, sensors, action_elements(spec))
+
+
+def load_building(path: str | Path | None = None) -> Building:
+    """The building a spec file declares; None: the data center (specs/datacenter-2zone.toml)."""
+    from parallel_eplus.buildings.resources import spec_file
+
+    return _load(spec_file(path) if path else model.DEFAULT_SPEC)
