@@ -7,6 +7,7 @@ the EnergyPlus side from `--building`), so they agree on every name and order by
 from __future__ import annotations
 
 import functools
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,7 +40,7 @@ class Building:
 
     @property
     def steps_per_day(self) -> int:
-        return 24 * (self.spec.timesteps_per_hour or model.TIMESTEPS_PER_HOUR)
+        return 24 * (self.spec.timesteps_per_hour or timesteps_per_hour(self.spec.idf))
 
     def bounds(self) -> tuple[list[float], list[float]]:
         return [s.low for s in self.sensors], [s.high for s in self.sensors]
@@ -49,6 +50,13 @@ class Building:
         if model == "baseline":
             return ControlModel("baseline", self.spec.baseline_idf or self.spec.idf, ())
         return ControlModel(self.spec.name, self.spec.idf, self.actions)
+
+
+def timesteps_per_hour(idf: Path) -> int:
+    """The model's own `Timestep` (zone timesteps per hour; EnergyPlus's default, 6, if it has none)."""
+    text = re.sub(r"!.*", "", idf.read_text(encoding="latin-1"))
+    m = re.search(r"^[ \t]*Timestep,\s*(\d+)\s*;", text, re.MULTILINE | re.IGNORECASE)
+    return int(m.group(1)) if m else 6
 
 
 @functools.cache

@@ -21,13 +21,16 @@ def _format_summary(summary: dict) -> str:
         f"           IT         {summary.get('it_power_kw', float('nan')):10.1f} kW",
         f"           HVAC       {summary.get('hvac_power_kw', float('nan')):10.1f} kW",
     ]
-    for zone in ("west", "east"):
-        z = {k.removeprefix(zone + "_"): v for k, v in summary.items() if k.startswith(zone + "_")}
+    # every temperature the reward watches: the data center's "west"/"east", any spec's own names
+    temps = [k.removesuffix("_temp_mean") for k in summary if k.endswith("_temp_mean")]
+    for name in temps:
+        z = {k.removeprefix(name + "_"): v for k, v in summary.items() if k.startswith(name + "_")}
+        label = f"{name.title()} zone" if name in ("west", "east") else name
         lines.append(
-            f"{zone.title():5s} zone  mean {z['temp_mean']:5.2f} C  std {z['temp_std']:4.2f}"
-            f"  min {z['temp_min']:5.2f}  max {z['temp_max']:5.2f}  in 22-25 C {z['in_band_pct']:5.1f} %"
+            f"{label:10s}  mean {z['temp_mean']:5.2f} C  std {z['temp_std']:4.2f}"
+            f"  min {z['temp_min']:5.2f}  max {z['temp_max']:5.2f}  in band {z['in_band_pct']:5.1f} %"
         )
-    lines.append(f"zone samples in 22-25 C {summary['in_band_pct']:8.2f} %")
+    lines.append(f"samples in band       {summary['in_band_pct']:8.2f} %")
     return "\n".join(lines)
 
 
