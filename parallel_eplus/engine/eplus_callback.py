@@ -36,7 +36,7 @@ import numpy as np
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import control_model
-from parallel_eplus.engine import pipe
+from parallel_eplus.engine import native, pipe
 
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
 
@@ -244,39 +244,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
-def register(api, state, bridge: Bridge, native: str | None) -> list:
-    """Register the callbacks: the Bridge's own, or the C ones that call it until it arms them.
-
-    Returns what must stay alive while EnergyPlus runs (ctypes callback objects)."""
-    rt = api.runtime
-    if native is None:
-        rt.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
-        rt.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
-        return []
-    lib = ctypes.CDLL(native)
-    lib.bridge_init.argtypes = [ctypes.c_void_p] * 9
-    lib.bridge_init.restype = None
-    lib.bridge_arm.argtypes = [
-        ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.c_int,
-        ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int), ctypes.c_int,
-        ctypes.POINTER(ctypes.c_double), ctypes.c_int, ctypes.c_long, ctypes.c_long, ctypes.c_int, ctypes.c_double,
-        ctypes.POINTER(ctypes.c_double), ctypes.c_long, ctypes.c_long,
-    ]  # fmt: skip
-    lib.bridge_step.restype = ctypes.c_long
-    lib.bridge_done_at.restype = ctypes.c_double
-    lib.bridge_error.restype = ctypes.c_char_p
-    callback = rt.py_state_callback_type  # void *(*)(void *state), as EnergyPlus calls it
-    slow = [callback(bridge.apply_action), callback(bridge.observe)]
-    x, r = api.exchange.api, rt.api
-    functions = [x.getVariableValue, x.setActuatorValue, x.calendarYear, x.dayOfYear, x.hour, x.zoneTimeStepNum]
-    lib.bridge_init(*(ctypes.cast(f, ctypes.c_void_p) for f in [*slow, *functions, r.stopSimulation]))
-    fast = [callback(("bridge_apply_action", lib)), callback(("bridge_observe", lib))]
-    r.callbackAfterPredictorAfterHVACManagers(state, fast[0])
-    r.callbackEndOfZoneTimeStepAfterZoneReporting(state, fast[1])
-    bridge.native = lib
-    return [lib, *slow, *fast]
-
-
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     # Open our ends first: the env holds both FIFOs open, so neither open blocks.
@@ -301,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
         bridge = Bridge(
             api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay, args.building
         )
-        keep = register(api, state, bridge, args.native)
+        keep = native.register(api, state, bridge, args.native)
         status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])
         bridge.collect()
         del keep

@@ -84,3 +84,36 @@ def bridge_library() -> str | None:
             return str(lib)
     log.warning("the C bridge cannot be built or loaded here; the Python bridge steps EnergyPlus instead")
     return None
+
+
+def register(api, state, bridge, native: str | None) -> list:
+    """Register the callbacks: the Bridge's own, or the C ones that call it until it arms them.
+
+    Returns what must stay alive while EnergyPlus runs (ctypes callback objects)."""
+    rt = api.runtime
+    if native is None:
+        rt.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
+        rt.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
+        return []
+    lib = ctypes.CDLL(native)
+    lib.bridge_init.argtypes = [ctypes.c_void_p] * 9
+    lib.bridge_init.restype = None
+    lib.bridge_arm.argtypes = [
+        ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.c_int,
+        ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int), ctypes.c_int,
+        ctypes.POINTER(ctypes.c_double), ctypes.c_int, ctypes.c_long, ctypes.c_long, ctypes.c_int, ctypes.c_double,
+        ctypes.POINTER(ctypes.c_double), ctypes.c_long, ctypes.c_long,
+    ]  # fmt: skip
+    lib.bridge_step.restype = ctypes.c_long
+    lib.bridge_done_at.restype = ctypes.c_double
+    lib.bridge_error.restype = ctypes.c_char_p
+    callback = rt.py_state_callback_type  # void *(*)(void *state), as EnergyPlus calls it
+    slow = [callback(bridge.apply_action), callback(bridge.observe)]
+    x, r = api.exchange.api, rt.api
+    functions = [x.getVariableValue, x.setActuatorValue, x.calendarYear, x.dayOfYear, x.hour, x.zoneTimeStepNum]
+    lib.bridge_init(*(ctypes.cast(f, ctypes.c_void_p) for f in [*slow, *functions, r.stopSimulation]))
+    fast = [callback(("bridge_apply_action", lib)), callback(("bridge_observe", lib))]
+    r.callbackAfterPredictorAfterHVACManagers(state, fast[0])
+    r.callbackEndOfZoneTimeStepAfterZoneReporting(state, fast[1])
+    bridge.native = lib
+    return [lib, *slow, *fast]

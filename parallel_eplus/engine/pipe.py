@@ -11,6 +11,7 @@ its end; child death is noticed through a pidfd (or a short poll) instead of wai
 from __future__ import annotations
 
 import contextlib
+import datetime as dt
 import functools
 import os
 import select
@@ -253,3 +254,15 @@ class PipePair:
     def __del__(self):
         if getattr(self, "act_fd", -1) >= 0:
             self.close()
+
+
+_YEAR_STARTS: dict[float, dt.datetime] = {}
+
+
+def frame_time(values: np.ndarray) -> dt.datetime:
+    """When an observation frame was taken, from its first TIME_FIELDS values (year, day, hour, minute)."""
+    year, day_of_year, hour, minute = values[:TIME_FIELDS].tolist()  # floats: cheaper than numpy scalars
+    start = _YEAR_STARTS.get(year)
+    if start is None:
+        start = _YEAR_STARTS[year] = dt.datetime(int(year), 1, 1)
+    return start + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)

@@ -8,7 +8,6 @@ drives several, writing every action before reading any observation.
 
 from __future__ import annotations
 
-import datetime as dt
 import logging
 import shutil
 import tempfile
@@ -43,17 +42,6 @@ from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
 log = logging.getLogger(__name__)
-
-
-_YEAR_STARTS: dict[float, dt.datetime] = {}
-
-
-def _time(values: np.ndarray) -> dt.datetime:
-    year, day_of_year, hour, minute = values[: pipe.TIME_FIELDS].tolist()  # floats: cheaper than numpy scalars
-    start = _YEAR_STARTS.get(year)
-    if start is None:
-        start = _YEAR_STARTS[year] = dt.datetime(int(year), 1, 1)
-    return start + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)
 
 
 class Simulation:
@@ -226,7 +214,7 @@ class Simulation:
         raw = values[pipe.TIME_FIELDS :]
         sensed = raw.tolist()  # per step, Python floats are cheaper than numpy scalars and small-array ops
         info = dict(zip(self.sensor_names, sensed, strict=True))
-        info["time"] = _time(values)
+        info["time"] = pipe.frame_time(values)
         info["weather"] = self.weather
         obs = raw.astype(np.float32)
         if not all(lo <= v <= hi for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True)):
