@@ -154,7 +154,11 @@ def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clea
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP], ids=["SIGKILL", "SIGSTOP"])
 def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_completes(tmp_path, no_leaks, sig, caplog):
-    cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=1, timesteps=1536, batch_size=192, step_timeout_s=2)
+    # 60-day episodes (5,760 steps, a few seconds each even on a quiet machine): long enough that a worker past
+    # its start-up is struck mid-episode, not as it finishes (a one-day episode can end before it is old enough)
+    cfg = small_config(
+        tmp_path, "hit", weathers=["CA"], run_days=60, timesteps=23040, batch_size=1152, step_timeout_s=2
+    )
     hit: list[int] = []
     stop = _strike_later(cfg.run_dir.resolve() / "episodes.csv", sig, hit, until=lambda: "restarting" in caplog.text)
     try:
@@ -163,7 +167,7 @@ def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_compl
         stop.set()
     assert hit, "no EnergyPlus process to hit"
     assert "restarting its episode" in caplog.text
-    assert final.is_file() and pd.read_csv(final.parent / "episodes.csv")["timesteps"].max() >= 1344
+    assert final.is_file() and pd.read_csv(final.parent / "episodes.csv")["timesteps"].max() >= 23040 - 2 * 5760
 
 
 @pytest.mark.slow
