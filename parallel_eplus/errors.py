@@ -54,3 +54,8 @@ class Interrupts:
 
 class RunExistsError(ValueError):
     """A new training run was given the name of an existing one (training/run_names.py)."""
+
+
+class WorkerLostError(EnergyPlusError):
+    """A Ray actor (and the EnergyPlus workers in it) was lost or stopped answering: its node died,
+    was cut off, or the actor hung. Training saves a checkpoint and stops (`train --resume` goes on)."""

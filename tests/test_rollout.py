@@ -14,7 +14,8 @@ from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.env import action_space, observation_space
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
 from parallel_eplus.training.config import TRPOSettings
-from parallel_eplus.training.rollout import FastTRPO, NumpyPolicy, _pipelinable
+from parallel_eplus.training.numpy_policy import NumpyPolicy
+from parallel_eplus.training.rollout import FastTRPO, _pipelinable
 from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 
@@ -67,10 +68,18 @@ def test_other_policy_shapes_fall_back_to_sb3():
     assert not NumpyPolicy.supports(policy(obs=image))
 
 
-def _one_rollout(out_dir, lockstep: bool) -> dict[str, np.ndarray]:
-    """One TRPO rollout (2 workers, CA and CO, 128 steps each: a day's episode ends inside it)."""
+def _one_rollout(out_dir, lockstep: bool, backend: str = "local", stats: list | None = None) -> dict[str, np.ndarray]:
+    """One TRPO rollout (2 workers, CA and CO, 128 steps each: a day's episode ends inside it).
+
+    backend "ray": the same two workers in two Ray actors of one worker each, collecting fragments."""
     sim = SimulationConfig(run_days=1, output_dir=str(out_dir), keep_episodes=0)
-    env = VecNormalize(SB3VecEnv(EnergyPlusVectorEnv(sim, [["CA"], ["CO"]])), norm_reward=False)
+    if backend == "ray":
+        from parallel_eplus.envs.ray_vector_env import RayVectorEnv
+
+        venv = RayVectorEnv(sim, [["CA"], ["CO"]], workers_per_actor=1)
+    else:
+        venv = EnergyPlusVectorEnv(sim, [["CA"], ["CO"]])
+    env = VecNormalize(SB3VecEnv(venv), norm_reward=False)
     env.training = False  # fixed statistics: served in any order, each worker sees the same numbers
     try:
         model = FastTRPO(
@@ -80,6 +89,8 @@ def _one_rollout(out_dir, lockstep: bool) -> dict[str, np.ndarray]:
         model.lockstep = lockstep
         assert (_pipelinable(env)[0] is not None) and model.n_envs == 2
         model.learn(256)  # one rollout, then one update (which leaves the buffer's contents alone)
+        if stats is not None:
+            stats.extend(venv.stats)
         b = model.rollout_buffer
         return {k: getattr(b, k).copy() for k in ("observations", "actions", "rewards", "episode_starts", "values",
                                                   "log_probs", "returns")}  # fmt: skip
@@ -118,6 +129,19 @@ def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leak
     # The update flattened the rest worker by worker: 128 steps of CA, then 128 of CO.
     obs = lockstep["observations"]
     assert obs.shape == (256, 6) and not np.allclose(obs[:128], obs[128:])
+
+
+@pytest.mark.slow
+def test_ray_actors_collect_the_batch_local_workers_collect(tmp_path, no_leaks):
+    """Fragments from Ray actors (one call per actor per batch) fill the buffer the local loop fills."""
+    pytest.importorskip("ray")
+    local = _one_rollout(tmp_path / "local", lockstep=False)
+    stats: list = []
+    ray = _one_rollout(tmp_path / "ray", lockstep=False, backend="ray", stats=stats)
+    for key, value in local.items():  # observations, actions, rewards, starts, values, log-probs, returns
+        np.testing.assert_allclose(ray[key], value, rtol=1e-5, atol=1e-6, err_msg=key)
+    assert ray["episode_starts"].sum() == 4  # both days ended inside the fragments and restarted
+    assert [s.round_trips for s in stats] == [2] and stats[0].progress_checks == 0
 
 
 class _StopAfter(BaseCallback):

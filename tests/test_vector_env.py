@@ -94,24 +94,8 @@ def _step_alone(venv, i: int, action) -> tuple:
     return _answer(venv, i)
 
 
-@pytest.fixture(params=["local", "ray"])
-def make_venv(request):
-    """Local workers, or the same workers in two Ray actors of one worker each (one Ray session per test)."""
-    if request.param == "local":
-        yield EnergyPlusVectorEnv
-        return
-    ray = pytest.importorskip("ray")
-    from parallel_eplus.envs.ray_vector_env import RayVectorEnv
-
-    ray.init(address="local", num_cpus=2, include_dashboard=False)
-    try:
-        yield lambda cfg, shares: RayVectorEnv(cfg, shares, workers_per_actor=1)
-    finally:
-        ray.shutdown()
-
-
 @pytest.mark.slow
-def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_leaks, make_venv):
+def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_leaks):
     """Pipelining changes only who waits for whom: each worker's episode is what lockstep gives it."""
     rng = np.random.default_rng(0)
     actions = np.clip(rng.normal(size=(STEPS_PER_DAY + 4, 2, 4)), -1, 1)
@@ -119,7 +103,7 @@ def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_le
     for mode in ("lockstep", "alone"):
         # One worker by one, the learner polls briefly before it sleeps (as it does with cores to spare).
         cfg = SimulationConfig(run_days=1, output_dir=str(tmp_path / mode), spin_s=0.0005 if mode == "alone" else None)
-        venv = make_venv(cfg, [["CA"], ["CO"]])
+        venv = EnergyPlusVectorEnv(cfg, [["CA"], ["CO"]])
         try:
             venv.start_all(range(2))
             obs, rewards, ends = [], [], []

@@ -1,72 +1,45 @@
-"""Ray backend: each actor hosts a group of EnergyPlus workers (a local `EnergyPlusVectorEnv`) on its node.
+"""Ray backend, the learner's side: groups of EnergyPlus workers in Ray actors, one group per actor.
 
-The learner sees one vector env either way: `step_lists` steps every actor at once and concatenates
-the results; pipelined (`send_one` / `ready` / `receive_one`, as the local vector env offers them) each
-actor steps as soon as all its workers have their actions, so no actor waits for the slowest of the
-cluster, only for the slowest of its own group.
+Training collects a batch with one call per actor (`collect`: the policy out, a trajectory fragment
+back; envs/ray_actor.py, training/fragments.py), so no Ray call is made per control step. The vector
+env API (`start_all`, `step_lists`) remains for what steps the workers one step at a time: SAC's
+off-policy loop and a `lockstep` run.
+
+Every wait has a deadline. A collection that stops making progress for `stall_s` (no observation
+served in any worker of an actor), an actor that does not answer a progress check within
+`answer_s`, or an actor that dies with its node, raises `WorkerLostError` naming the node.
 """
 
 from __future__ import annotations
 
+import collections
 import logging
+import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from parallel_eplus.engine.config import SimulationConfig, policy_action_names
 from parallel_eplus.envs.env import action_space, observation_space
+from parallel_eplus.envs.ray_actor import actor_class
+from parallel_eplus.errors import EnergyPlusError, WorkerLostError
 
 log = logging.getLogger(__name__)
 
 
-def _actor_class():
-    import ray
+@dataclass
+class BatchStats:
+    """What one batch cost the learner in Ray: counted calls and seconds spent waiting."""
 
-    from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
-
-    @ray.remote
-    class WorkerGroup:
-        def __init__(self, config: SimulationConfig, shares: list[list[str]], first_worker: int, max_restarts: int):
-            logging.basicConfig(level=logging.INFO)
-            self.venv = EnergyPlusVectorEnv(config, shares, max_restarts=max_restarts, first_worker=first_worker)
-
-        def start_all(self, indices):
-            infos = self.venv.start_all(indices)
-            return self.venv.observations(), infos
-
-        def step(self, actions):
-            return self.venv.step_lists(actions)
-
-        def close(self):
-            self.venv.close()
-
-        def node(self) -> str:
-            import socket
-
-            return f"{socket.gethostname()} ({ray.util.get_node_ip_address()})"
-
-    return WorkerGroup
-
-
-def _log_placement(actors, slices, timeout_s: float = 60.0) -> None:
-    """The cluster's resources and how many workers each node got: what a user checks first on a cluster."""
-    import collections
-
-    import ray
-
-    res = ray.cluster_resources()
-    nodes = [n for n in ray.nodes() if n.get("Alive")]
-    log.info("Ray cluster: %d node(s), %.0f CPUs, %.1f GiB memory", len(nodes), res.get("CPU", 0),
-             res.get("memory", 0) / 2**30)  # fmt: skip
-    placed = ray.get([a.node.remote() for a in actors], timeout=timeout_s)
-    per_node: collections.Counter = collections.Counter()
-    for node, sl in zip(placed, slices, strict=True):
-        per_node[node] += sl.stop - sl.start
-    for node, n in per_node.items():
-        log.info("  %s: %d worker(s)", node, n)
+    round_trips: int = 0  # collect calls: one per actor
+    progress_checks: int = 0  # deadline checks made while waiting (none when a batch is quick)
+    wait_s: float = 0.0  # learner idle: from sending the order to the last fragment in
+    collect_s: list[float] = field(default_factory=list)  # per actor, measured on its node
+    merge_s: float = 0.0  # learner: fragments into the buffer and the statistics, callbacks
 
 
 class RayVectorEnv:
-    """Groups of workers in Ray actors: stepped together (`step_lists`) or each group as soon as it answers."""
+    """Groups of workers in Ray actors: a batch per call (`collect`), or a step per call (`step_lists`)."""
 
     def __init__(
         self,
@@ -75,6 +48,7 @@ class RayVectorEnv:
         workers_per_actor: int,
         address: str | None = None,
         max_restarts: int = 3,
+        answer_s: float = 30.0,
     ):
         import ray
 
@@ -91,52 +65,46 @@ class RayVectorEnv:
             config.time_features, config.schedule_features, config.building
         )
         self.single_action_space = action_space(len(policy_action_names(config)))
-        group = _actor_class()
+        # A worker silent for step_timeout_s is restarted inside its actor; an actor that serves no
+        # observation for twice that (plus an episode's start-up) is lost.
+        self.stall_s = 2 * config.step_timeout_s + 60.0
+        self.answer_s = answer_s
+        self.poll_s = min(30.0, self.stall_s / 4)
+        group = actor_class()
         self.slices: list[slice] = []
-        self.actors = []
+        self.actors: list = []
+        self.nodes: list[str] = []
+        self.stats: list[BatchStats] = []
         for start in range(0, self.num_envs, workers_per_actor):
             part = shares[start : start + workers_per_actor]
             self.slices.append(slice(start, start + len(part)))
-            actor = group.options(num_cpus=len(part)).remote(config, part, start, max_restarts)
-            self.actors.append(actor)
+            self.actors.append(group.options(num_cpus=len(part)).remote(config, part, start, max_restarts))
         self._obs = np.zeros((self.num_envs, *self.single_observation_space.shape), dtype=np.float32)
-        self._actor_of = [j for j, sl in enumerate(self.slices) for _ in range(sl.start, sl.stop)]
-        self._actions = np.zeros((self.num_envs, *self.single_action_space.shape), dtype=np.float32)
-        self._staged = [0] * len(self.actors)  # actions received for each actor's next step
-        self._in_flight: dict = {}  # ObjectRef of an actor's step -> actor index
-        self._answers: dict[int, tuple] = {}  # worker -> its answer, fetched but not yet received
-        log.info("Ray backend: %d workers in %d actors", self.num_envs, len(self.actors))
-        _log_placement(self.actors, self.slices)
+        try:
+            self.nodes = ray.get([a.node.remote() for a in self.actors], timeout=120)
+        except Exception:
+            self.close()
+            raise
+        _log_placement(self.nodes, self.slices)
 
     def observations(self) -> np.ndarray:
         return self._obs.copy()
 
     def start_all(self, indices) -> list[dict]:
-        import ray
-
         wanted = set(indices)
-        # A rollout stopped midway leaves steps in flight: each actor finishes its step before it
-        # restarts (its calls run in order), and those answers belong to the episodes being replaced.
-        if wanted >= set(range(self.num_envs)):
-            self._in_flight.clear()
-            self._answers.clear()
-            self._staged = [0] * len(self.actors)
         calls = []
         for actor, sl in zip(self.actors, self.slices, strict=True):
             local = [i - sl.start for i in range(sl.start, sl.stop) if i in wanted]
-            calls.append((sl, actor.start_all.remote(local)))
+            calls.append(actor.start_all.remote(local))
         infos: list[dict] = []
-        for sl, ref in calls:
-            obs, part = ray.get(ref)
+        for (obs, part), sl in zip(self._get_all(calls), self.slices, strict=True):
             self._obs[sl] = obs
             infos.extend(part)
         return infos
 
     def step_lists(self, actions):
-        import ray
-
         refs = [actor.step.remote(actions[sl]) for actor, sl in zip(self.actors, self.slices, strict=True)]
-        results = ray.get(refs)
+        results = self._get_all(refs)
         obs = np.concatenate([r[0] for r in results])
         self._obs[:] = obs
         rewards = np.concatenate([r[1] for r in results])
@@ -145,50 +113,123 @@ class RayVectorEnv:
         infos = [info for r in results for info in r[4]]
         return obs, rewards, terminated, truncated, infos
 
-    # -- one worker at a time, for pipelining ---------------------------------------------------
-    def send_one(self, i: int, action) -> None:
-        """Stage worker i's action; its actor steps once every worker of its group has one."""
-        j = self._actor_of[i]
-        self._actions[i] = action
-        self._staged[j] += 1
-        sl = self.slices[j]
-        if self._staged[j] == sl.stop - sl.start:
-            self._staged[j] = 0
-            self._in_flight[self.actors[j].step.remote(self._actions[sl].copy())] = j
-
-    def ready(self, indices) -> list[int]:
-        """The workers among `indices` whose answer is in, waiting for the first actor to finish if none is."""
+    # -- a batch per call ------------------------------------------------------------------------
+    def collect(self, order, rngs: list[np.random.Generator]) -> list:
+        """Every actor's fragment of one batch: one broadcast (`order`) and one reply per actor."""
         import ray
 
-        wanted = list(indices)
-        if not any(i in self._answers for i in wanted):
-            if not self._in_flight:
-                raise RuntimeError("no Ray actor is stepping: send every worker of a group its action first")
-            done, _ = ray.wait(list(self._in_flight), num_returns=1)
-            for ref in done:
-                j = self._in_flight.pop(ref)
-                obs, rewards, terminated, truncated, infos = ray.get(ref)  # an actor's error surfaces here
-                for k, i in enumerate(range(self.slices[j].start, self.slices[j].stop)):
-                    self._answers[i] = (obs[k], float(rewards[k]), bool(terminated[k]), bool(truncated[k]), infos[k])
-        return [i for i in wanted if i in self._answers]
+        stats = BatchStats()
+        t0 = time.perf_counter()
+        shared = ray.put(order)
+        refs = [a.collect.remote(shared, rngs[sl]) for a, sl in zip(self.actors, self.slices, strict=True)]
+        stats.round_trips = len(refs)
+        fragments = self._get_all(refs, stats)
+        stats.wait_s = time.perf_counter() - t0
+        stats.collect_s = [f.collect_s for f in fragments]
+        self.stats.append(stats)
+        for f, sl in zip(fragments, self.slices, strict=True):
+            self._obs[sl] = f.last_raw
+        return fragments
 
-    def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, bool, dict]:
-        """Worker i's (observation, reward, terminated, truncated, info); an actor resets its own workers."""
-        answer = self._answers.pop(i)
-        self._obs[i] = answer[0]
-        return answer
+    def record_merge(self, seconds: float) -> None:
+        if self.stats:
+            self.stats[-1].merge_s = seconds
+
+    # -- waiting, with deadlines -------------------------------------------------------------------
+    def _get_all(self, refs: list, stats: BatchStats | None = None) -> list:
+        """Every actor's answer, in actor order; never waits without a deadline."""
+        import ray
+
+        index = {ref: j for j, ref in enumerate(refs)}
+        answers: dict[int, object] = {}
+        pending = list(refs)
+        last = {j: (-1, time.monotonic()) for j in range(len(refs))}  # (progress, when it last moved)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1, timeout=self.poll_s)
+            for ref in done:
+                answers[index[ref]] = self._answer(index[ref], ref)
+            if not done:
+                self._check_progress([index[r] for r in pending], last, stats)
+        return [answers[j] for j in range(len(refs))]
+
+    def _answer(self, j: int, ref):
+        import ray
+
+        try:
+            return ray.get(ref, timeout=self.answer_s)
+        except ray.exceptions.RayActorError as e:
+            raise WorkerLostError(
+                f"Ray actor {j} (workers {self._workers(j)}) on node {self.nodes[j] if self.nodes else '?'} "
+                f"was lost: {str(e).splitlines()[0]}"
+            ) from None
+        except ray.exceptions.RayTaskError as e:
+            cause = getattr(e, "cause", None)
+            if isinstance(cause, EnergyPlusError | KeyboardInterrupt):
+                raise cause from None
+            raise
+
+    def _check_progress(self, pending: list[int], last: dict, stats: BatchStats | None) -> None:
+        import ray
+
+        refs = [self.actors[j].progress.remote() for j in pending]
+        if stats is not None:
+            stats.progress_checks += len(refs)
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=self.answer_s)
+        now = time.monotonic()
+        for j, ref in zip(pending, refs, strict=True):
+            if ref not in ready:
+                raise WorkerLostError(
+                    f"Ray actor {j} (workers {self._workers(j)}) on node {self.nodes[j]} did not answer "
+                    f"a progress check within {self.answer_s:.0f} s"
+                )
+            served = self._answer(j, ref)
+            if served != last[j][0]:
+                last[j] = (served, now)
+            elif now - last[j][1] > self.stall_s:
+                raise WorkerLostError(
+                    f"Ray actor {j} (workers {self._workers(j)}) on node {self.nodes[j]} served no observation "
+                    f"for {now - last[j][1]:.0f} s"
+                )
+
+    def _workers(self, j: int) -> str:
+        sl = self.slices[j]
+        return f"{sl.start}-{sl.stop - 1}" if sl.stop - sl.start > 1 else str(sl.start)
 
     def close(self) -> None:
+        """Stop every actor's collection, close its workers (EnergyPlus and pipes), then end the actors."""
         import ray
 
-        if not self.actors:
-            return
-        try:
-            ray.get([a.close.remote() for a in self.actors], timeout=60)
-        except Exception as e:  # noqa: BLE001 - closing must not mask the original error
-            log.warning("closing Ray workers: %s", e)
-        for a in self.actors:
-            ray.kill(a)
-        self.actors = []
-        if self._owns_ray:
+        if self.actors:
+            for a in self.actors:
+                a.stop.remote()  # a collection still running ends at its next observation
+            refs = [a.close.remote() for a in self.actors]
+            ready, _ = ray.wait(refs, num_returns=len(refs), timeout=60)
+            for ref in ready:
+                try:
+                    ray.get(ref)
+                except Exception as e:  # noqa: BLE001 - closing must not mask the original error
+                    log.warning("closing Ray workers: %s", str(e).splitlines()[0])
+            if len(ready) < len(refs):
+                log.warning("%d Ray actor(s) did not close within 60 s; ending them", len(refs) - len(ready))
+            for a in self.actors:
+                ray.kill(a)
+            self.actors = []
+        if self._owns_ray and ray.is_initialized():
             ray.shutdown()
+
+
+def _log_placement(nodes: list[str], slices: list[slice]) -> None:
+    """The cluster's resources and how many workers each node got: what a user checks first on a cluster."""
+    import ray
+
+    res = ray.cluster_resources()
+    alive = [n for n in ray.nodes() if n.get("Alive")]
+    log.info("Ray cluster: %d node(s), %.0f CPUs, %.1f GiB memory", len(alive), res.get("CPU", 0),
+             res.get("memory", 0) / 2**30)  # fmt: skip
+    per_node: collections.Counter = collections.Counter()
+    for node, sl in zip(nodes, slices, strict=True):
+        per_node[node] += sl.stop - sl.start
+    for node, n in per_node.items():
+        log.info("  %s: %d worker(s)", node, n)
+    log.info("Ray backend: %d workers in %d actors; a batch is one call per actor", sum(per_node.values()),
+             len(slices))  # fmt: skip

@@ -161,7 +161,7 @@ def load_policy(model_zip: str | Path):
     model_zip = Path(model_zip)
     stats = require_policy_files(model_zip)
     saved = _saved_policy(model_zip)
-    from parallel_eplus.training.rollout import NumpyPolicy
+    from parallel_eplus.training.numpy_policy import NumpyPolicy
 
     norm = read_stats(stats)
     low, high = saved.action_space.low, saved.action_space.high

@@ -44,8 +44,13 @@ class SB3VecEnv(VecEnv):
     # -- one worker at a time (pipelining), where the vector env offers it ----------------------
     @property
     def steps_one_by_one(self) -> bool:
-        """Whether `send_one`, `ready` and `receive_one` work (local workers and Ray actors both offer them)."""
+        """Whether `send_one`, `ready` and `receive_one` work (local workers offer them)."""
         return hasattr(self.venv, "receive_one")
+
+    @property
+    def collects_fragments(self) -> bool:
+        """Whether the workers collect whole trajectory fragments themselves (Ray actors: `collect`)."""
+        return hasattr(self.venv, "collect")
 
     def send_one(self, i: int, action: np.ndarray) -> None:
         self.venv.send_one(i, action)

@@ -143,7 +143,7 @@ def train(
             if isinstance(e, EnergyPlusError) and model.num_timesteps == start_steps:
                 raise  # nothing learned since the last save
             path = save_checkpoint(model, env, run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip", True)
-            cause = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped by the EnergyPlus failure below"
+            cause = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped by the failure below"
             log.warning("%s at step %d; checkpoint saved: %s", cause, model.num_timesteps, path)
             log.warning("resume with: parallel-eplus train --resume %s", path)
             raise

@@ -1,0 +1,77 @@
+"""The node's side of the Ray backend: an actor that owns a group of EnergyPlus workers on its node.
+
+Per batch it receives one order (the policy, the observation statistics, its workers' random
+streams), collects its share of the batch with the pipelined loop and no call to the learner per
+step, and returns one trajectory fragment (training/fragments.py). The actor runs two threads, so
+the learner can ask how far a collection has come (its deadline check) and stop it while it runs.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import threading
+
+import numpy as np
+
+from parallel_eplus.engine.config import SimulationConfig
+
+
+def actor_class(max_concurrency: int = 2):
+    """The Ray actor class (made on first use, so importing this module does not import Ray)."""
+    import ray
+
+    from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
+    from parallel_eplus.training.fragments import BatchOrder, Fragment, collect_fragment
+    from parallel_eplus.training.sb3_adapter import SB3VecEnv
+
+    @ray.remote(max_concurrency=max_concurrency)
+    class WorkerGroup:
+        def __init__(self, config: SimulationConfig, shares: list[list[str]], first_worker: int, max_restarts: int):
+            logging.basicConfig(level=logging.INFO)
+            self.venv = EnergyPlusVectorEnv(config, shares, max_restarts=max_restarts, first_worker=first_worker)
+            self.env = SB3VecEnv(self.venv)  # episode returns and SB3's info keys, as the learner's callbacks expect
+            self.starts = np.ones(self.venv.num_envs, dtype=bool)
+            self._lock = threading.Lock()  # one collection, step or close at a time
+            self._stop = threading.Event()
+            self.served = 0  # observations served so far: the learner's sign of life
+
+        def start_all(self, indices):
+            with self._lock:
+                if len(list(indices)) == self.venv.num_envs:
+                    self.env.reset()  # also zeroes the episode returns
+                    self.starts[:] = True
+                    infos = self.env.reset_infos
+                else:
+                    infos = self.venv.start_all(indices)
+                return self.venv.observations(), infos
+
+        def collect(self, order: BatchOrder, rngs: list[np.random.Generator]) -> Fragment:
+            with self._lock:
+                fragment = collect_fragment(self.env, order, self.venv.observations(), self.starts, rngs,
+                                            self._stop, self._served)  # fmt: skip
+                self.starts = fragment.last_starts.copy()
+                return fragment
+
+        def _served(self) -> None:
+            self.served += 1
+
+        def step(self, actions):
+            with self._lock:
+                return self.venv.step_lists(actions)
+
+        def progress(self) -> int:
+            return self.served
+
+        def stop(self) -> None:
+            self._stop.set()
+
+        def close(self) -> None:
+            self._stop.set()
+            with self._lock:
+                self.venv.close()
+
+        def node(self) -> str:
+            return f"{socket.gethostname()} ({ray.util.get_node_ip_address()})"
+
+    return WorkerGroup

@@ -1,0 +1,116 @@
+"""The policy as the rollout loop uses it: an SB3 `MlpPolicy` snapshot evaluated in numpy.
+
+Why: with two workers, SB3's loop cost 0.93 ms of learner CPU per vector step, most of it torch
+dispatch for a 32x32 network, a `Normal` per step and tensor conversions, while every EnergyPlus
+worker waited for its action. The same arithmetic on numpy arrays costs 0.36 ms. A snapshot is a few
+kB of plain arrays, so it also travels: a Ray actor receives one per batch and acts on its node.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.distributions import DiagGaussianDistribution
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.preprocessing import is_image_space
+from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
+
+_HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
+
+
+def _layers(module: th.nn.Module) -> list[tuple[np.ndarray, np.ndarray, bool]] | None:
+    """(weight.T, bias, tanh after?) per Linear of a Linear/Tanh stack; None for anything else."""
+    layers: list[tuple[np.ndarray, np.ndarray, bool]] = []
+    for m in module.modules() if isinstance(module, th.nn.Sequential) else [module]:
+        if isinstance(m, th.nn.Sequential):
+            continue
+        if type(m) is th.nn.Linear and m.bias is not None:
+            layers.append((m.weight.detach().numpy().T.copy(), m.bias.detach().numpy().copy(), False))
+        elif type(m) is th.nn.Tanh and layers and not layers[-1][2]:
+            layers[-1] = (*layers[-1][:2], True)
+        else:
+            return None
+    return layers
+
+
+def _run(layers: list[tuple[np.ndarray, np.ndarray, bool]], x: np.ndarray) -> np.ndarray:
+    for w, b, tanh in layers:
+        x = x @ w + b
+        if tanh:
+            np.tanh(x, out=x)
+    return x
+
+
+class NumpyPolicy:
+    """A snapshot of an SB3 `MlpPolicy` (Box observations, diagonal Gaussian, tanh MLP) in numpy.
+
+    Take a new snapshot after every update; `supports(policy)` says whether a policy has this shape.
+    """
+
+    def __init__(self, policy: ActorCriticPolicy):
+        self.actor = _layers(policy.mlp_extractor.policy_net) + _layers(policy.action_net)
+        self.critic = _layers(policy.mlp_extractor.value_net) + _layers(policy.value_net)
+        log_std = policy.log_std.detach().numpy().astype(np.float64)
+        self.std = np.exp(log_std)
+        self._log_prob_const = -(log_std.sum() + _HALF_LOG_2PI * log_std.size)
+
+    @staticmethod
+    def supports(policy: ActorCriticPolicy) -> bool:
+        """Exactly SB3's own classes (a subclass may override any step), on the CPU, flat spaces."""
+        if type(policy) is not ActorCriticPolicy or policy.device.type != "cpu":
+            return False
+        obs_space, act_space = policy.observation_space, policy.action_space
+        return (
+            isinstance(obs_space, spaces.Box)
+            and not (policy.normalize_images and is_image_space(obs_space))
+            and isinstance(act_space, spaces.Box)
+            and len(act_space.shape) == 1
+            and type(policy.action_dist) is DiagGaussianDistribution
+            and not policy.squash_output
+            and not policy.use_sde
+            and type(policy.mlp_extractor) is MlpExtractor
+            and type(policy.pi_features_extractor) is FlattenExtractor
+            and type(policy.vf_features_extractor) is FlattenExtractor
+            and all(
+                _layers(m) is not None
+                for m in (
+                    policy.mlp_extractor.policy_net,
+                    policy.mlp_extractor.value_net,
+                    policy.action_net,
+                    policy.value_net,
+                )
+            )
+        )
+
+    @staticmethod
+    def _flat(obs: np.ndarray) -> np.ndarray:
+        return obs.reshape(len(obs), -1).astype(np.float64)
+
+    def mean(self, obs: np.ndarray) -> np.ndarray:
+        return _run(self.actor, self._flat(obs))
+
+    def value(self, obs: np.ndarray) -> np.ndarray:
+        return _run(self.critic, self._flat(obs))[:, 0]
+
+    def log_prob(self, actions: np.ndarray, mean: np.ndarray) -> np.ndarray:
+        z = (actions - mean) / self.std
+        return self._log_prob_const - 0.5 * (z * z).sum(axis=1)
+
+    def sample(
+        self, obs: np.ndarray, rng: np.random.Generator | list[np.random.Generator]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stochastic float32 actions (as the buffer stores them), the critic's values, their log-probabilities.
+
+        `rng`: one generator for every row, or one per row (each worker's own stream).
+        """
+        x = self._flat(obs)
+        mean = _run(self.actor, x)
+        if isinstance(rng, np.random.Generator):
+            noise = rng.standard_normal(mean.shape)
+        else:
+            noise = np.array([r.standard_normal(mean.shape[1]) for r in rng])
+        actions = (mean + self.std * noise).astype(np.float32)
+        return actions, _run(self.critic, x)[:, 0], self.log_prob(actions, mean)
