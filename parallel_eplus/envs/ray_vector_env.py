@@ -36,6 +36,12 @@ class BatchStats:
     wait_s: float = 0.0  # learner idle: from sending the order to the last fragment in
     collect_s: list[float] = field(default_factory=list)  # per actor, measured on its node
     merge_s: float = 0.0  # learner: fragments into the buffer and the statistics, callbacks
+    cycle_s: float | None = None  # from this batch's order to the next one's (collection, merge, update)
+
+    @property
+    def idle_share(self) -> float | None:
+        """The share of the learner's cycle spent waiting for fragments (known once the next batch starts)."""
+        return None if not self.cycle_s else self.wait_s / self.cycle_s
 
 
 class RayVectorEnv:
@@ -75,6 +81,7 @@ class RayVectorEnv:
         self.actors: list = []
         self.nodes: list[str] = []
         self.stats: list[BatchStats] = []
+        self._t_order = 0.0
         for start in range(0, self.num_envs, workers_per_actor):
             part = shares[start : start + workers_per_actor]
             self.slices.append(slice(start, start + len(part)))
@@ -120,6 +127,9 @@ class RayVectorEnv:
 
         stats = BatchStats()
         t0 = time.perf_counter()
+        if self.stats:
+            self.stats[-1].cycle_s = t0 - self._t_order
+        self._t_order = t0
         shared = ray.put(order)
         refs = [a.collect.remote(shared, rngs[sl]) for a, sl in zip(self.actors, self.slices, strict=True)]
         stats.round_trips = len(refs)
@@ -131,9 +141,15 @@ class RayVectorEnv:
             self._obs[sl] = f.last_raw
         return fragments
 
-    def record_merge(self, seconds: float) -> None:
-        if self.stats:
-            self.stats[-1].merge_s = seconds
+    def record_merge(self, seconds: float) -> dict[str, float]:
+        """Note the learner's merge time; returns the scalars TensorBoard shows under `ray/`."""
+        last = self.stats[-1]
+        last.merge_s = seconds
+        scalars = {"ray/round_trips": last.round_trips + last.progress_checks, "ray/wait_s": last.wait_s,
+                   "ray/merge_s": seconds, "ray/actor_collect_s_max": max(last.collect_s, default=0.0)}  # fmt: skip
+        if len(self.stats) > 1 and self.stats[-2].idle_share is not None:
+            scalars["ray/learner_idle_share"] = self.stats[-2].idle_share
+        return scalars
 
     # -- waiting, with deadlines -------------------------------------------------------------------
     def _get_all(self, refs: list, stats: BatchStats | None = None) -> list:

@@ -24,7 +24,8 @@ def episodes_per_weather(episodes_csv: Path) -> dict[str, int]:
 class EpisodeMetrics(BaseCallback):
     """Per finished episode, tagged by weather: reward, power, zone temperatures, share in range.
 
-    Also appends every episode's summary to runs/<name>/episodes.csv and logs throughput.
+    Also appends every episode's summary to runs/<name>/episodes.csv, logs throughput and counts the
+    episodes cut short by an EnergyPlus failure (restarted, within the restart budget).
     """
 
     KEYS = {
@@ -44,6 +45,7 @@ class EpisodeMetrics(BaseCallback):
         self.episodes_csv = episodes_csv
         self.progress = progress
         self.episodes = 0
+        self.restarts = 0
         self.per_weather = episodes_per_weather(episodes_csv)  # a resumed run counts on from its earlier episodes
         self._t0 = time.monotonic()
         self._steps0 = 0
@@ -54,6 +56,8 @@ class EpisodeMetrics(BaseCallback):
 
     def _on_step(self) -> bool:
         for info in self.locals["infos"]:
+            if "energyplus_error" in info:
+                self.restarts += 1
             final = info.get("final_info")
             if final and "episode_summary" in final:
                 self._record(final["episode_summary"], info.get("episode", {}).get("r"))
@@ -83,6 +87,7 @@ class EpisodeMetrics(BaseCallback):
             self.logger.record("throughput/env_steps_per_s", rate)
             self.logger.record("throughput/sim_years_per_hour", rate * 3600 / STEPS_PER_YEAR)
         self.logger.record("throughput/episodes", self.episodes)
+        self.logger.record("throughput/worker_restarts", self.restarts)
         for weather, count in self.per_weather.items():
             self.logger.record(f"episodes/{weather}", count)
 

@@ -209,7 +209,8 @@ class NumpyRollouts:
             if not callback.on_step():
                 return False
             self._update_info_buffer(infos, dones[t])
-        cluster.record_merge(time.perf_counter() - t0)
+        for key, value in cluster.record_merge(time.perf_counter() - t0).items():
+            self.logger.record(key, value)
         callback.update_locals({"new_obs": obs, "dones": starts, "values": values})
         callback.on_rollout_end()
         return True

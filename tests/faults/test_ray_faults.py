@@ -1,0 +1,94 @@
+"""Faults with the Ray backend: an EnergyPlus worker killed inside an actor, an actor lost with its node.
+
+Ray runs locally here (one node); a lost node is an actor process killed outright, which is what Ray
+reports when a node's raylet dies (docs/cluster.md measures the two-node case).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import threading
+import time
+
+import pytest
+
+from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.errors import WorkerLostError
+from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.train import train
+
+from ..conftest import _started_by_us
+from ..test_train import scalars, small_config
+
+pytestmark = pytest.mark.slow
+ray = pytest.importorskip("ray")
+
+
+def _ours(pattern: str) -> list[int]:
+    out = subprocess.run(["pgrep", "-f", pattern], capture_output=True, text=True)
+    return [int(p) for p in out.stdout.split() if _started_by_us(p)]
+
+
+def _strike_when(ready, pattern: str, hit: list, until=lambda: False) -> threading.Event:
+    """Once `ready()`, SIGKILL the first of this session's processes matching `pattern`; again until `until()`."""
+    stop = threading.Event()
+
+    def strike():
+        deadline = time.monotonic() + 180
+        while not ready() and time.monotonic() < deadline and not stop.is_set():
+            time.sleep(0.2)
+        while time.monotonic() < deadline and not until() and not stop.is_set():
+            victims = [p for p in _ours(pattern) if p not in hit]
+            if victims:
+                os.kill(victims[0], signal.SIGKILL)
+                hit.append(victims[0])
+                if not until():
+                    time.sleep(4.0)
+            time.sleep(0.5)
+
+    threading.Thread(target=strike, daemon=True).start()
+    return stop
+
+
+def test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run_completes(tmp_path, no_leaks):
+    # 30-day episodes: a struck worker is mid-episode; the first batch's end (a checkpoint) is the cue
+    cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=30, timesteps=11520, batch_size=2304,
+                       checkpoint_every=2304, backend="ray", workers_per_actor=1)  # fmt: skip
+    checkpoints = cfg.run_dir.resolve() / "checkpoints"
+    hit: list[int] = []
+    stop = _strike_when(lambda: checkpoints.is_dir() and any(checkpoints.iterdir()), pipe_sweep.CALLBACK_MODULE, hit,
+                        until=lambda: bool(hit))  # fmt: skip
+    try:
+        final = train(cfg, progress=False)
+    finally:
+        stop.set()
+    assert hit, "no EnergyPlus process to hit"
+    assert final.is_file()
+    restarts = scalars(tmp_path / "tb" / "hit")["throughput/worker_restarts"]
+    assert restarts[-1].value >= 1  # the cut episode was restarted inside its actor, within the budget
+    assert [s.value for s in scalars(tmp_path / "tb" / "hit")["ray/round_trips"]] == [2.0] * 5
+
+
+def test_a_lost_actor_stops_the_run_naming_its_node_after_a_checkpoint_that_resumes(tmp_path, no_leaks):
+    cfg = small_config(tmp_path, "lost", weathers=["CA"], run_days=30, timesteps=100_000, batch_size=1152,
+                       checkpoint_every=1152, backend="ray", workers_per_actor=1)  # fmt: skip
+    checkpoints = cfg.run_dir.resolve() / "checkpoints"
+    hit: list[int] = []
+    stop = _strike_when(lambda: checkpoints.is_dir() and any(checkpoints.iterdir()), "ray::WorkerGroup", hit,
+                        until=lambda: bool(hit))  # fmt: skip
+    t0 = time.monotonic()
+    with pytest.raises(WorkerLostError) as err:
+        try:
+            train(cfg, progress=False)
+        finally:
+            stop.set()
+    assert hit
+    assert "was lost" in str(err.value) and "on node" in str(err.value)
+    assert time.monotonic() - t0 < 600
+    checkpoint = max(checkpoints.glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
+    steps = int(checkpoint.stem.split("_")[1])
+    assert steps >= 1152
+    resumed = train(TrainConfig(timesteps=steps + 1152), resume=checkpoint, progress=False)
+    assert resumed.is_file()
