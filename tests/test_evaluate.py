@@ -65,6 +65,19 @@ def test_sweep_writes_table_and_figures(tmp_path, policy, no_leaks):
     assert len(files) == 5
 
 
+@pytest.mark.slow
+def test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures(tmp_path, policy, no_leaks):
+    """Each episode a Ray task with the policy shipped to it: the same rows, the episode files brought back."""
+    pytest.importorskip("ray")
+    controllers = [Controller(BASELINE_LABEL, "baseline"), policy_controller(str(policy))]
+    local = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "local", progress=False)
+    ray = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "ray", progress=False, backend="ray")
+    pd.testing.assert_frame_equal(ray.drop(columns="episode_dir"), local.drop(columns="episode_dir"))
+    assert all(str(d).startswith(str(tmp_path / "ray")) for d in ray.episode_dir)
+    write_results(ray, tmp_path / "ray")  # the figures read the episode files the tasks returned
+    assert is_png(tmp_path / "ray" / "west_zone_histogram.png")
+
+
 def test_plot_run_and_episode(tmp_path, policy):
     run_dir = policy.parent
     assert is_png(plot_path(run_dir))

@@ -158,7 +158,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
-        not args.quiet, args.building,
+        not args.quiet, args.building, args.backend, args.ray_address,
     )  # fmt: skip
     if args.online:
         import pandas as pd

@@ -114,6 +114,9 @@ def build_parser() -> argparse.ArgumentParser:
         "one episode (a copy; the saved model is untouched); rows labelled '..., online'",
     )  # fmt: skip
     ev.add_argument("--online-batch", type=int, help="with --online: steps per update (default: the run's own)")
+    ev.add_argument("--backend", default="local", choices=["local", "ray"],
+                    help="ray: each episode is a Ray task on --ray-address's cluster (or a local Ray)")  # fmt: skip
+    ev.add_argument("--ray-address", help="an existing Ray cluster (default: start Ray locally)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     ev.set_defaults(func=c.cmd_evaluate)
 

@@ -119,8 +119,12 @@ def run_sweep(
     reward: RewardConfig | None = None,
     progress: bool = True,
     building: str | None = None,
+    backend: str = "local",
+    ray_address: str | None = None,
 ) -> pd.DataFrame:
     """One episode per (controller, weather), up to `workers` at once; returns results.csv's table.
+
+    `backend` "ray": each episode is a Ray task (ray_sweep.py), on `ray_address`'s cluster or a local Ray.
 
     `building`: a spec (checked first); its "baseline" is its model's own controls (`baseline_idf`)."""
     known = None
@@ -137,24 +141,51 @@ def run_sweep(
             )
     weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs
     controllers = unique_labels(controllers)
-    jobs = deque((c, w) for c in controllers for w in weathers)
+    jobs = [(c, _job_config(c, w, building, run_days, reward, out_dir)) for c in controllers for w in weathers]
     total_steps = len(jobs) * run_days * STEPS_PER_DAY
-    rows: list[dict] = []
-    active: list[dict] = []
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:
-        while jobs or active:
+        if backend == "ray":
+            from parallel_eplus.evaluation import ray_sweep
+
+            # each EnergyPlus step has its own deadline; this bounds the wait for any next episode to end
+            deadline_s = 600.0 + run_days * STEPS_PER_DAY * 0.05
+            rows = ray_sweep.run_jobs(jobs, workers, ray_address, bar, deadline_s)
+        else:
+            rows = _run_local(jobs, workers, bar)
+    finally:
+        bar.close()
+    order = {c.label: i for i, c in enumerate(controllers)}
+    worder = {weather_label(w): i for i, w in enumerate(weathers)}
+    df = pd.DataFrame(rows)
+    df = df.sort_values(by=["controller", "weather"], key=lambda s: s.map({**order, **worder}))
+    return df.reset_index(drop=True)
+
+
+def _job_config(
+    controller: Controller, weather: str, building: str | None, run_days: int, reward: RewardConfig | None,
+    out_dir: Path,
+) -> SimulationConfig:  # fmt: skip
+    return SimulationConfig(
+        weather=weather, model=controller.model, building=building, run_days=run_days,
+        reward=reward or RewardConfig(),
+        time_features=controller.time_features, schedule_features=controller.schedule_features,
+        residual_scale=controller.residual_scale, residual_space=controller.residual_space,
+        rbc_target_c=controller.rbc_target_c,
+        output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
+    )  # fmt: skip
+
+
+def _run_local(jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar) -> list[dict]:
+    """The jobs as EnergyPlus processes of this machine, up to `workers` at once."""
+    queue = deque(jobs)
+    rows: list[dict] = []
+    active: list[dict] = []
+    try:
+        while queue or active:
             started = []
-            while jobs and len(active) < workers:
-                controller, weather = jobs.popleft()
-                cfg = SimulationConfig(
-                    weather=weather, model=controller.model, building=building, run_days=run_days,
-                    reward=reward or RewardConfig(),
-                    time_features=controller.time_features, schedule_features=controller.schedule_features,
-                    residual_scale=controller.residual_scale, residual_space=controller.residual_space,
-                    rbc_target_c=controller.rbc_target_c,
-                    output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
-                )  # fmt: skip
+            while queue and len(active) < workers:
+                controller, cfg = queue.popleft()
                 sim = Simulation(cfg, name=controller.label, siblings=workers)
                 sim.launch()
                 job = {"controller": controller, "sim": sim, "act": controller.make()}
@@ -184,14 +215,9 @@ def run_sweep(
                 job["sim"].close()
                 bar.set_postfix(done=len(rows), last=f"{job['controller'].label} {summary['weather']}")
     finally:
-        bar.close()
         for job in active:
             job["sim"].close()
-    order = {c.label: i for i, c in enumerate(controllers)}
-    worder = {weather_label(w): i for i, w in enumerate(weathers)}
-    df = pd.DataFrame(rows)
-    df = df.sort_values(by=["controller", "weather"], key=lambda s: s.map({**order, **worder}))
-    return df.reset_index(drop=True)
+    return rows
 
 
 RESULT_COLUMNS = [

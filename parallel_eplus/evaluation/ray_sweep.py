@@ -1,0 +1,107 @@
+"""`evaluate --backend ray`: each (controller, weather) episode is one Ray task, wherever a CPU is free.
+
+An evaluation job is a whole episode, so it needs no call per step either: a policy's files (a few
+kB to a few hundred kB) go into Ray's object store once and every task that runs it reads them there;
+a task returns its episode's summary and the files the figures read (`steps.parquet`, `summary.json`,
+the EnergyPlus error file), which land in the same episode folders a local sweep writes. Nothing has
+to be on the nodes but the package (docs/cluster.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from parallel_eplus import io
+from parallel_eplus.engine.config import SimulationConfig
+
+log = logging.getLogger(__name__)
+
+RETURNED_FILES = ("steps.parquet", "summary.json", "eplusout.err")
+
+
+def _policy_files(model_zip: Path) -> dict[str, bytes]:
+    """A policy's model and statistics, by the names `load_policy` looks for beside each other."""
+    from parallel_eplus.training.policy_files import MODEL_FILE, NORMALIZE_FILE, normalization_file
+
+    stats = normalization_file(model_zip)
+    return {MODEL_FILE: model_zip.read_bytes(), Path(NORMALIZE_FILE).with_suffix(stats.suffix).name: stats.read_bytes()}
+
+
+def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None) -> tuple[dict, dict[str, bytes]]:
+    """One whole episode on a node; returns (its results row, the files the figures read)."""
+    from parallel_eplus.engine.simulation import Simulation
+
+    with tempfile.TemporaryDirectory(prefix="parallel-eplus-eval-") as tmp:
+        if files is not None:  # the policy, written where this node can read it
+            for name, data in files.items():
+                (Path(tmp) / name).write_bytes(data)
+            controller = replace(controller, path=Path(tmp) / "model.zip")
+        sim = Simulation(replace(cfg, output_dir=str(Path(tmp) / "episodes")), name=controller.label)
+        act = controller.make()
+        try:
+            sim.launch()
+            obs, info = sim.first_observation()
+            terminated = False
+            while not terminated:
+                sim.send(act(obs, info))
+                obs, _, terminated, info = sim.receive()
+        finally:
+            sim.close()
+        episode_dir = Path(info["episode_dir"])
+        out = {n: (episode_dir / n).read_bytes() for n in RETURNED_FILES if (episode_dir / n).is_file()}
+        return {"controller": controller.label, **info["episode_summary"], "episode_dir": episode_dir.name}, out
+
+
+def run_jobs(jobs: list[tuple], workers: int, address: str | None, bar, deadline_s: float) -> list[dict]:
+    """Run (controller, SimulationConfig) jobs as Ray tasks; returns their rows as the local sweep makes them.
+
+    `workers`: CPUs of a Ray started here (no `address`); on a cluster, its CPUs decide. `deadline_s`:
+    the longest wait for any next episode to finish (each EnergyPlus step has its own deadline too).
+    """
+    import ray
+
+    owns = not ray.is_initialized()
+    if owns:
+        if address:
+            ray.init(address=address, log_to_driver=True)
+        else:  # a Ray of our own, whatever an earlier cluster left behind (ray_vector_env.py)
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=True)
+    task = ray.remote(num_cpus=1, max_retries=0)(_episode)
+    shipped: dict[Path, object] = {}
+    pending: dict = {}
+    try:
+        for controller, cfg in jobs:
+            files = None
+            if controller.kind == "policy":
+                if controller.path not in shipped:  # once per policy, however many weathers run it
+                    shipped[controller.path] = ray.put(_policy_files(controller.path))
+                files = shipped[controller.path]
+            pending[task.remote(controller, cfg, files)] = (controller, cfg)
+        log.info("Ray evaluation: %d episodes over %.0f CPUs", len(jobs), ray.cluster_resources().get("CPU", 0))
+        rows = []
+        while pending:
+            t0 = time.monotonic()
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=deadline_s)
+            if not done:
+                raise TimeoutError(f"no evaluation episode finished within {deadline_s:.0f} s on the Ray cluster")
+            controller, cfg = pending.pop(done[0])
+            row, files = ray.get(done[0], timeout=60)
+            local = Path(cfg.output_dir) / row["episode_dir"]  # where a local sweep would have written it
+            local.mkdir(parents=True, exist_ok=True)
+            for name, data in files.items():
+                io.write_bytes(local / name, data)
+            row["episode_dir"] = str(local)
+            rows.append(row)
+            bar.update(int(row.get("steps", 0)))
+            bar.set_postfix(done=len(rows), last=f"{controller.label} {row['weather']}")
+            log.debug("%s %s: %.0f s", controller.label, row["weather"], time.monotonic() - t0)
+        return rows
+    finally:
+        for ref in pending:  # failed or interrupted: stop what still runs (its EnergyPlus sees its pipes close)
+            ray.cancel(ref, force=True)
+        if owns:
+            ray.shutdown()
