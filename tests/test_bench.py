@@ -40,8 +40,10 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
         assert results[f"vector_{n}_over_raw"] > 0 and results[f"raw_exploring_{n}_steps_per_s"] > 0
     assert results["million_steps_floor_minutes"] > 0
     assert results["update_s"] > 0 and results["train_steps_per_s"] > 0
+    assert results["train_ray_over_local"] == results["train_ray_steps_per_s"] / results["train_steps_per_s"] > 0
     table = format_table(results)
     assert "2 runs at once" in table and "cores busy" in table and "stepped alone" in table and "lockstep" in table
+    assert "Ray backend" in table
 
 
 @pytest.mark.parametrize("bridge", ["c", "python"])

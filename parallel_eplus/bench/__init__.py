@@ -10,7 +10,9 @@
    replaying the same actions with no pipes (1 and N processes): what the physics alone costs;
 4. training: env steps/s inside TRPO `learn` with N workers, against the vector env's rate and raw's,
    and the floor for a million steps here (raw EnergyPlus's time under those actions plus the updates);
-5. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
+5. the same training through a local Ray (one actor per worker, each collecting its fragment of the
+   batch), against the local backend: the Ray backend's price, re-measured whenever speed work lands;
+6. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
 
 Random actions in 3 are drawn like an untrained TRPO policy's (N(0, 1) clipped to [-1, 1]), so 3 and
 4 ask EnergyPlus for the same kind of work: control changes EnergyPlus's own cost several-fold.
@@ -97,6 +99,10 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
         results["million_steps_floor_minutes"] = (
             1e6 / results["raw_exploring_n_steps_per_s"] + 1e6 / cfg.batch_size * tr["update_s"]
         ) / 60
+        if cfg.ray:
+            ray_tr = training_rate(cfg, tmp / "train-ray", backend="ray")
+            results["train_ray_steps_per_s"] = ray_tr["steps_per_s"]
+            results["train_ray_over_local"] = ray_tr["steps_per_s"] / tr["steps_per_s"]
         results["worker_peak_rss_mb"] = worker_rss_mb
         results["learner_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if out is not None:
@@ -128,6 +134,9 @@ def format_table(r: dict) -> str:
          f"scaling {r['independent_scaling']:.2f}: the ceiling without lockstep or learner"),
         (f"TRPO learn, {n} workers", f"{r['train_steps_per_s']:.0f} steps/s",
          f"train/vector {r['train_over_vector']:.2f} (target >= 0.75); {r['train_over_raw']:.2f} of raw"),
+        *([(f"TRPO learn, {n} workers, Ray backend", f"{r['train_ray_steps_per_s']:.0f} steps/s",
+            f"ray/local {r['train_ray_over_local']:.2f} (target >= 0.90); local Ray, one actor per worker")]
+          if "train_ray_steps_per_s" in r else []),
         ("TRPO update of one 16k batch", f"{r['update_s']:.2f} s", ""),
         ("1M TRPO steps", f"{r['million_steps_minutes']:.1f} min",
          f"target <= 15 min; EnergyPlus's own time and the updates: {r['million_steps_floor_minutes']:.1f} min"),

@@ -22,6 +22,7 @@ class BenchConfig:
     workers: int = os.cpu_count() or 1
     repeats: int = 3
     action: float = 0.0  # the constant normalized action for raw and env
+    ray: bool = True  # also time training through a local Ray (the Ray backend's row)
 
 
 def _exploring_actions(cfg: BenchConfig, workers: int) -> np.ndarray:

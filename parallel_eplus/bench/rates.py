@@ -141,8 +141,11 @@ def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
     return sum(rates)
 
 
-def training_rate(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
-    """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded."""
+def training_rate(cfg: BenchConfig, workdir: Path, backend: str = "local") -> dict[str, float]:
+    """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded.
+
+    backend "ray": the same run through a local Ray, one actor per worker collecting fragments.
+    """
     from parallel_eplus.training.callbacks import UpdateTimer
     from parallel_eplus.training.config import TrainConfig
     from parallel_eplus.training.train import train
@@ -151,7 +154,7 @@ def training_rate(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
         workers=cfg.workers, weathers=[cfg.weather], timesteps=cfg.train_steps,
         batch_size=-(-cfg.batch_size // cfg.workers) * cfg.workers,  # split evenly across the workers
         run_name="bench", runs_dir=str(workdir / "runs"), tensorboard_dir=str(workdir / "tb"),
-        checkpoint_every=10**9, keep_episodes=0,
+        checkpoint_every=10**9, keep_episodes=0, backend=backend, workers_per_actor=1,
     )  # fmt: skip
     timer = UpdateTimer()
     t0 = time.perf_counter()

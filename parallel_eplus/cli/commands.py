@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import logging
 import sys
 import tempfile
@@ -225,7 +226,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return 0
     cfg = BenchConfig(
         weather=args.weather, raw_days=args.days, vector_steps=args.vector_steps, train_steps=args.train_steps,
-        workers=args.workers, repeats=args.repeats,
+        workers=args.workers, repeats=args.repeats, ray=not args.no_ray and importlib.util.find_spec("ray") is not None,
     )  # fmt: skip
     results = run(cfg, args.out)
     print(format_table(results))

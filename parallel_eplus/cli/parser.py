@@ -130,6 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     be.add_argument("--repeats", type=int, default=3, help="repetitions; medians are reported")
     be.add_argument("--out", type=Path, default=Path("results") / "bench.json")
+    be.add_argument("--no-ray", action="store_true", help="skip the Ray backend's row (a local Ray's training rate)")
     be.add_argument(
         "--replay-run", type=Path, metavar="RUN_DIR",
         help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",
