@@ -246,10 +246,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    # Open our ends first: the env holds both FIFOs open, so neither open blocks.
+    # Open our ends first. The env holds both FIFOs open, so neither open waits for it; if it died after
+    # starting us, there is no reader and a blocking open would wait forever: ENXIO, and we exit.
     obs_fd = act_fd = None
     if args.obs_pipe and args.act_pipe:
-        obs_fd = os.open(args.obs_pipe, os.O_WRONLY)
+        try:
+            obs_fd = os.open(args.obs_pipe, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError as e:
+            print(f"the env is gone before EnergyPlus started ({e}); exiting", file=sys.stderr)
+            return 1
+        os.set_blocking(obs_fd, True)
         act_fd = os.open(args.act_pipe, os.O_RDONLY | os.O_NONBLOCK)
 
     def fail(status: float) -> int:

@@ -22,6 +22,7 @@ import numpy as np
 from parallel_eplus.engine.config import SimulationConfig, policy_action_names
 from parallel_eplus.envs.env import action_space, observation_space
 from parallel_eplus.envs.ray_actor import actor_class
+from parallel_eplus.envs.ray_session import connect
 from parallel_eplus.errors import EnergyPlusError, WorkerLostError
 
 log = logging.getLogger(__name__)
@@ -58,14 +59,7 @@ class RayVectorEnv:
     ):
         import ray
 
-        self._owns_ray = not ray.is_initialized()
-        if self._owns_ray:
-            if address:
-                ray.init(address=address, log_to_driver=True)
-            else:
-                # "local": a new Ray of our own, whatever an earlier cluster left in Ray's temp folder
-                # (a stale ray_current_cluster file) or in RAY_ADDRESS (only read when no address is given).
-                ray.init(address="local", num_cpus=len(shares), include_dashboard=False, log_to_driver=True)
+        self._owns_ray = connect(address, len(shares))
         self.num_envs = len(shares)
         self.single_observation_space = observation_space(
             config.time_features, config.schedule_features, config.building

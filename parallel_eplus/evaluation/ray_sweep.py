@@ -17,6 +17,7 @@ from pathlib import Path
 
 from parallel_eplus import io
 from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.envs.ray_session import connect
 
 log = logging.getLogger(__name__)
 
@@ -64,12 +65,7 @@ def run_jobs(jobs: list[tuple], workers: int, address: str | None, bar, deadline
     """
     import ray
 
-    owns = not ray.is_initialized()
-    if owns:
-        if address:
-            ray.init(address=address, log_to_driver=True)
-        else:  # a Ray of our own, whatever an earlier cluster left behind (ray_vector_env.py)
-            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=True)
+    owns = connect(address, workers)
     task = ray.remote(num_cpus=1, max_retries=0)(_episode)
     shipped: dict[Path, object] = {}
     pending: dict = {}

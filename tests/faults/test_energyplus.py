@@ -72,3 +72,20 @@ def test_broken_idf_raises_with_the_error_file_tail(tmp_path, no_leaks):
         assert "eplusout.err" in err.value.err_tail
     finally:
         env.close()
+
+
+def test_the_energyplus_side_exits_when_its_env_died_before_it_opened_the_pipes(tmp_path):
+    """A learner or Ray actor killed right after starting EnergyPlus holds no pipe end: the child must not wait."""
+    import subprocess
+    import sys
+
+    from parallel_eplus.engine.pipe_sweep import CALLBACK_MODULE
+
+    act, obs = tmp_path / "act", tmp_path / "obs"
+    os.mkfifo(act)
+    os.mkfifo(obs)
+    args = ["--act-pipe", act, "--obs-pipe", obs, "--idf", "m.idf", "--epw", "w.epw", "--output-dir", tmp_path,
+            "--steps", "96"]  # fmt: skip
+    done = subprocess.run([sys.executable, "-m", CALLBACK_MODULE, *map(str, args)], capture_output=True, text=True,
+                          timeout=30)  # fmt: skip
+    assert done.returncode == 1 and "the env is gone" in done.stderr

@@ -1,0 +1,103 @@
+"""The same training through Ray and locally, side by side: steps/s, round trips and the learner's idle share.
+
+Runs alternate (local, Ray, local, Ray, ...) so the machine's drift hits both alike; each run is a fresh
+`train` with the same seed, workers, batch and episodes. Ray joins the cluster at --address (started as
+docs/cluster.md shows; export RAY_AUTH_MODE=token and RAY_AUTH_TOKEN_PATH first), or a local Ray without it.
+
+    PYTHONPATH=. .venv/bin/python scripts/ray_vs_local.py --address 10.200.0.1:6379 --out results/cluster
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import statistics
+import tempfile
+from pathlib import Path
+
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from parallel_eplus.training.callbacks import UpdateTimer
+from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.train import train
+
+
+def _scalars(tb_dir: Path, tag: str) -> list[float]:
+    ea = EventAccumulator(str(tb_dir), size_guidance={"scalars": 0})
+    ea.Reload()
+    return [e.value for e in ea.Scalars(tag)] if tag in ea.Tags()["scalars"] else []
+
+
+def one_run(backend: str, address: str | None, args: argparse.Namespace, root: Path, k: int) -> dict:
+    name = f"{backend}-{k}"
+    cfg = TrainConfig(
+        workers=args.workers, weathers=args.weathers.split(","), run_days=args.run_days, timesteps=args.timesteps,
+        batch_size=args.batch_size, seed=0, run_name=name, runs_dir=str(root / "runs"),
+        tensorboard_dir=str(root / "tb"), checkpoint_every=10**9, keep_episodes=0, backend=backend,
+        ray_address=address if backend == "ray" else None, workers_per_actor=args.workers_per_actor,
+    )  # fmt: skip
+    timer = UpdateTimer()
+    train(cfg, progress=False, timer=timer)
+    row = {"backend": backend, "run": k, "steps": timer.learn_steps, "learn_s": timer.learn_s,
+           "steps_per_s": timer.learn_steps / timer.learn_s, "update_s": statistics.median(timer.updates)}  # fmt: skip
+    if backend == "ray":
+        tb = root / "tb" / name
+        trips = _scalars(tb, "ray/round_trips")
+        idle = _scalars(tb, "ray/learner_idle_share")
+        row.update(round_trips_per_batch=trips, idle_share=statistics.mean(idle) if idle else None,
+                   wait_s=statistics.mean(_scalars(tb, "ray/wait_s")))  # fmt: skip
+    return row
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--address", help="the Ray cluster (default: a local Ray)")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--workers-per-actor", type=int, default=1)
+    p.add_argument("--weathers", default="CA")
+    p.add_argument("--run-days", type=int, default=7)
+    p.add_argument("--timesteps", type=int, default=16384)
+    p.add_argument("--batch-size", type=int, default=4096)
+    p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--out", type=Path, help="folder for ray_vs_local.json and .md")
+    args = p.parse_args()
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="ray-vs-local-") as tmp:
+        for k in range(args.repeats):
+            for backend in ("local", "ray"):
+                rows.append(one_run(backend, args.address, args, Path(tmp), k))
+                print(json.dumps(rows[-1]), flush=True)
+    local = [r["steps_per_s"] for r in rows if r["backend"] == "local"]
+    ray = [r["steps_per_s"] for r in rows if r["backend"] == "ray"]
+    ratios = [r / lo for r, lo in zip(ray, local, strict=True)]
+    summary = {"config": {k: v for k, v in vars(args).items() if k != "out"}, "runs": rows,
+               "local_steps_per_s": statistics.median(local), "ray_steps_per_s": statistics.median(ray),
+               "ray_over_local": statistics.median(ratios), "ratios": ratios}  # fmt: skip
+    ray_rows = [r for r in rows if r["backend"] == "ray"]
+    lines = [
+        f"Ray ({args.address or 'local Ray'}) against local: {args.workers} workers, "
+        f"{args.workers_per_actor} per actor, {args.run_days}-day episodes, {args.timesteps} steps, "
+        f"batch {args.batch_size}, seed 0",
+        "",
+        "| run | local steps/s | Ray steps/s | Ray / local | round trips per batch | learner idle share |",
+        "|---|---|---|---|---|---|",
+    ]
+    for k, (lo, r, q) in enumerate(zip(local, ray, ratios, strict=True)):
+        rr = ray_rows[k]
+        trips = sorted(set(rr["round_trips_per_batch"]))
+        idle = f"{rr['idle_share']:.2f}" if rr["idle_share"] is not None else "–"
+        lines.append(f"| {k + 1} | {lo:.0f} | {r:.0f} | {q:.2f} | {', '.join(f'{t:.0f}' for t in trips)} | {idle} |")
+    lines.append(f"| median | {summary['local_steps_per_s']:.0f} | {summary['ray_steps_per_s']:.0f} | "
+                 f"{summary['ray_over_local']:.2f} | | |")  # fmt: skip
+    text = "\n".join(lines) + "\n"
+    print(text)
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "ray_vs_local.json").write_text(json.dumps(summary, indent=2))
+        (args.out / "ray_vs_local.md").write_text(text)
+
+
+if __name__ == "__main__":
+    main()
