@@ -95,6 +95,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         workers_per_actor=args.workers_per_actor,
         lockstep=args.lockstep,
+        max_restarts=args.max_restarts,
+        step_timeout_s=args.step_timeout,
         time_features=args.time_features,
         schedule_features=args.schedule_features,
         init_from=str(args.init_from) if args.init_from else None,

@@ -87,6 +87,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="step all workers together (a seed then fixes the run bit for bit). Default: each "
         "local worker gets its next action as soon as its observation arrives",
     )  # fmt: skip
+    tr.add_argument(
+        "--max-restarts", type=int, default=3,
+        help="restarts in a row a worker's episode gets after EnergyPlus fails, before the run stops",
+    )  # fmt: skip
+    tr.add_argument("--step-timeout", type=float, default=60.0, help="seconds before a silent EnergyPlus is hung")
     tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=c.cmd_train)

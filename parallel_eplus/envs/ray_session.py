@@ -10,6 +10,7 @@ the built-in buildings' EnergyPlus models inside it (buildings/resources.py find
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -30,6 +31,11 @@ def connect(address: str | None, num_cpus: int) -> bool:
     if not address:
         ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, log_to_driver=True)
         return True
+    if os.environ.get("RAY_AUTH_MODE") != "token":
+        log.warning(
+            "RAY_AUTH_MODE is not 'token': a Ray 2.60 cluster with a token (the default) refuses this driver "
+            "until it gives up; export RAY_AUTH_MODE=token RAY_AUTH_TOKEN_PATH=<the cluster's token file>"
+        )
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-job-") as staging:
         try:  # the package is uploaded during init; the staging copy is not needed after it
             ray.init(address=address, runtime_env={"py_modules": [str(_stage_package(Path(staging)))]},
