@@ -92,3 +92,26 @@ def test_a_lost_actor_stops_the_run_naming_its_node_after_a_checkpoint_that_resu
     assert steps >= 1152
     resumed = train(TrainConfig(timesteps=steps + 1152), resume=checkpoint, progress=False)
     assert resumed.is_file()
+
+
+def test_ctrl_c_during_ray_training_saves_a_checkpoint_and_leaves_no_ray_energyplus_or_pipes(tmp_path, no_leaks):
+    import sys
+
+    cmd = [
+        sys.executable, "-m", "parallel_eplus.cli", "train", "--backend", "ray", "--workers", "2",
+        "--workers-per-actor", "1", "--weathers", "CA", "--run-days", "30", "--timesteps", "100000",
+        "--batch-size", "1152", "--checkpoint-every", "1152", "--run-name", "cut", "--quiet",
+    ]  # fmt: skip
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    checkpoints = tmp_path / "runs" / "cut" / "checkpoints"
+    deadline = time.monotonic() + 180
+    while not (checkpoints.is_dir() and any(checkpoints.iterdir())) and proc.poll() is None:
+        assert time.monotonic() < deadline, "no checkpoint within 180 s"
+        time.sleep(0.5)
+    time.sleep(2.0)  # mid-batch: the actors are collecting
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 130, out
+    assert "checkpoint saved" in out
+    time.sleep(1.0)
+    assert _ours("ray::") == [] and _ours("raylet") == [] and _ours("gcs_server") == []
