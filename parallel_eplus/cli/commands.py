@@ -225,7 +225,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return 0
     cfg = BenchConfig(
         weather=args.weather, raw_days=args.days, vector_steps=args.vector_steps, train_steps=args.train_steps,
-        workers=args.workers, repeats=args.repeats,
+        workers=args.workers, repeats=args.repeats, building=args.building,
     )  # fmt: skip
     results = run(cfg, args.out)
     print(format_table(results))
