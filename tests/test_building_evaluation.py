@@ -68,3 +68,20 @@ def test_building_results_name_the_band(tmp_path):
     text = (tmp_path / "results.md").read_text()
     assert "18–27 °C" in text and "-10.0 %" in text
     assert {f.name for f in files} >= {"results.csv", "results.md", "temperatures.png", "power.png"}
+
+
+def test_a_specs_time_features_apply(tmp_path):
+    """office-small declares `time_features = true`: its env and its training runs observe the clock."""
+    from parallel_eplus.envs.env import EnergyPlusEnv
+    from parallel_eplus.training.config import TrainConfig
+
+    env = EnergyPlusEnv(building="office-small", output_dir=tmp_path)
+    try:
+        assert env.observation_space.shape == (8 + 4,) and env.config.time_features
+    finally:
+        env.close()
+    assert EnergyPlusEnv(building="office-small", time_features=False, output_dir=tmp_path).observation_space.shape == (
+        8,
+    )
+    assert TrainConfig(building="office-small").resolved().time_features
+    assert not TrainConfig(building=CRAC).resolved().time_features

@@ -115,6 +115,8 @@ class TrainConfig:
             known = spec.weathers
             if self.reward == RewardConfig():  # the spec's reward unless the user gave constants
                 self.reward = reward_config(spec)
+            self.time_features |= spec.time_features  # the spec's opt-in observation features
+            self.schedule_features |= spec.schedule_features
         parse_weathers(",".join(self.weathers), known if self.building else None)
         if self.workers < 1:
             raise ValueError("--workers must be at least 1")
