@@ -62,7 +62,7 @@ def run_online_episode(
     cfg = replace(
         saved, workers=1, weathers=[weather], run_days=run_days, batch_size=batch_size or saved.batch_size,
         runs_dir=str(out_dir / "online"), run_name=f"{slug(label)}-{weather_label(weather)}",
-        init_from=None, backend="local", lockstep=True, keep_episodes=2,
+        init_from=None, backend="local", lockstep=True, keep_episodes=2, building=controller.building,
     ).resolved()  # fmt: skip
     episode_steps = run_days * load_building(cfg.building).steps_per_day  # the building's own control step
     th.set_num_threads(1)

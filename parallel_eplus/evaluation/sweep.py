@@ -88,8 +88,11 @@ def policy_controller(spec: str) -> Controller:
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     time_features, schedule_features = policy_features(path)
     space = saved.get("residual_space", "action")
+    building = saved.get("building")
+    if building and not Path(building).is_file():  # a built-in spec, saved by another checkout or install
+        building = Path(building).stem
     sim = SimulationConfig(
-        model=saved.get("model", "temp_fan"), building=saved.get("building"), residual_scale=residual,
+        model=saved.get("model", "temp_fan"), building=building, residual_scale=residual,
         residual_space=space,
     )  # fmt: skip
     what = f"building {Path(sim.building).stem}" if sim.building else f"model {sim.model}"
@@ -100,7 +103,7 @@ def policy_controller(spec: str) -> Controller:
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
-        residual_space=saved.get("residual_space", "action"), building=saved.get("building"),
+        residual_space=saved.get("residual_space", "action"), building=building,
     )  # fmt: skip
 
 
@@ -153,7 +156,8 @@ def run_sweep(
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
     for c in controllers:  # a policy acts only in the building it was trained on
-        if c.kind == "policy" and (c.building or None) != (building or None):
+        trained = str(load_building(c.building).spec.path) if c.kind == "policy" and c.building else None
+        if c.kind == "policy" and trained != (building or None):
             raise ValueError(
                 f"{c.path} was trained on building {c.building or 'datacenter-2zone (default)'}, "
                 f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"
