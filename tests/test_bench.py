@@ -76,6 +76,38 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
     pd.testing.assert_frame_equal(raw_out, env_out)
 
 
+def test_bench_runs_a_building_spec(tmp_path, no_leaks):
+    """`bench --building`: raw EnergyPlus replays a spec's actions, at its own timestep (10 minutes for the
+    CRAC), as its env applied them; the env run and the constant-action raw run are the spec's too."""
+    from parallel_eplus.bench.rates import env_run
+    from parallel_eplus.bench.raw import raw_seconds
+    from parallel_eplus.buildings.building import load_building
+
+    building = load_building("datacenter-crac")
+    steps = building.steps_per_day
+    assert steps == 144
+    actions = np.clip(np.random.default_rng(3).normal(size=(steps, 1, len(building.actions))), -1, 1)
+    sim = Simulation(SimulationConfig(building="datacenter-crac", run_days=1, output_dir=str(tmp_path / "env")))
+    try:
+        sim.start()
+        for a in actions[:, 0]:
+            sim.send(a)
+            sim.receive()
+        env_dir = sim.episode_dir
+    finally:
+        sim.close()
+    sent = read_steps(env_dir)[[e.name for e in building.actions]].to_numpy()
+    np.testing.assert_allclose(sent, [_physical(a, "datacenter-crac") for a in actions[:, 0]])
+    cfg = BenchConfig(building="datacenter-crac", raw_days=1)
+    assert raw_rate(cfg, tmp_path / "raw", actions) > 0
+    # This model writes no CSV: its output file, every reported value, minus the line with the date it ran
+    env_out = (env_dir / "eplusout.eso").read_text().splitlines()[1:]
+    raw_out = (tmp_path / "raw" / "copy0" / "eplusout.eso").read_text().splitlines()[1:]
+    assert len(env_out) > steps and env_out == raw_out
+    assert raw_seconds(cfg, tmp_path / "const") > 0
+    assert env_run(cfg, tmp_path / "envrun")["steps"] == steps
+
+
 @pytest.mark.slow
 def test_a_training_run_replays_in_raw_energyplus(tmp_path, no_leaks):
     """`bench --replay-run`: every step a run took, with its own model and weather, minus pipes and learner."""

@@ -95,6 +95,6 @@ def test_evaluate_generic_building_cli(tmp_path, no_leaks):
     argv = ["evaluate", "--building", str(spec), "--baseline", "--weathers", "CA", "--run-days", "1"]
     assert main([*argv, "--workers", "1", "--out", str(out), "--quiet"]) == 0
     table = (out / "results.md").read_text()
-    assert "zone_a in band" in table and "zone_b in band" in table
+    assert "zone_a in 22–25 °C" in table and "zone_b in 22–25 °C" in table
     df = pd.read_csv(out / "results.csv")
     assert df["power_kw"].iloc[0] > 0 and 0 <= df["zone_a_in_band_pct"].iloc[0] <= 100

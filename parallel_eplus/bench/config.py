@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from parallel_eplus.buildings.building import Building, load_building
+
 
 @dataclass
 class BenchConfig:
@@ -23,10 +25,17 @@ class BenchConfig:
     repeats: int = 3
     action: float = 0.0  # the constant normalized action for raw and env
     ray: bool = True  # also time training through a local Ray (the Ray backend's row)
+    building: str | None = None  # a spec path or built-in name; None: the data center (temp_fan)
+
+
+def bench_building(cfg: BenchConfig) -> Building:
+    """The building every measurement runs: its model, actions and control step."""
+    return load_building(cfg.building)
 
 
 def _exploring_actions(cfg: BenchConfig, workers: int) -> np.ndarray:
-    """(steps, workers, 4) actions drawn like an untrained policy's, the same for every measurement."""
+    """(steps, workers, actions) drawn like an untrained policy's, the same for every measurement."""
     steps = cfg.vector_steps or cfg.train_steps // cfg.workers
     rng = np.random.default_rng(0)
-    return np.clip(rng.normal(size=(steps, workers, 4)), -1, 1).astype(np.float32)
+    n = len(bench_building(cfg).actions)
+    return np.clip(rng.normal(size=(steps, workers, n)), -1, 1).astype(np.float32)

@@ -27,8 +27,10 @@ def _cpu_seconds() -> float:
 
 def env_run(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
     """One `EnergyPlusEnv` episode under the constant action: wall seconds, first observation, steps/s."""
-    env = EnergyPlusEnv(weather=cfg.weather, run_days=cfg.raw_days, output_dir=workdir, keep_episodes=0)
-    action = np.full(4, cfg.action, dtype=np.float32)
+    env = EnergyPlusEnv(
+        weather=cfg.weather, run_days=cfg.raw_days, output_dir=workdir, keep_episodes=0, building=cfg.building
+    )
+    action = np.full(env.action_space.shape, cfg.action, dtype=np.float32)
     try:
         t0 = time.perf_counter()
         env.reset()
@@ -65,7 +67,9 @@ def vector_rate(cfg: BenchConfig, workers: int, workdir: Path, pipelined: bool =
     and the cores it kept busy (CPU seconds of learner and workers, start-up included, per wall second).
 
     `pipelined`: each worker stepped as soon as it answers (as training steps them); else in lockstep."""
-    sim = SimulationConfig(weather=cfg.weather, run_days=365, output_dir=str(workdir), keep_episodes=0)
+    sim = SimulationConfig(
+        weather=cfg.weather, building=cfg.building, run_days=365, output_dir=str(workdir), keep_episodes=0
+    )
     actions = _exploring_actions(cfg, workers)
     cpu0, wall0 = _cpu_seconds(), time.perf_counter()
     venv = EnergyPlusVectorEnv(sim, weather_shares([cfg.weather], workers))
@@ -114,8 +118,8 @@ def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
     procs = [
         ctx.Process(
             target=_step_alone,
-            args=(SimulationConfig(weather=cfg.weather, output_dir=str(workdir / f"w{i}"), keep_episodes=0),
-                  actions[:, i], cfg.workers, results),
+            args=(SimulationConfig(weather=cfg.weather, building=cfg.building, output_dir=str(workdir / f"w{i}"),
+                                   keep_episodes=0), actions[:, i], cfg.workers, results),
         )
         for i in range(cfg.workers)
     ]  # fmt: skip
@@ -151,7 +155,7 @@ def training_rate(cfg: BenchConfig, workdir: Path, backend: str = "local") -> di
     from parallel_eplus.training.train import train
 
     tc = TrainConfig(
-        workers=cfg.workers, weathers=[cfg.weather], timesteps=cfg.train_steps,
+        workers=cfg.workers, weathers=[cfg.weather], building=cfg.building, timesteps=cfg.train_steps,
         batch_size=-(-cfg.batch_size // cfg.workers) * cfg.workers,  # split evenly across the workers
         run_name="bench", runs_dir=str(workdir / "runs"), tensorboard_dir=str(workdir / "tb"),
         checkpoint_every=10**9, keep_episodes=0, backend=backend, workers_per_actor=1,

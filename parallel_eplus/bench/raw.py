@@ -12,17 +12,18 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.bench.config import BenchConfig
-from parallel_eplus.buildings.model import AGENT_IDF, STEPS_PER_DAY, control_model
+from parallel_eplus.bench.config import BenchConfig, bench_building
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.model import control_model
 from parallel_eplus.buildings.weather import resolve_weather
 from parallel_eplus.engine import native
 from parallel_eplus.engine.actions import scale_action
 from parallel_eplus.engine.episode import MODEL_FILE, write_episode_idf
 
 
-def _physical(action) -> list[float]:
-    """A normalized action in the agent model's physical units, as the env scales it."""
-    elements = control_model("temp_fan").actions
+def _physical(action, building: str | None = None) -> list[float]:
+    """A normalized action in the agent model's physical units, as the env scales it (None: the data center's)."""
+    elements = load_building(building).actions
     low, high = [e.low for e in elements], [e.high for e in elements]
     return scale_action(action, low, high, tuple(e.name for e in elements))
 
@@ -35,6 +36,15 @@ class RawJob:
     epw: Path
     actions: np.ndarray  # steps x elements, physical units
     model: str = "temp_fan"
+    building: str | None = None  # a spec: its actions instead of the data center's `model`
+
+    def elements(self):
+        return load_building(self.building).actions if self.building else control_model(self.model).actions
+
+    def args(self) -> list[str]:
+        """What the EnergyPlus side needs to know the actions: the data center's variant or the spec."""
+        building = ["--building", str(load_building(self.building).spec.path)] if self.building else []
+        return ["--model", self.model, *building, "--initial-action", *(str(e.initial) for e in self.elements())]
 
 
 def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
@@ -51,8 +61,7 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
         np.save(out / "replay.npy", job.actions)
         cmds.append([
             sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--idf", str(job.idf), "--epw", str(job.epw),
-            "--output-dir", str(out), "--model", job.model, "--steps", str(len(job.actions)),
-            "--initial-action", *(str(e.initial) for e in control_model(job.model).actions),
+            "--output-dir", str(out), "--steps", str(len(job.actions)), *job.args(),
             "--replay", str(out / "replay.npy"),
             *(["--native", lib] if lib else []),  # the env's own callbacks, minus the pipes
         ])  # fmt: skip
@@ -76,10 +85,15 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
 def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray) -> list[RawJob]:
     """One job per column of `replays` (steps x copies x actions, normalized) on the bench's weather."""
     workdir.mkdir(parents=True, exist_ok=True)
+    building = bench_building(cfg)
     idf = workdir / MODEL_FILE  # one model file for all: each run writes its outputs in its own directory
-    write_episode_idf(AGENT_IDF, idf, -(-len(replays) // STEPS_PER_DAY))
-    epw = resolve_weather(cfg.weather)
-    return [RawJob(idf, epw, np.array([_physical(a) for a in replays[:, i]])) for i in range(replays.shape[1])]
+    write_episode_idf(building.control().idf, idf, -(-len(replays) // building.steps_per_day))
+    epw = building.spec.weathers.get(cfg.weather) or resolve_weather(cfg.weather)
+    model = building.spec.name if cfg.building else "temp_fan"
+    return [
+        RawJob(idf, epw, np.array([_physical(a, cfg.building) for a in replays[:, i]]), model, cfg.building)
+        for i in range(replays.shape[1])
+    ]
 
 
 def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
@@ -88,12 +102,13 @@ def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
     With `copies` > 1, that many identical runs at once, until the last exits: what the machine itself
     gives N EnergyPlus processes, the ceiling for the vector env's scaling.
     """
-    constant = np.full((cfg.raw_days * STEPS_PER_DAY, copies, len(control_model("temp_fan").actions)), cfg.action)
+    building = bench_building(cfg)
+    constant = np.full((cfg.raw_days * building.steps_per_day, copies, len(building.actions)), cfg.action)
     return _raw_runs(_bench_jobs(cfg, workdir, constant), workdir)[0]
 
 
 def raw_rate(cfg: BenchConfig, workdir: Path, actions: np.ndarray) -> float:
-    """EnergyPlus alone under the vector env's exploring actions (steps x workers x 4), one process per
+    """EnergyPlus alone under the vector env's exploring actions (steps x workers x actions), one process per
     worker, all at once, no pipes: aggregate steps/s from the first step on, as the vector env is timed.
     What the physics costs; the vector env and training are measured against it."""
     _, stepping = _raw_runs(_bench_jobs(cfg, workdir, actions), workdir)
@@ -111,8 +126,9 @@ def replay_run(run_dir: Path, workers: int, workdir: Path, progress: bool = True
 
     run_dir = Path(run_dir)
     saved = json.loads((run_dir / "config.json").read_text())
-    model = saved.get("model", "temp_fan")
-    names = [e.name for e in control_model(model).actions]  # the step table's action columns
+    model, building = saved.get("model", "temp_fan"), saved.get("building")
+    elements = load_building(building).actions if building else control_model(model).actions
+    names = [e.name for e in elements]  # the step table's action columns
     columns = sorted((run_dir / "episodes").glob("worker-*"))
     episodes = [sorted(d for d in w.glob("episode-*") if (d / "steps.parquet").is_file()) for w in columns]
     summaries = sum(len(list(w.glob("episode-*"))) for w in columns)
@@ -123,7 +139,10 @@ def replay_run(run_dir: Path, workers: int, workdir: Path, progress: bool = True
             "train with --keep-episodes at least as large as the episodes per worker to replay a run"
         )
     in_order = [ep for column in itertools.zip_longest(*episodes) for ep in column if ep is not None]
-    jobs = [RawJob(ep / MODEL_FILE, next(ep.glob("*.epw")), read_steps(ep)[names].to_numpy(), model) for ep in in_order]
+    jobs = [
+        RawJob(ep / MODEL_FILE, next(ep.glob("*.epw")), read_steps(ep)[names].to_numpy(), model, building)
+        for ep in in_order
+    ]
     steps = sum(len(j.actions) for j in jobs)
     wall = 0.0
     with tqdm(total=steps, unit="step", desc="replay", disable=not progress) as bar:

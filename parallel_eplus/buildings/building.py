@@ -13,7 +13,7 @@ from pathlib import Path
 
 from parallel_eplus.buildings import model
 from parallel_eplus.buildings.model import ActionElement, ControlModel, Sensor, action_elements
-from parallel_eplus.buildings.spec import BuildingSpec, SpecError, load_spec
+from parallel_eplus.buildings.spec import BuildingSpec, load_spec
 
 
 @dataclass(frozen=True)
@@ -62,11 +62,10 @@ def timesteps_per_hour(idf: Path) -> int:
 @functools.cache
 def _load(path: Path) -> Building:
     spec = model.DEFAULT if path == model.DEFAULT_SPEC else load_spec(path)
-    meters = [f"observations[{i}].meter" for i, o in enumerate(spec.observations) if o.meter is not None]
-    if meters:  # the engine (and its C bridge) read output variables; EnergyPlus 25.2 does not hand out
-        # Electricity:Facility's meter handle anyway: its variable is "Facility Total Electricity Demand Rate"
-        raise SpecError(f"{path}: {', '.join(meters)}: meters are not read by the engine yet; use variable and key")
-    sensors = tuple(Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high) for o in spec.observations)
+    sensors = tuple(
+        Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high, o.meter is not None, o.scale)
+        for o in spec.observations
+    )
     return Building(spec, sensors, action_elements(spec))
 
 

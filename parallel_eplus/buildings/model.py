@@ -36,10 +36,12 @@ class Sensor:
     """One observation element: an EnergyPlus output variable with the paper's bounds."""
 
     name: str  # column and `info` key
-    variable: str  # EnergyPlus output variable name
+    variable: str  # EnergyPlus output variable name (or meter name, with `meter`)
     key: str  # EnergyPlus key (zone, node or 'Whole Building')
     low: float
     high: float
+    meter: bool = False  # `variable` names a meter: read as its mean rate over the zone timestep (J/s, i.e. W)
+    scale: float = 1.0  # the value EnergyPlus gives, times this
 
 
 @dataclass(frozen=True)

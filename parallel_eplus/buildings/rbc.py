@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import datetime as dt
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.model import ACTIONS, ZONE_TEMP_NAMES, it_load_schedule
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.model import it_load_schedule
 
 
 @dataclass
@@ -40,11 +42,19 @@ class RuleBasedController:
     floor); below it, the shortfall raises the setpoint instead.
     """
 
-    def __init__(self, cfg: RBCConfig | None = None):
+    def __init__(self, cfg: RBCConfig | None = None, building: str | Path | None = None):
+        """`building`: a spec with the data center's shape (None: the data center's own)."""
         self.cfg = cfg or RBCConfig()
+        b = load_building(building)
+        if len(b.actions) != 4 or len(b.temperatures) != 2:
+            raise ValueError(
+                f"the rule-based controller drives two zones' supply setpoints and fans (4 actions, 2 reward "
+                f"temperatures); building {b.spec.name} has {len(b.actions)} and {len(b.temperatures)}"
+            )
+        self.temperatures = b.temperatures
         self.trim = np.zeros(2)  # integral part of the flow demand, kg/s
-        self.low = np.array([a.low for a in ACTIONS])
-        self.high = np.array([a.high for a in ACTIONS])
+        self.low = np.array([a.low for a in b.actions])
+        self.high = np.array([a.high for a in b.actions])
 
     def load(self, t: dt.datetime) -> float:
         hour = t.hour + t.minute / 60
@@ -55,7 +65,7 @@ class RuleBasedController:
         the loop still settles the zones on its target, so a correction acts on transients."""
         c = self.cfg
         fan_lo, fan_hi = self.low[2], self.high[2]
-        error = np.array([info[name] for name in ZONE_TEMP_NAMES]) - c.target_c  # > 0: too warm
+        error = np.array([info[name] for name in self.temperatures]) - c.target_c  # > 0: too warm
         feed_forward = np.array(c.flow_per_load_kg_s) * self.load(info["time"])
         max_shortfall = (self.high[0] - c.setpoint_floor_c) / c.setpoint_k_per_kg_s
         self.trim = np.clip(

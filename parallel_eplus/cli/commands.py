@@ -19,9 +19,10 @@ def _format_summary(summary: dict) -> str:
         f"weather {summary.get('weather')}  model {summary.get('model')}  steps {summary.get('steps', 0):.0f}",
         f"mean reward           {summary.get('reward_mean', float('nan')):10.3f}",
         f"mean power total      {summary.get('power_kw', float('nan')):10.1f} kW",
-        f"           IT         {summary.get('it_power_kw', float('nan')):10.1f} kW",
-        f"           HVAC       {summary.get('hvac_power_kw', float('nan')):10.1f} kW",
     ]
+    for part in ("IT", "HVAC"):  # the data center's power split, where a building has it
+        if f"{part.lower()}_power_kw" in summary:
+            lines.append(f"           {part:<4}       {summary[f'{part.lower()}_power_kw']:10.1f} kW")
     # every temperature the reward watches: the data center's "west"/"east", any spec's own names
     temps = [k.removesuffix("_temp_mean") for k in summary if k.endswith("_temp_mean")]
     for name in temps:
@@ -228,7 +229,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return 0
     cfg = BenchConfig(
         weather=args.weather, raw_days=args.days, vector_steps=args.vector_steps, train_steps=args.train_steps,
-        workers=args.workers, repeats=args.repeats, ray=not args.no_ray and importlib.util.find_spec("ray") is not None,
+        workers=args.workers, repeats=args.repeats, building=args.building,
+        ray=not args.no_ray and importlib.util.find_spec("ray") is not None,
     )  # fmt: skip
     results = run(cfg, args.out)
     print(format_table(results))

@@ -126,7 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.set_defaults(func=c.cmd_evaluate)
 
     be = sub.add_parser("bench", help="measure our overhead against raw EnergyPlus on this machine")
-    be.add_argument("--weather", default="CA")
+    be.add_argument("--weather", default="CA", help="a short name (the spec's, or CA, CO, FL, IL, VA) or an .epw")
+    be.add_argument(
+        "--building", help="a building spec (TOML path or built-in name), checked first; default: the data center"
+    )
     be.add_argument("--days", type=int, default=365, help="period for the raw and env runs (default a year)")
     be.add_argument("--train-steps", type=int, default=16384, help="env steps of TRPO learn (default one batch)")
     be.add_argument(

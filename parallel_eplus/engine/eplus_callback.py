@@ -64,6 +64,9 @@ class Bridge:
         self.obs_fd = obs_fd
         spec = load_building(building)  # None: the data center, whose variants `model` names
         self.sensors = spec.sensors
+        # Meters and scaled values are read here, in Python: the C bridge reads output variables as they are.
+        self.python_only = any(s.meter or s.scale != 1.0 for s in self.sensors)
+        self.step_s = 900.0  # seconds per zone timestep, to turn a meter's joules into watts
         self.elements = spec.actions if building and model != "baseline" else control_model(model).actions
         if len(initial) != len(self.elements):
             raise SystemExit(f"--initial-action needs {len(self.elements)} values, got {len(initial)}")
@@ -98,9 +101,14 @@ class Bridge:
             return False
         missing = []
         for s in self.sensors:
-            h = self.x.get_variable_handle(state, s.variable, s.key)
-            if h < 0:
-                missing.append(f"variable '{s.variable}' for '{s.key}'")
+            if s.meter:
+                h = self.x.get_meter_handle(state, s.variable)
+                if h < 0:
+                    missing.append(f"meter '{s.variable}'")
+            else:
+                h = self.x.get_variable_handle(state, s.variable, s.key)
+                if h < 0:
+                    missing.append(f"variable '{s.variable}' for '{s.key}'")
             self.sensor_handles.append(h)
         for i, elem in enumerate(self.elements):
             for a in elem.actuators:
@@ -111,6 +119,7 @@ class Bridge:
         if missing:
             raise RuntimeError("the model lacks " + "; ".join(missing))
         self.minutes = 60 // self.x.num_time_steps_in_hour(state)  # minutes per zone timestep
+        self.step_s = 3600.0 / self.x.num_time_steps_in_hour(state)
         return True
 
     def _in_run_period(self, state) -> bool:
@@ -121,7 +130,14 @@ class Bridge:
     # wrappers re-check every argument, which cost ~5 us a call, about 60 us a step here.
     def _read_sensors(self, state) -> list[float]:
         get = self.x.api.getVariableValue
-        return [get(state, h) for h in self.sensor_handles]
+        if not self.python_only:
+            return [get(state, h) for h in self.sensor_handles]
+        # A meter's value at the end of a zone timestep is the energy of that timestep (J): as a mean rate, W.
+        meter = self.x.api.getMeterValue
+        return [
+            (meter(state, h) / self.step_s if s.meter else get(state, h)) * s.scale
+            for s, h in zip(self.sensors, self.sensor_handles, strict=True)
+        ]
 
     def _time(self, state, at_start: bool = False) -> list[float]:
         c = self.x.api
@@ -173,7 +189,7 @@ class Bridge:
             action = self.action
             for h, i in self.actuator_handles:
                 set_value(state, h, action[i])
-        if self.native is not None and self.started:
+        if self.native is not None and self.started and not self.python_only:
             self._arm()
 
     def _arm(self) -> None:
@@ -274,6 +290,9 @@ def main(argv: list[str] | None = None) -> int:
         bridge = Bridge(
             api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay, args.building
         )
+        for s in bridge.sensors:  # EnergyPlus gathers only requested variables: a model need not report them
+            if not s.meter:
+                api.exchange.request_variable(state, s.variable, s.key)
         keep = native.register(api, state, bridge, args.native)
         status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])
         bridge.collect()

@@ -265,6 +265,8 @@ class Simulation:
             "run_days": self.config.run_days,
             "complete": complete,
         }
+        if self.config.building:  # what `plot` reads the episode's signals from (none: the data center)
+            extra["building"] = str(self.building.spec.path)
         signals = {"temperatures": self._temps, "power": self._power, "band": self.building.band}
         self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, **signals)
         self.records = None

@@ -72,7 +72,7 @@ class EnergyPlusEnv(gym.Env):
     ## Arguments
     `weather`: a short name (CA, CO, FL, IL, VA), an EPW path, or a list cycled episode by episode;
     `run_days`; `output_dir` and `keep_episodes` for episode records; `reward`; `idf` to override the
-    model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features`;
+    model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the spec's);
     `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
     not apply; its reward parameters are the default `reward`; it is checked against its model first).
@@ -91,8 +91,8 @@ class EnergyPlusEnv(gym.Env):
         step_timeout_s: float = 60.0,
         start_timeout_s: float = 180.0,
         idf: str | Path | None = None,
-        time_features: bool = False,
-        schedule_features: bool = False,
+        time_features: bool | None = None,
+        schedule_features: bool | None = None,
         residual_scale: float = 0.0,
         residual_space: str = "action",
         rbc_target_c: float | None = None,
@@ -103,6 +103,9 @@ class EnergyPlusEnv(gym.Env):
             from parallel_eplus.buildings.check import check_building
 
             check_building(building)
+        spec = load_building(building).spec  # its opt-in features unless given here (the data center's: off)
+        time_features = spec.time_features if time_features is None else time_features
+        schedule_features = spec.schedule_features if schedule_features is None else schedule_features
         self.config = SimulationConfig(
             weather=weathers[0],
             model=model,

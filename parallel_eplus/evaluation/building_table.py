@@ -13,11 +13,20 @@ def is_generic(df: pd.DataFrame) -> bool:
     return "west_temp_mean" not in df.columns
 
 
+def band_of(df: pd.DataFrame) -> tuple[float, float] | None:
+    """The reward band the episodes were counted against (their summaries record it)."""
+    if "band_low_c" not in df.columns:
+        return None
+    return float(df["band_low_c"].iloc[0]), float(df["band_high_c"].iloc[0])
+
+
 def table_markdown(df: pd.DataFrame, baseline: str) -> str:
     zones = [c.removesuffix("_in_band_pct") for c in df.columns if c.endswith("_in_band_pct") and c != "in_band_pct"]
+    band = band_of(df)
+    named = "in band" if band is None else "in {:g}–{:g} °C".format(*band)
     base = df[df.controller == baseline].set_index("weather")["power_kw"]
-    head = "| Controller | Weather | power (kW) | vs baseline | " + " | ".join(f"{z} in band" for z in zones)
-    lines = [head + " | all in band |", "|---" * (5 + len(zones)) + "|"]
+    head = "| Controller | Weather | power (kW) | vs baseline | " + " | ".join(f"{z} {named}" for z in zones)
+    lines = [head + f" | all {named} |", "|---" * (5 + len(zones)) + "|"]
     for _, r in df.iterrows():
         change = (
             "–"
@@ -29,11 +38,28 @@ def table_markdown(df: pd.DataFrame, baseline: str) -> str:
             f"| {r.controller} | {r.weather} | {r.power_kw:.2f} | {change} | " + " | ".join(cells)
             + f" | {r.in_band_pct:.2f} % |"
         )  # fmt: skip
+    avg = df.groupby("controller", sort=False)[["power_kw", "in_band_pct"]].mean()
+    lines += ["", f"| Controller | mean power (kW) | vs baseline | all {named} |", "|---|---|---|---|"]
+    for c, r in avg.iterrows():
+        change = (
+            "–"
+            if c == baseline or baseline not in avg.index
+            else f"{100 * (r.power_kw / avg.power_kw[baseline] - 1):+.1f} %"
+        )
+        lines.append(f"| {c} | {r.power_kw:.2f} | {change} | {r.in_band_pct:.2f} % |")
     return "\n".join(lines) + "\n"
 
 
 def write_results(df: pd.DataFrame, out_dir: Path, baseline: str) -> list[Path]:
+    from parallel_eplus.evaluation import plots
+
     out_dir.mkdir(parents=True, exist_ok=True)
     df.to_csv(out_dir / "results.csv", index=False)
     (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df, baseline))
-    return [out_dir / "results.csv", out_dir / "results.md"]
+    files = [out_dir / "results.csv", out_dir / "results.md"]
+    if plots.zones_of(df):
+        files.append(
+            plots.temperature_comparison(df, out_dir / "temperatures.png", band_of(df) or plots.COMFORT_BAND_C)
+        )
+    files.append(plots.power_comparison(df, out_dir / "power.png"))
+    return files

@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 from stable_baselines3.common.callbacks import BaseCallback
 
-from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.weather import parse_weathers, weather_label
 from parallel_eplus.evaluation.sweep import Controller, slug
 
@@ -62,8 +62,9 @@ def run_online_episode(
     cfg = replace(
         saved, workers=1, weathers=[weather], run_days=run_days, batch_size=batch_size or saved.batch_size,
         runs_dir=str(out_dir / "online"), run_name=f"{slug(label)}-{weather_label(weather)}",
-        init_from=None, backend="local", lockstep=True, keep_episodes=2,
+        init_from=None, backend="local", lockstep=True, keep_episodes=2, building=controller.building,
     ).resolved()  # fmt: skip
+    episode_steps = run_days * load_building(cfg.building).steps_per_day  # the building's own control step
     th.set_num_threads(1)
     venv = make_vec_env(cfg)
     try:
@@ -72,14 +73,15 @@ def run_online_episode(
         model = ALGORITHMS[saved.algorithm].load(controller.path, env=env, device="cpu", n_steps=cfg.n_steps)
         model.lockstep = True
         stop = _FirstEpisode()
-        model.learn(run_days * STEPS_PER_DAY + 2 * cfg.n_steps, callback=stop, reset_num_timesteps=True)
+        model.learn(episode_steps + 2 * cfg.n_steps, callback=stop, reset_num_timesteps=True)
     finally:
         venv.close()
     if stop.summary is None:
         raise RuntimeError(f"online evaluation of {label} on {weather}: the episode did not finish")
-    updates = (run_days * STEPS_PER_DAY) // cfg.n_steps
+    updates = episode_steps // cfg.n_steps
     log.info("%s on %s: %d updates during the episode", label, weather, updates)
-    return {"controller": label, **stop.summary, "online_updates": updates}
+    band = dict(zip(("band_low_c", "band_high_c"), load_building(cfg.building).band, strict=True))
+    return {"controller": label, **stop.summary, **(band if cfg.building else {}), "online_updates": updates}
 
 
 def _run(args: tuple) -> dict:
@@ -96,7 +98,9 @@ def run_online(
     batch_size: int | None = None,
 ) -> pd.DataFrame:
     """`run_online_episode` for every (policy, weather), up to `workers` at once (one process each)."""
-    weathers = parse_weathers(",".join(weathers))
+    buildings = {c.building for c in controllers if c.kind == "policy"}
+    known = {k: v for b in buildings if b for k, v in load_building(b).spec.weathers.items()}
+    weathers = parse_weathers(",".join(weathers), known)
     jobs = [(c, w, run_days, out_dir, batch_size) for c in controllers if c.kind == "policy" for w in weathers]
     if workers <= 1 or len(jobs) <= 1:
         rows = [run_online_episode(*job) for job in jobs]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import textwrap
 import zlib
 from pathlib import Path
@@ -14,13 +15,32 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from parallel_eplus import io  # noqa: E402
+from parallel_eplus.buildings.building import load_building  # noqa: E402
 from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
-from parallel_eplus.engine.episode import STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
+from parallel_eplus.engine.episode import REWARD_PARTS, STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
 
 # One colour per controller in every figure: the references fixed, other labels by a stable hash.
 REFERENCE_COLORS = {"Baseline": "tab:gray", "Rule-based": "tab:green"}
 _POLICY_COLORS = ["tab:blue", "tab:orange", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan"]
 ZONE_COLORS = {"west": "tab:blue", "east": "tab:orange"}
+_ZONE_PALETTE = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:cyan"]
+
+
+def zones_of(df: pd.DataFrame) -> list[str]:
+    """The temperatures a results table reports (the data center's "west", "east"; any spec's own names)."""
+    return [c.removesuffix("_temp_mean") for c in df.columns if c.endswith("_temp_mean")]
+
+
+def zone_colors(zones: list[str]) -> dict[str, str]:
+    return {z: ZONE_COLORS.get(z, _ZONE_PALETTE[i % len(_ZONE_PALETTE)]) for i, z in enumerate(zones)}
+
+
+def zone_label(zone: str) -> str:
+    return f"{zone.title()} zone" if zone in ZONE_COLORS else zone
+
+
+def band_label(band: tuple[float, float]) -> str:
+    return "{:g}–{:g} °C".format(*band)
 
 
 def controller_color(label: str) -> str:
@@ -59,10 +79,14 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def temperature_comparison(df: pd.DataFrame, path: Path) -> Path:
-    """Figure 4 left: per controller, weather and zone a min-max line with a mean +- std box."""
+def temperature_comparison(df: pd.DataFrame, path: Path, band: tuple[float, float] = COMFORT_BAND_C) -> Path:
+    """Figure 4 left: per controller, weather and zone a min-max line with a mean +- std box.
+
+    Any building's: its reported temperatures (`zones_of`) and its reward band."""
     controllers = list(dict.fromkeys(df["controller"]))
     weathers = list(dict.fromkeys(df["weather"]))
+    colors = zone_colors(zones_of(df))
+    width = 0.7 / len(colors)
     fig, ax = _figure((min(16, max(7, 0.45 * len(controllers) * len(weathers) + 2.5)), 4.4))
     x, ticks, labels = 0.0, [], []
     for c in controllers:
@@ -71,22 +95,25 @@ def temperature_comparison(df: pd.DataFrame, path: Path) -> Path:
             if r.empty:
                 continue
             r = r.iloc[0]
-            for k, (zone, color) in enumerate(ZONE_COLORS.items()):
-                xi = x + (k - 0.5) * 0.35
+            for k, (zone, color) in enumerate(colors.items()):
+                xi = x + (k - (len(colors) - 1) / 2) * width
                 ax.vlines(xi, r[f"{zone}_temp_min"], r[f"{zone}_temp_max"], color=color, lw=1)
                 mean, std = r[f"{zone}_temp_mean"], r[f"{zone}_temp_std"]
-                ax.add_patch(plt.Rectangle((xi - 0.12, mean - std), 0.24, 2 * std, color=color, alpha=0.8))
+                ax.add_patch(
+                    plt.Rectangle((xi - 0.34 * width, mean - std), 0.68 * width, 2 * std, color=color, alpha=0.8)
+                )
             ticks.append(x)
             labels.append(f"{w}")
             x += 1
         x += 0.6
-    ax.axhspan(*COMFORT_BAND_C, color="green", alpha=0.08)
+    ax.axhspan(*band, color="green", alpha=0.08)
     ax.set_xticks(ticks, labels)
     ax.set_ylabel("zone temperature (°C)")
     ax.set_title("Zone temperatures (line: min–max, box: mean ± std)", fontsize=10)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=c, alpha=0.8) for c in ZONE_COLORS.values()]
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c, alpha=0.8) for c in colors.values()]
     handles.append(plt.Rectangle((0, 0), 1, 1, color="green", alpha=0.15))
-    fig.legend(handles, ["West zone", "East zone", "22–25 °C"], loc="outside right upper", fontsize=8)
+    names = [zone_label(z) for z in colors] + [band_label(band)]
+    fig.legend(handles, names, loc="outside right upper", fontsize=8)
     # Controller names under their group of weathers.
     group = len(weathers)
     for i, c in enumerate(controllers):
@@ -137,21 +164,30 @@ def convergence(run_dir: Path, path: Path | None = None) -> Path:
 
 
 def episode(episode_dir: Path, path: Path | None = None) -> Path:
-    """One episode as time series: temperatures with the band, setpoints, fan flows, power."""
+    """One episode as time series: temperatures with the band, the actions (°C and other units), power.
+
+    Any building's: its summary names the building (None: the data center), whose sensors, actions,
+    reward temperatures and band the panels show."""
     steps = read_steps(episode_dir)
-    summary = summarize(steps)
-    setpoints = [c for c in steps.columns if c.endswith("_setpoint_c")]
-    fans = [c for c in steps.columns if c.endswith("_fan_kg_s")]
-    panels = 2 + bool(setpoints) + bool(fans)
+    saved = json.loads((episode_dir / SUMMARY_FILE).read_text()) if (episode_dir / SUMMARY_FILE).is_file() else {}
+    building = load_building(saved.get("building"))
+    summary = summarize(steps, building.temperatures, building.power, building.band)
+    sensors = set(building.sensor_names)
+    actions = [c for c in steps.columns[1:] if c not in sensors and c != "reward" and c not in REWARD_PARTS]
+    in_c = [c for c in actions if c.endswith("_c")]
+    other = [c for c in actions if not c.endswith("_c")]
+    temps = [c for c in ("outdoor_temp_c",) if c in steps.columns] + list(building.temperatures)
+    power = [c for c in building.sensor_names if c.endswith("_w")]
+    panels = 2 + bool(in_c) + bool(other)
     fig, axes = plt.subplots(panels, 1, figsize=(12, 2.6 * panels), sharex=True, layout="constrained")
     ax = axes[0]
-    for col in ("outdoor_temp_c", "west_temp_c", "east_temp_c"):
-        ax.plot(steps["time"], steps[col], lw=0.7, label=col.removesuffix("_temp_c"))
-    ax.axhspan(*COMFORT_BAND_C, color="green", alpha=0.1)
+    for col in temps:
+        ax.plot(steps["time"], steps[col], lw=0.7, label=col.removesuffix("_c").removesuffix("_temp"))
+    ax.axhspan(*building.band, color="green", alpha=0.1)
     ax.set_ylabel("°C")
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     i = 1
-    for cols, unit in ((setpoints, "setpoint °C"), (fans, "fan kg/s")):
+    for cols, unit in ((in_c, "action °C"), (other, "action")):
         if cols:
             for col in cols:
                 axes[i].plot(steps["time"], steps[col], lw=0.7, label=col)
@@ -159,17 +195,19 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
             axes[i].legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
             i += 1
     ax = axes[i]
-    for col in ("power_w", "it_power_w", "hvac_power_w"):
+    for col in power:
         ax.plot(steps["time"], steps[col] / 1000, lw=0.7, label=col.removesuffix("_w"))
     ax.set_ylabel("kW")
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
-    text = (
-        f"power {summary['power_kw']:.1f} kW (IT {summary['it_power_kw']:.1f}, HVAC {summary['hvac_power_kw']:.1f});  "
-        f"West {summary['west_temp_mean']:.2f} ± {summary['west_temp_std']:.2f} °C;  "
-        f"East {summary['east_temp_mean']:.2f} ± {summary['east_temp_std']:.2f} °C;  "
-        f"in 22–25 °C {summary['in_band_pct']:.2f} %;  reward {summary['reward_mean']:.3f}/step"
-    )
-    fig.suptitle(f"{episode_dir.name}\n{text}", fontsize=9)
+    parts = [f"power {summary['power_kw']:.1f} kW"]
+    if "it_power_kw" in summary and "hvac_power_kw" in summary:
+        parts[0] += f" (IT {summary['it_power_kw']:.1f}, HVAC {summary['hvac_power_kw']:.1f})"
+    for zone in zones_of(pd.DataFrame([summary])):
+        parts.append(f"{zone_label(zone)} {summary[f'{zone}_temp_mean']:.2f} ± {summary[f'{zone}_temp_std']:.2f} °C")
+    parts.append(f"in {band_label(building.band)} {summary['in_band_pct']:.2f} %")
+    parts.append(f"reward {summary['reward_mean']:.3f}/step")
+    text = ";  ".join(parts)
+    fig.suptitle(f"{episode_dir.name}\n{textwrap.fill(text, 160)}", fontsize=9)
     return _save(fig, path or episode_dir / "episode.png")
 
 

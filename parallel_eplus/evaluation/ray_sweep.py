@@ -42,7 +42,7 @@ def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None) 
                 (Path(tmp) / name).write_bytes(data)
             controller = replace(controller, path=Path(tmp) / "model.zip")
         sim = Simulation(replace(cfg, output_dir=str(Path(tmp) / "episodes")), name=controller.label)
-        act = controller.make()
+        act = controller.make(cfg.building)
         try:
             sim.launch()
             obs, info = sim.first_observation()

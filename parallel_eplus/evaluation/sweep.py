@@ -20,7 +20,8 @@ import pandas as pd
 from tqdm import tqdm
 
 from parallel_eplus import io
-from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.model import COMFORT_BAND_C
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import RewardConfig
 from parallel_eplus.buildings.weather import parse_weathers, weather_label
@@ -51,14 +52,18 @@ class Controller:
     def model(self) -> str:
         return "baseline" if self.kind == "baseline" else "temp_fan"
 
-    def make(self) -> Callable[[np.ndarray, dict], np.ndarray]:
-        """A fresh actor for one episode: (observation, info) -> action."""
+    def make(self, building: str | None = None) -> Callable[[np.ndarray, dict], np.ndarray]:
+        """A fresh actor for one episode: (observation, info) -> action. `building`: the swept spec, whose
+        `controller` ("module:Class") is the rule-based one; None: the data center's."""
         if self.kind == "baseline":
             empty = np.zeros(0, dtype=np.float32)
             return lambda obs, info: empty
         if self.kind == "rbc":
             target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
-            return RuleBasedController(RBCConfig(**target))
+            cls = spec_controller(building) if building else RuleBasedController
+            if cls is RuleBasedController:
+                return RuleBasedController(RBCConfig(**target), building)
+            return cls(**target)  # a user's class: called (observation, info) -> normalized action
         from parallel_eplus.training.policy_files import load_policy
 
         act = load_policy(self.path)
@@ -83,16 +88,37 @@ def policy_controller(spec: str) -> Controller:
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     time_features, schedule_features = policy_features(path)
     space = saved.get("residual_space", "action")
-    sim = SimulationConfig(model=saved.get("model", "temp_fan"), residual_scale=residual, residual_space=space)
-    what = f"model {sim.model}" + (f" with residual space {space}" if residual else "")
+    building = saved.get("building")
+    if building and not Path(building).is_file():  # a built-in spec, saved by another checkout or install
+        building = Path(building).stem
+    sim = SimulationConfig(
+        model=saved.get("model", "temp_fan"), building=building, residual_scale=residual,
+        residual_space=space,
+    )  # fmt: skip
+    what = f"building {Path(sim.building).stem}" if sim.building else f"model {sim.model}"
+    what += f" with residual space {space}" if residual else ""
     check_actions(path, len(policy_action_names(sim)), what)
     if sim.model != "temp_fan":
         raise ValueError(f"{path}: trained on model {sim.model!r}; the evaluation sweep runs temp_fan")
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
-        residual_space=saved.get("residual_space", "action"), building=saved.get("building"),
+        residual_space=saved.get("residual_space", "action"), building=building,
     )  # fmt: skip
+
+
+def spec_controller(building: str) -> type:
+    """The class a spec's `controller = "module:Class"` names, or a ValueError saying the spec has none."""
+    import importlib
+
+    spec = load_building(building).spec
+    if not spec.controller:
+        raise ValueError(f'{spec.path}: --rbc needs the spec to name a controller (controller = "module:Class")')
+    module, _, name = spec.controller.partition(":")
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as e:
+        raise ValueError(f"{spec.path}: controller {spec.controller!r} cannot be imported: {e}") from None
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
@@ -131,30 +157,37 @@ def run_sweep(
     if building:
         from parallel_eplus.buildings.check import check_building
 
-        building = str(Path(building).resolve())
-        known = check_building(building).weathers
+        spec = check_building(building)  # a path, or a built-in spec's name
+        building, known = str(spec.path), spec.weathers
     for c in controllers:  # a policy acts only in the building it was trained on
-        if c.kind == "policy" and (c.building or None) != (building or None):
+        trained = str(load_building(c.building).spec.path) if c.kind == "policy" and c.building else None
+        if c.kind == "policy" and trained != (building or None):
             raise ValueError(
                 f"{c.path} was trained on building {c.building or 'datacenter-2zone (default)'}, "
                 f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"
             )
     weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs
+    for c in controllers:  # a rule-based controller the building cannot take fails here, not mid-sweep
+        if c.kind == "rbc":
+            c.make(building)
     controllers = unique_labels(controllers)
     jobs = [(c, _job_config(c, w, building, run_days, reward, out_dir)) for c in controllers for w in weathers]
-    total_steps = len(jobs) * run_days * STEPS_PER_DAY
+    steps_per_day = load_building(building).steps_per_day
+    total_steps = len(jobs) * run_days * steps_per_day
+    band = dict(zip(("band_low_c", "band_high_c"), load_building(building).band, strict=True)) if building else {}
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:
         if backend == "ray":
             from parallel_eplus.evaluation import ray_sweep
 
             # each EnergyPlus step has its own deadline; this bounds the wait for any next episode to end
-            deadline_s = 600.0 + run_days * STEPS_PER_DAY * 0.05
+            deadline_s = 600.0 + run_days * steps_per_day * 0.05
             rows = ray_sweep.run_jobs(jobs, workers, ray_address, bar, deadline_s)
         else:
             rows = _run_local(jobs, workers, bar)
     finally:
         bar.close()
+    rows = [{**row, **band} for row in rows]  # a spec's band, beside its "% in band"
     order = {c.label: i for i, c in enumerate(controllers)}
     worder = {weather_label(w): i for i, w in enumerate(weathers)}
     df = pd.DataFrame(rows)
@@ -188,7 +221,7 @@ def _run_local(jobs: list[tuple[Controller, SimulationConfig]], workers: int, ba
                 controller, cfg = queue.popleft()
                 sim = Simulation(cfg, name=controller.label, siblings=workers)
                 sim.launch()
-                job = {"controller": controller, "sim": sim, "act": controller.make()}
+                job = {"controller": controller, "sim": sim, "act": controller.make(cfg.building)}
                 active.append(job)
                 started.append(job)
             for job in started:
@@ -250,8 +283,9 @@ def table_markdown(df: pd.DataFrame) -> str:
         cells += [f"{reward_avg:.2f}", f"**{avg[c]:.1f}**{change}"]
     lines.append("| **Average** | " + " | ".join(cells) + " |")
 
-    lines += ["", "Zone temperatures (°C) and share of zone samples within 22–25 °C:", ""]
-    lines.append("| Controller | Weather | West mean ± std [min, max] | East mean ± std [min, max] | in 22–25 °C |")
+    band = "{:g}–{:g} °C".format(*COMFORT_BAND_C)  # the data center's (its spec's reward band)
+    lines += ["", f"Zone temperatures (°C) and share of zone samples within {band}:", ""]
+    lines.append(f"| Controller | Weather | West mean ± std [min, max] | East mean ± std [min, max] | in {band} |")
     lines.append("|---|---|---|---|---|")
     for _, r in df.iterrows():
         lines.append(
@@ -263,7 +297,7 @@ def table_markdown(df: pd.DataFrame) -> str:
     share = df.groupby("controller", sort=False)["in_band_pct"].mean()
     lines += [
         "",
-        "| Controller | mean power (kW) | change vs baseline | zone samples in 22–25 °C |",
+        f"| Controller | mean power (kW) | change vs baseline | zone samples in {band} |",
         "|---|---|---|---|",
     ]
     for c in controllers:

@@ -33,17 +33,14 @@ class EpisodeMetrics(BaseCallback):
         "power_kw": "power_kw",
         "it_power_kw": "it_power_kw",
         "hvac_power_kw": "hvac_power_kw",
-        "west_temp_mean": "west_temp_mean",
-        "west_temp_std": "west_temp_std",
-        "east_temp_mean": "east_temp_mean",
-        "east_temp_std": "east_temp_std",
-        "in_band_pct": "in_22_25_pct",
-    }
+    }  # and every reward temperature's mean and std, and the share in band (`_tags`)
 
-    def __init__(self, episodes_csv: Path, progress: tqdm | None):
+    def __init__(self, episodes_csv: Path, progress: tqdm | None, steps_per_year: int = STEPS_PER_YEAR):
+        """`steps_per_year`: the building's control steps in a year (the data center's 15-minute steps)."""
         super().__init__()
         self.episodes_csv = episodes_csv
         self.progress = progress
+        self.steps_per_year = steps_per_year
         self.episodes = 0
         self.restarts = 0
         self.per_weather = episodes_per_weather(episodes_csv)  # a resumed run counts on from its earlier episodes
@@ -69,9 +66,8 @@ class EpisodeMetrics(BaseCallback):
         self.episodes += 1
         weather = summary.get("weather", "?")
         self.per_weather[weather] = self.per_weather.get(weather, 0) + 1
-        for key, tag in self.KEYS.items():
-            if key in summary:
-                self.logger.record_mean(f"episode/{weather}/{tag}", summary[key])
+        for key, tag in self._tags(summary).items():
+            self.logger.record_mean(f"episode/{weather}/{tag}", summary[key])
         if episode_return is not None:
             self.logger.record_mean(f"episode/{weather}/return", episode_return)
         row = {"timesteps": self.num_timesteps, **summary}
@@ -80,12 +76,20 @@ class EpisodeMetrics(BaseCallback):
         if self.progress is not None:
             self.progress.set_postfix(episodes=self.episodes, last=f"{weather} {summary.get('power_kw', 0):.0f} kW")
 
+    def _tags(self, summary: dict) -> dict[str, str]:
+        """Summary key -> TensorBoard tag: the fixed ones, each reward temperature's, the share in band."""
+        tags = {k: t for k, t in self.KEYS.items() if k in summary}
+        tags |= {k: k for k in summary if k.endswith(("_temp_mean", "_temp_std"))}
+        if "in_band_pct" in summary:  # the data center's tag names its band, as its runs always have
+            tags["in_band_pct"] = "in_22_25_pct" if "west_temp_mean" in summary else "in_band_pct"
+        return tags
+
     def _on_rollout_end(self) -> None:
         elapsed = time.monotonic() - self._t0
         if elapsed > 0:
             rate = (self.num_timesteps - self._steps0) / elapsed
             self.logger.record("throughput/env_steps_per_s", rate)
-            self.logger.record("throughput/sim_years_per_hour", rate * 3600 / STEPS_PER_YEAR)
+            self.logger.record("throughput/sim_years_per_hour", rate * 3600 / self.steps_per_year)
         self.logger.record("throughput/episodes", self.episodes)
         self.logger.record("throughput/worker_restarts", self.restarts)
         for weather, count in self.per_weather.items():
@@ -109,6 +113,14 @@ class UpdateTimer(BaseCallback):
         self._update_done()  # the last rollout's update, which no rollout follows
         self.learn_s = time.perf_counter() - self._t0
         self.learn_steps = self.num_timesteps - self._steps0
+
+    def _tags(self, summary: dict) -> dict[str, str]:
+        """Summary key -> TensorBoard tag: the fixed ones, each reward temperature's, the share in band."""
+        tags = {k: t for k, t in self.KEYS.items() if k in summary}
+        tags |= {k: k for k in summary if k.endswith(("_temp_mean", "_temp_std"))}
+        if "in_band_pct" in summary:  # the data center's tag names its band, as its runs always have
+            tags["in_band_pct"] = "in_22_25_pct" if "west_temp_mean" in summary else "in_band_pct"
+        return tags
 
     def _on_rollout_end(self) -> None:
         self._t = time.perf_counter()

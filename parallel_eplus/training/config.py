@@ -110,11 +110,13 @@ class TrainConfig:
             from parallel_eplus.buildings.check import check_building
             from parallel_eplus.buildings.spec import reward_config
 
-            self.building = str(Path(self.building).resolve())
-            spec = check_building(self.building)
+            spec = check_building(self.building)  # a path, or a built-in spec's name
+            self.building = str(spec.path)
             known = spec.weathers
             if self.reward == RewardConfig():  # the spec's reward unless the user gave constants
                 self.reward = reward_config(spec)
+            self.time_features |= spec.time_features  # the spec's opt-in observation features
+            self.schedule_features |= spec.schedule_features
         parse_weathers(",".join(self.weathers), known if self.building else None)
         if self.workers < 1:
             raise ValueError("--workers must be at least 1")

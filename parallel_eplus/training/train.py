@@ -18,6 +18,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
 from parallel_eplus import io
+from parallel_eplus.buildings.building import load_building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError, Interrupts
@@ -133,7 +134,7 @@ def train(
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
         callbacks = CallbackList([
             timer or UpdateTimer(),
-            EpisodeMetrics(run_dir / "episodes.csv", bar),
+            EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * load_building(cfg.building).steps_per_day),
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
         ])  # fmt: skip
         try:

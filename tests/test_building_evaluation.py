@@ -1,0 +1,91 @@
+"""Evaluation counts, reports and controls in the building's own terms: its control step, zones and band.
+
+The CRAC data center steps every 10 minutes (144 steps a day, the 2-zone model 96): code that counted the
+data center's steps cuts its episodes short or miscounts them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from parallel_eplus.evaluation.plots import plot_path
+from parallel_eplus.evaluation.sweep import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller, run_sweep
+
+CRAC = "datacenter-crac"
+
+
+def test_sweep_counts_the_buildings_steps(tmp_path, capsys, no_leaks):
+    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], 1, 1, tmp_path, progress=True, building=CRAC)
+    assert df["steps"].tolist() == [144] and (df["band_low_c"][0], df["band_high_c"][0]) == (18.0, 27.0)
+    assert "144/144" in capsys.readouterr().err  # the progress bar's total is the building's day
+    figure = plot_path(Path(df["episode_dir"][0]))  # its time series: the servers' inlet air and its band
+    assert figure.is_file() and figure.stat().st_size > 1000
+
+
+def test_online_evaluation_runs_the_buildings_whole_episode(tmp_path, no_leaks):
+    """`evaluate --online` learns for one whole episode of the building (144 steps here, not 96)."""
+    from parallel_eplus.evaluation.online import run_online
+    from parallel_eplus.training.config import TrainConfig
+    from parallel_eplus.training.train import train
+
+    cfg = TrainConfig(
+        workers=1, weathers=["CA"], building=CRAC, run_days=1, timesteps=32, batch_size=32, run_name="crac",
+        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
+    )  # fmt: skip
+    final = train(cfg, progress=False)
+    # Saved by another checkout or install: a built-in spec is found by its name where this one keeps it.
+    config = final.parent / "config.json"
+    config.write_text(config.read_text().replace(str(Path(cfg.building).parent), "/elsewhere/specs"))
+    policy = policy_controller(str(final))
+    assert policy.building and run_sweep([policy], ["CA"], 1, 1, tmp_path / "frozen", False, building=CRAC)[
+        "steps"
+    ].tolist() == [144]
+    df = run_online([policy], ["CA"], 1, 1, tmp_path / "eval", batch_size=16)
+    assert df["steps"].tolist() == [144] and df["online_updates"].tolist() == [144 // 16]
+
+
+def test_rule_based_controller_comes_from_the_spec(tmp_path):
+    """`--rbc` runs the controller a spec names, and refuses a building it cannot drive, before any run."""
+    with pytest.raises(ValueError, match="controller"):  # the CRAC's spec names none
+        run_sweep([Controller(RBC_LABEL, "rbc")], ["CA"], 1, 1, tmp_path, progress=False, building=CRAC)
+    with pytest.raises(ValueError, match="4 actions"):  # the data center's, but only two of its actions
+        Controller(RBC_LABEL, "rbc").make("datacenter-2zone-temp")
+    assert len(Controller(RBC_LABEL, "rbc").make("datacenter-2zone").temperatures) == 2
+    assert not list(tmp_path.iterdir())  # nothing ran
+
+
+def test_building_results_name_the_band(tmp_path):
+    from parallel_eplus.evaluation.building_table import write_results
+
+    df = pd.DataFrame(
+        [
+            {"controller": c, "weather": "CA", "power_kw": p, "reward_mean": -1.0, "it_inlet_in_band_pct": b,
+             "it_inlet_temp_mean": 20.0, "it_inlet_temp_std": 1.0, "it_inlet_temp_min": 18.0,
+             "it_inlet_temp_max": 24.0, "in_band_pct": b, "band_low_c": 18.0, "band_high_c": 27.0}
+            for c, p, b in ((BASELINE_LABEL, 100.0, 100.0), ("TRPO (CA)", 90.0, 99.0))
+        ]
+    )  # fmt: skip
+    files = write_results(df, tmp_path, BASELINE_LABEL)
+    text = (tmp_path / "results.md").read_text()
+    assert "18–27 °C" in text and "-10.0 %" in text
+    assert {f.name for f in files} >= {"results.csv", "results.md", "temperatures.png", "power.png"}
+
+
+def test_a_specs_time_features_apply(tmp_path):
+    """office-small declares `time_features = true`: its env and its training runs observe the clock."""
+    from parallel_eplus.envs.env import EnergyPlusEnv
+    from parallel_eplus.training.config import TrainConfig
+
+    env = EnergyPlusEnv(building="office-small", output_dir=tmp_path)
+    try:
+        assert env.observation_space.shape == (8 + 4,) and env.config.time_features
+    finally:
+        env.close()
+    assert EnergyPlusEnv(building="office-small", time_features=False, output_dir=tmp_path).observation_space.shape == (
+        8,
+    )
+    assert TrainConfig(building="office-small").resolved().time_features
+    assert not TrainConfig(building=CRAC).resolved().time_features
