@@ -4,9 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import pandas as pd
 
-from parallel_eplus.evaluation.compare import compare_figure, compare_table, references
+from parallel_eplus.evaluation.compare import compare_figure, compare_table, draw_comparison, references
+from parallel_eplus.evaluation.plots import REFERENCE_COLORS
+from tests.test_plots import _inside
 
 RESULTS = Path(__file__).parent.parent / "results" / "paper" / "results.csv"
 
@@ -22,3 +25,21 @@ def test_figure_and_table_show_each_algorithm_beside_the_reference_controllers(t
     table = compare_table(progress, refs)
     assert "| TRPO | 2,000 |" in table and "| SAC | 2,000 |" in table and "| Rule-based |" in table
     assert "| Baseline | - | - | 100.00 |" in table
+
+
+def test_figure_keeps_its_legend_outside_the_data_and_the_references_in_their_colours():
+    refs = references(RESULTS)
+    progress = pd.DataFrame(
+        [(a, s, s, s / 100, 50 + s / 1e4, 100 - s / 1e4, 0.1) for a in ("trpo", "ppo", "sac") for s in (1000, 2000)],
+        columns=["algorithm", "target", "steps", "wall_s", "in_band_pct", "power_kw", "reward_mean"],
+    )
+    fig = draw_comparison(progress, refs)
+    try:
+        assert _inside(fig) == []
+        assert all(ax.get_legend() is None for ax in fig.axes)  # one legend, the figure's, beside the axes
+        (legend,) = fig.legends
+        shown = {t.get_text(): h.get_color() for t, h in zip(legend.get_texts(), legend.legend_handles, strict=True)}
+        assert {k: shown[k] for k in REFERENCE_COLORS} == REFERENCE_COLORS
+        assert len({shown[a] for a in ("TRPO", "PPO", "SAC")}) == 3
+    finally:
+        plt.close(fig)

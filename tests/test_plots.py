@@ -41,3 +41,12 @@ def test_references_added_and_colours_fixed():
     assert list(dict.fromkeys(shown.controller)) == ["Baseline", "Rule-based", "TRPO (CA)"]
     assert plots.controller_color("Baseline") != plots.controller_color("Rule-based")
     assert plots.controller_color("TRPO (CA)") == plots.controller_color("TRPO (CA)")
+
+
+def test_policies_hashed_alike_get_distinct_colours_in_one_figure():
+    # Both labels hash to the same palette entry; in one figure the second must move, the first keep its own.
+    first, second = "TRPO (CA-CO-FL) 1M, online", "TRPO (CA-CO-FL) 10.5M, online"
+    assert plots.controller_color(first) == plots.controller_color(second)
+    colors = plots.controller_colors(["Baseline", "Rule-based", first, second])
+    assert len(set(colors.values())) == 4
+    assert colors[first] == plots.controller_color(first) and colors["Rule-based"] == "tab:green"

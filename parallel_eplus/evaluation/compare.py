@@ -18,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from parallel_eplus.evaluation.plots import controller_colors  # noqa: E402
 from parallel_eplus.evaluation.sweep import BASELINE_LABEL, RBC_LABEL, policy_controller, run_sweep  # noqa: E402
 from parallel_eplus.training.config import TrainConfig  # noqa: E402
 from parallel_eplus.training.train import train  # noqa: E402
@@ -81,27 +82,40 @@ def references(results_csv: Path) -> dict[str, tuple[float, float]]:
     }
 
 
-def compare_figure(progress: pd.DataFrame, refs: dict[str, tuple[float, float]], path: Path) -> Path:
-    """In-band % and power saved (against the built-in controller) vs. env steps and vs. wall time."""
+def draw_comparison(progress: pd.DataFrame, refs: dict[str, tuple[float, float]]) -> plt.Figure:
+    """In-band % and power saved (against the built-in controller) vs. env steps and vs. wall time.
+
+    The references are lines in their colours of every other figure (`plots.REFERENCE_COLORS`); the legend
+    sits outside the axes so no curve hides behind it.
+    """
     baseline_kw = refs[BASELINE_LABEL][1]
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharey="row")
+    labels = [a.upper() for a in dict.fromkeys(progress["algorithm"])]
+    colors = controller_colors([*refs, *labels])
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharey="row", layout="constrained")
     for algorithm, g in progress.groupby("algorithm", sort=False):
         saved = 100 * (baseline_kw - g["power_kw"]) / baseline_kw
+        style = {"marker": "o", "label": algorithm.upper(), "color": colors[algorithm.upper()]}
         for col, x in enumerate((g["steps"], g["wall_s"] / 3600)):
-            axes[0, col].plot(x, g["in_band_pct"], marker="o", label=algorithm.upper())
-            axes[1, col].plot(x, saved, marker="o", label=algorithm.upper())
+            axes[0, col].plot(x, g["in_band_pct"], **style)
+            axes[1, col].plot(x, saved, **style)
     for label, (in_band, kw) in refs.items():
-        style = {"color": "grey" if label == BASELINE_LABEL else "black", "linestyle": "--", "linewidth": 1}
+        style = {"color": colors[label], "linestyle": ":" if label == BASELINE_LABEL else "--", "linewidth": 1,
+                 "label": label}  # fmt: skip
         for col in range(2):
-            axes[0, col].axhline(in_band, label=label, **style)
-            axes[1, col].axhline(100 * (baseline_kw - kw) / baseline_kw, label=label, **style)
+            axes[0, col].axhline(in_band, **style)
+            axes[1, col].axhline(100 * (baseline_kw - kw) / baseline_kw, **style)
     for col, xlabel in enumerate(("environment steps", "wall time (h)")):
         axes[1, col].set_xlabel(xlabel)
     axes[0, 0].set_ylabel("zone samples in 22-25 °C (%)")
     axes[1, 0].set_ylabel("power saved vs. built-in (%)")
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle("TRPO, PPO and SAC on CA-CO-FL: five-weather mean, frozen deterministic policy")
-    fig.tight_layout()
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside right upper", fontsize=8)
+    fig.suptitle(f"{', '.join(labels)} on CA-CO-FL: five-weather mean, frozen deterministic policy", fontsize=10)
+    return fig
+
+
+def compare_figure(progress: pd.DataFrame, refs: dict[str, tuple[float, float]], path: Path) -> Path:
+    """`draw_comparison`, saved to `path`."""
+    fig = draw_comparison(progress, refs)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path

@@ -50,6 +50,20 @@ def controller_color(label: str) -> str:
     return _POLICY_COLORS[zlib.crc32(label.encode()) % len(_POLICY_COLORS)]
 
 
+def controller_colors(labels) -> dict[str, str]:
+    """The colours of one figure's controllers: each its own `controller_color`, unless an earlier label in
+    the same figure already took it (two policies hashed alike must not look alike); then the next free one."""
+    colors: dict[str, str] = {}
+    for label in dict.fromkeys(labels):
+        own = controller_color(label)
+        if label not in REFERENCE_COLORS and own in colors.values():
+            start = _POLICY_COLORS.index(own)
+            rotated = _POLICY_COLORS[start:] + _POLICY_COLORS[:start]
+            own = next((c for c in rotated if c not in colors.values()), own)  # more policies than colours: reuse
+        colors[label] = own
+    return colors
+
+
 def with_references(df: pd.DataFrame, references: pd.DataFrame | None) -> pd.DataFrame:
     """Puts the built-in and rule-based controllers' rows (same weathers) before a sweep that lacks them."""
     if references is None:
@@ -116,11 +130,12 @@ def temperature_comparison(df: pd.DataFrame, path: Path, band: tuple[float, floa
     fig.legend(handles, names, loc="outside right upper", fontsize=8)
     # Controller names under their group of weathers.
     group = len(weathers)
+    colors = controller_colors(controllers)
     for i, c in enumerate(controllers):
         name = textwrap.fill(c, max(12, 5 * group))
         ax.annotate(name, xy=(i * (group + 0.6) + (group - 1) / 2, 0), xycoords=("data", "axes fraction"),
                     xytext=(0, -24), textcoords="offset points", ha="center", va="top", fontsize=8,
-                    color=controller_color(c))  # fmt: skip
+                    color=colors[c])  # fmt: skip
     return _save(fig, path)
 
 
@@ -129,7 +144,8 @@ def power_comparison(df: pd.DataFrame, path: Path) -> Path:
     table = df.pivot(index="weather", columns="controller", values="power_kw")
     table = table.loc[list(dict.fromkeys(df["weather"])), list(dict.fromkeys(df["controller"]))]
     fig, ax = _figure((9, 4))
-    table.plot.bar(ax=ax, rot=0, color=[controller_color(c) for c in table.columns], legend=False)
+    colors = controller_colors(table.columns)
+    table.plot.bar(ax=ax, rot=0, color=[colors[c] for c in table.columns], legend=False)
     ax.set_ylabel("average total power (kW)")
     ax.set_xlabel("test weather")
     ax.set_title("Average power per controller and weather", fontsize=10)
