@@ -114,14 +114,6 @@ class UpdateTimer(BaseCallback):
         self.learn_s = time.perf_counter() - self._t0
         self.learn_steps = self.num_timesteps - self._steps0
 
-    def _tags(self, summary: dict) -> dict[str, str]:
-        """Summary key -> TensorBoard tag: the fixed ones, each reward temperature's, the share in band."""
-        tags = {k: t for k, t in self.KEYS.items() if k in summary}
-        tags |= {k: k for k in summary if k.endswith(("_temp_mean", "_temp_std"))}
-        if "in_band_pct" in summary:  # the data center's tag names its band, as its runs always have
-            tags["in_band_pct"] = "in_22_25_pct" if "west_temp_mean" in summary else "in_band_pct"
-        return tags
-
     def _on_rollout_end(self) -> None:
         self._t = time.perf_counter()
 
