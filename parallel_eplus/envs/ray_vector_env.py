@@ -139,8 +139,9 @@ class RayVectorEnv:
         """Note the learner's merge time; returns the scalars TensorBoard shows under `ray/`."""
         last = self.stats[-1]
         last.merge_s = seconds
-        scalars = {"ray/round_trips": last.round_trips + last.progress_checks, "ray/wait_s": last.wait_s,
-                   "ray/merge_s": seconds, "ray/actor_collect_s_max": max(last.collect_s, default=0.0)}  # fmt: skip
+        scalars = {"ray/round_trips": last.round_trips, "ray/progress_checks": last.progress_checks,
+                   "ray/wait_s": last.wait_s, "ray/merge_s": seconds,
+                   "ray/actor_collect_s_max": max(last.collect_s, default=0.0)}  # fmt: skip
         if len(self.stats) > 1 and self.stats[-2].idle_share is not None:
             scalars["ray/learner_idle_share"] = self.stats[-2].idle_share
         return scalars
