@@ -50,3 +50,20 @@ def test_policies_hashed_alike_get_distinct_colours_in_one_figure():
     colors = plots.controller_colors(["Baseline", "Rule-based", first, second])
     assert len(set(colors.values())) == 4
     assert colors[first] == plots.controller_color(first) and colors["Rule-based"] == "tab:green"
+
+
+def test_convergence_shows_the_references_only_on_the_reward_they_were_scored_with(tmp_path, monkeypatch):
+    models = REFERENCE.parents[1] / "paper" / "models"
+    refs = pd.read_csv(REFERENCE)
+    ca = refs[refs.weather == "CA"]
+    expected = {c: ca[ca.controller == c].reward_mean.item() for c in plots.REFERENCE_COLORS}
+    assert plots.reference_rewards(models / "paper-ca", ["CA"]) == pytest.approx(expected)
+    assert plots.reference_rewards(models / "residual-demand", ["CA", "CO", "FL"]) == {}  # trained on another reward
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: figures.append(fig) or path)
+    plots.convergence(models / "paper-ca-co-fl", tmp_path / "convergence.png")
+    assert _inside(figures[0]) == [] and figures[0].axes[0].get_legend() is None  # the legend beside the axes
+    assert {"Baseline, mean of CA/CO/FL", "Rule-based, mean of CA/CO/FL"} <= {
+        t.get_text() for t in figures[0].legends[0].get_texts()
+    }
+    plt.close(figures[0])
