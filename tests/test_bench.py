@@ -46,6 +46,7 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     assert "Ray backend" in table
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bridge", ["c", "python"])
 def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, bridge, monkeypatch):
     """The floor the benchmark measures against: replaying an env run's actions in raw EnergyPlus gives

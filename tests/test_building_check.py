@@ -30,6 +30,7 @@ def _spec_with(tmp_path, *replacements: tuple[str, str]):
     return path
 
 
+@pytest.mark.slow
 def test_the_shipped_spec_resolves_and_the_pass_is_cached(tmp_path):
     first = check_spec(SHIPPED)
     assert first.ok and not first.cached and first.timesteps_per_hour == 4
@@ -58,6 +59,7 @@ def test_typos_are_all_reported_with_the_key_and_the_close_name(tmp_path, no_lea
     assert not check_spec(spec).cached  # a failed check is never cached
 
 
+@pytest.mark.slow
 def test_the_2025_meter_handle_gap_is_named(tmp_path):
     spec = _spec_with(
         tmp_path,
@@ -70,6 +72,7 @@ def test_the_2025_meter_handle_gap_is_named(tmp_path):
     assert len(problems) == 1 and "Facility Total Electricity Demand Rate" in problems[0], problems
 
 
+@pytest.mark.slow
 def test_a_model_energyplus_rejects_is_one_clear_problem(tmp_path, no_leaks):
     broken = tmp_path / "broken.idf"
     broken.write_text(
@@ -81,6 +84,7 @@ def test_a_model_energyplus_rejects_is_one_clear_problem(tmp_path, no_leaks):
     assert len(problems) == 1 and "EnergyPlus rejected" in problems[0] and "broken.idf" in problems[0], problems
 
 
+@pytest.mark.slow
 def test_cli_exit_codes(tmp_path, capsys):
     assert main(["building", "check", str(SHIPPED)]) == 0
     assert "datacenter-2zone: ok: 6 observations, 4 actions (10 actuators)" in capsys.readouterr().out

@@ -27,6 +27,7 @@ def _elsewhere(text: str) -> str:
     return text
 
 
+@pytest.mark.slow
 def test_building_env_matches_model_variant(tmp_path, no_leaks):
     """The setpoint-only spec through `Building-v0` steps exactly as the built-in `temp` variant."""
     spec = SPECS / "datacenter-2zone-temp.toml"
@@ -47,6 +48,7 @@ def test_building_env_matches_model_variant(tmp_path, no_leaks):
         ref.close()
 
 
+@pytest.mark.slow
 def test_spec_weather_short_name(tmp_path, no_leaks):
     """A short name only the spec knows resolves through it."""
     text = _elsewhere((SPECS / "datacenter-2zone.toml").read_text())
@@ -60,12 +62,14 @@ def test_spec_weather_short_name(tmp_path, no_leaks):
         env.close()
 
 
+@pytest.mark.slow
 def test_simulate_building(tmp_path, capsys, no_leaks):
     spec = SPECS / "datacenter-2zone.toml"
     assert main(["simulate", "--building", str(spec), "--days", "1", "--quiet"]) == 0
     assert "power" in capsys.readouterr().out.lower()
 
 
+@pytest.mark.slow
 def test_evaluate_building_baseline(tmp_path, no_leaks):
     """`evaluate --building` runs the spec's built-in controls; its summary uses the spec's reward signals."""
     from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
@@ -85,6 +89,7 @@ def test_evaluate_refuses_other_building(tmp_path):
         run_sweep([policy], ["CA"], 1, 1, tmp_path, progress=False, building=SPECS / "datacenter-2zone-temp.toml")
 
 
+@pytest.mark.slow
 def test_evaluate_generic_building_cli(tmp_path, no_leaks):
     """A spec with its own names: evaluate reports power and % in band per temperature against its baseline."""
     text = _elsewhere((SPECS / "datacenter-2zone.toml").read_text())

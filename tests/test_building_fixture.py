@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from parallel_eplus.buildings import model
 from parallel_eplus.envs.env import EnergyPlusEnv
@@ -15,10 +16,12 @@ FIXTURE = Path(__file__).parent / "data" / "datacenter_2zone_ca_2days.csv"
 SPEC = Path(model.__file__).parent / "specs" / "datacenter-2zone.toml"
 
 
+@pytest.mark.slow
 def test_fixed_actions_reproduce_fixture(tmp_path, no_leaks):
     _replay(EnergyPlusEnv(weather="CA", model="temp_fan", run_days=2, output_dir=tmp_path))
 
 
+@pytest.mark.slow
 def test_spec_file_reproduces_fixture(tmp_path, no_leaks):
     """The spec given explicitly: both sides of the pipe (env and EnergyPlus callback) build from the file."""
     _replay(EnergyPlusEnv(weather="CA", building=SPEC, run_days=2, output_dir=tmp_path))

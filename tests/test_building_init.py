@@ -28,6 +28,7 @@ def uncomment_actions(text: str, pattern: str) -> str:
     return "\n\n".join(blocks)
 
 
+@pytest.mark.slow
 def test_init_two_zone_data_center(tmp_path):
     idf = tmp_path / "dc.idf"
     shutil.copy(resources.model_file("2ZoneDataCenterHVAC_wEconomizer.idf"), idf)
@@ -51,6 +52,7 @@ def test_init_two_zone_data_center(tmp_path):
         init_spec(idf)  # never overwrites a spec
 
 
+@pytest.mark.slow
 def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
     out = tmp_path / "office.toml"
     weather = resources.weather_file("USA_CO_Golden-NREL.724666_TMY3.epw")

@@ -70,6 +70,7 @@ def run_day(spec: BuildingSpec, actions: dict[str, float] | None = None, idf: Pa
     return samples
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", SPECS, ids=[p.stem for p in SPECS])
 def test_spec_resolves_and_holds_its_initial_action(path):
     spec = load_spec(path)
@@ -83,6 +84,7 @@ def mean(xs: list[float]) -> float:
     return sum(xs) / len(xs)
 
 
+@pytest.mark.slow
 def test_crac_agent_owns_supply_temperature_and_fan():
     """With the Warmest manager disabled the supply setpoint reaches the servers' inlet (supply + 2 K approach)."""
     spec = load_spec(resources.spec_dir() / "datacenter-crac.toml")
@@ -95,6 +97,7 @@ def test_crac_agent_owns_supply_temperature_and_fan():
     assert mean(stock["it_inlet_c"]) > 21.0
 
 
+@pytest.mark.slow
 def test_office_setpoints_move_the_zones():
     spec = load_spec(resources.spec_dir() / "office-small.toml")
     cool = run_day(spec, {"cooling_setpoint_c": 23.0, "heating_setpoint_c": 22.0})

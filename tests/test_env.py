@@ -29,6 +29,7 @@ def run_episode(env, action) -> tuple[int, list[float], dict]:
     return len(rewards), rewards, info
 
 
+@pytest.mark.slow
 def test_registered_and_two_day_episode_steps_exactly(tmp_path, no_leaks):
     env = gym.make(parallel_eplus.ENV_ID, weather="CA", model="temp_fan", run_days=2, output_dir=tmp_path)
     try:
@@ -86,6 +87,7 @@ def mean_zone_temps(tmp_path, west: float, east: float) -> tuple[float, float]:
     return late["west_temp_c"].mean(), late["east_temp_c"].mean()
 
 
+@pytest.mark.slow
 def test_each_zone_follows_its_own_setpoint(tmp_path, no_leaks):
     # West cold / East warm, then the reverse: each zone must move with its own setpoint only.
     w_lo, e_hi = mean_zone_temps(tmp_path / "a", -0.8, 0.0)  # 14 C vs 25 C supply air
@@ -103,6 +105,7 @@ def test_check_env(tmp_path, no_leaks):
         env.close()
 
 
+@pytest.mark.slow
 def test_two_envs_with_different_weathers_step_alternately(tmp_path, no_leaks):
     a = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "a")
     b = EnergyPlusEnv(weather="FL", run_days=1, output_dir=tmp_path / "b")
@@ -126,6 +129,7 @@ def test_two_envs_with_different_weathers_step_alternately(tmp_path, no_leaks):
         b.close()
 
 
+@pytest.mark.slow
 def test_reset_mid_episode_starts_a_fresh_simulation(tmp_path, no_leaks):
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
     try:
@@ -153,6 +157,7 @@ def test_nan_action_raises_value_error(tmp_path, no_leaks):
         env.close()
 
 
+@pytest.mark.slow
 def test_time_features_follow_the_clock(no_leaks):
     env = EnergyPlusEnv(weather="CO", run_days=1, time_features=True)
     try:
@@ -168,6 +173,7 @@ def test_time_features_follow_the_clock(no_leaks):
         env.close()
 
 
+@pytest.mark.slow
 def test_schedule_features_announce_the_it_load_step_the_next_action_meets(no_leaks):
     env = EnergyPlusEnv(weather="CO", run_days=1, time_features=True, schedule_features=True)
     try:
@@ -201,6 +207,7 @@ def _controlled_episode(out: Path, act, **env_kwargs) -> pd.DataFrame:
         env.close()
 
 
+@pytest.mark.slow
 def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
     from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 
@@ -219,6 +226,7 @@ def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
     assert set(Path(tempfile.gettempdir()).glob("parallel-eplus-episodes-*")) == temp_dirs  # refused before any
 
 
+@pytest.mark.slow
 def test_demand_residual_corrects_the_controllers_flow_demand(tmp_path, no_leaks):
     from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 

@@ -38,6 +38,7 @@ def is_png(path) -> bool:
     return path.is_file() and path.stat().st_size > 1000 and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_sweep_writes_table_and_figures(tmp_path, policy, no_leaks):
     controllers = [Controller(BASELINE_LABEL, "baseline"), Controller(RBC_LABEL, "rbc"), policy_controller(str(policy))]
     assert controllers[2].label == "TRPO (CA)"
@@ -78,6 +79,7 @@ def test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures(tmp_
     assert is_png(tmp_path / "ray" / "west_zone_histogram.png")
 
 
+@pytest.mark.slow
 def test_plot_run_and_episode(tmp_path, policy):
     run_dir = policy.parent
     assert is_png(plot_path(run_dir))
@@ -113,6 +115,7 @@ def test_policy_with_extra_features_is_evaluated_with_them(tmp_path, no_leaks, s
     assert df.steps.tolist() == [96] and df.power_kw.gt(0).all()
 
 
+@pytest.mark.slow
 def test_rule_based_controller_holds_the_target_it_is_given(tmp_path, no_leaks):
     controllers = [Controller(f"RBC {t}", "rbc", rbc_target_c=t) for t in (22.7, 23.7)]
     df = run_sweep(controllers, ["CO"], 3, 2, tmp_path, progress=False).set_index("controller")
@@ -121,6 +124,7 @@ def test_rule_based_controller_holds_the_target_it_is_given(tmp_path, no_leaks):
         assert warm[f"{zone}_temp_mean"] - cold[f"{zone}_temp_mean"] > 0.6, zone
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("space", ["action", "demand"])
 def test_residual_policy_is_evaluated_as_a_correction_of_the_rule_based_controller(tmp_path, no_leaks, space):
     cfg = TrainConfig(
@@ -141,6 +145,7 @@ def test_residual_policy_is_evaluated_as_a_correction_of_the_rule_based_controll
     assert steps.west_setpoint_c.median() < 15 and steps.east_setpoint_c.median() < 15
 
 
+@pytest.mark.slow
 def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alone(tmp_path, no_leaks):
     from parallel_eplus.training.config import TrainConfig
     from parallel_eplus.training.train import train

@@ -40,6 +40,7 @@ def test_agent_variant_differs_only_by_the_zone_setpoint_managers():
     assert base == active_objects(AGENT_IDF, "")
 
 
+@pytest.mark.slow
 def test_baseline_year_runs_without_severe_input_errors(tmp_path):
     """A short baseline run: no Severe at input processing, DX coils read their curves."""
     from parallel_eplus.engine.episode import write_episode_idf

@@ -18,6 +18,7 @@ def _bridges() -> list:
     return [c, pytest.param(False, id="python-bridge")]
 
 
+@pytest.mark.slow
 def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
     """The C bridge is the Python one's steady state moved to C: same actions, same physics, bit for bit."""
     from parallel_eplus.engine import native
@@ -45,6 +46,7 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("use_c", _bridges())
 def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_leaks):
     from parallel_eplus.engine import pipe

@@ -13,6 +13,7 @@ def test_readme_has_snippets():
     assert SNIPPETS, "README.md should show how to use the env from Python"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("index", range(len(SNIPPETS)))
 def test_readme_snippet_runs(index, tmp_path, monkeypatch, no_leaks):
     monkeypatch.chdir(tmp_path)

@@ -153,6 +153,7 @@ class _StopAfter(BaseCallback):
         return self.n_calls < self.calls
 
 
+@pytest.mark.slow
 def test_a_rollout_stopped_midway_starts_the_workers_afresh_at_the_next_learn(tmp_path, no_leaks):
     """Stopped by a callback, pipelined workers are mid-step; the next `learn` must not answer stale actions."""
     sim = SimulationConfig(run_days=1, output_dir=str(tmp_path), keep_episodes=0)

@@ -180,6 +180,7 @@ def test_residual_settings_are_checked_before_anything_runs(tmp_path):
     assert not (tmp_path / "runs").exists()  # refused before a run directory or an EnergyPlus process
 
 
+@pytest.mark.slow
 def test_sac_trains_checkpoints_resumes_and_its_policy_evaluates(tmp_path, no_leaks, caplog):
     from parallel_eplus.evaluation.sweep import policy_controller, run_sweep
     from parallel_eplus.training.config import SACSettings

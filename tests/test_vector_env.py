@@ -30,6 +30,7 @@ def test_weather_shares_give_every_weather_an_equal_share_of_episodes():
             )
 
 
+@pytest.mark.slow
 def test_vector_env_autoresets_and_cycles_weathers(tmp_path, no_leaks):
     venv = EnergyPlusVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path)), [["CA", "FL"], ["CO"]])
     try:
@@ -46,6 +47,7 @@ def test_vector_env_autoresets_and_cycles_weathers(tmp_path, no_leaks):
         venv.close()
 
 
+@pytest.mark.slow
 def test_crashed_worker_restarts_its_episode_then_gives_up(tmp_path, no_leaks, caplog):
     venv = EnergyPlusVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path)), [["CA"], ["FL"]], max_restarts=1)
     try:
@@ -128,6 +130,7 @@ def test_workers_stepped_one_by_one_follow_the_same_trajectories(tmp_path, no_le
     assert not np.allclose(obs[:, 0], obs[:, 1])  # two weathers: a swapped worker would show
 
 
+@pytest.mark.slow
 def test_pipelined_worker_that_crashes_or_hangs_restarts_alone(tmp_path, no_leaks, caplog):
     cfg = SimulationConfig(run_days=1, output_dir=str(tmp_path), step_timeout_s=2.0)
     venv = EnergyPlusVectorEnv(cfg, [["CA"], ["FL"]], max_restarts=2)
@@ -169,6 +172,7 @@ def test_pipelined_worker_that_crashes_or_hangs_restarts_alone(tmp_path, no_leak
         venv.close()
 
 
+@pytest.mark.slow
 def test_ray_backend_starts_its_own_ray_despite_a_stale_cluster(tmp_path, no_leaks, monkeypatch):
     """A cluster ended by Ctrl-C leaves ray_current_cluster behind; with no address we still start our own Ray."""
     ray = pytest.importorskip("ray")

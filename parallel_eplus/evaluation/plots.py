@@ -17,6 +17,7 @@ import pandas as pd  # noqa: E402
 from parallel_eplus import io  # noqa: E402
 from parallel_eplus.buildings.building import load_building  # noqa: E402
 from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
+from parallel_eplus.buildings.reward import RewardConfig  # noqa: E402
 from parallel_eplus.engine.episode import REWARD_PARTS, STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
 
 # One colour per controller in every figure: the references fixed, other labels by a stable hash.
@@ -166,16 +167,38 @@ def west_zone_histogram(episode_dir: Path, title: tuple[str, str], path: Path) -
     return _save(fig, path)
 
 
+def reference_rewards(run_dir: Path, weathers: list[str]) -> dict[str, float]:
+    """The built-in and rule-based controllers' mean reward per step over `weathers`, from the reference sweep
+    above `run_dir`; none when the run trained on other reward constants than that sweep's (the defaults)."""
+    refs, config = find_references(run_dir), run_dir / "config.json"
+    if refs is None or "reward_mean" not in refs or not config.is_file():
+        return {}
+    if RewardConfig.from_any(json.loads(config.read_text()).get("reward")) != RewardConfig():
+        return {}  # another reward: the references' rewards are not on this scale
+    rows = refs[refs["controller"].isin(REFERENCE_COLORS) & refs["weather"].isin(weathers)]
+    return {
+        label: g["reward_mean"].mean()
+        for label, g in rows.groupby("controller", sort=False)
+        if set(g["weather"]) == set(weathers)
+    }
+
+
 def convergence(run_dir: Path, path: Path | None = None) -> Path:
-    """Figure 3: mean reward per step of each finished episode against timesteps, per weather."""
+    """Figure 3: mean reward per step of each finished episode against timesteps, per weather, beside the
+    built-in and rule-based controllers' reward on the same weathers (`reference_rewards`)."""
     episodes = pd.read_csv(run_dir / "episodes.csv")
+    weathers = list(dict.fromkeys(episodes["weather"]))
     fig, ax = _figure((8, 4))
-    for weather, g in episodes.groupby("weather"):
-        ax.plot(g["timesteps"], g["reward_mean"], "o-", ms=3, label=weather)
+    for i, (weather, g) in enumerate(episodes.groupby("weather", sort=False)):
+        color = _POLICY_COLORS[i % len(_POLICY_COLORS)]  # never a reference's grey or green
+        ax.plot(g["timesteps"], g["reward_mean"], "o-", ms=3, label=weather, color=color)
+    for label, value in reference_rewards(run_dir, weathers).items():
+        ax.axhline(value, color=REFERENCE_COLORS[label], linestyle=":" if label == "Baseline" else "--", lw=1,
+                   label=f"{label}, mean of {'/'.join(weathers)}")  # fmt: skip
     ax.set_xlabel("timesteps")
     ax.set_ylabel("mean reward per step (episode)")
     ax.set_title(f"Training convergence: {run_dir.name}", fontsize=10)
-    fig.legend(loc="outside right upper", fontsize=8, title="weather", title_fontsize=8)
+    fig.legend(loc="outside right upper", fontsize=8, title="training weather", title_fontsize=8)
     return _save(fig, path or run_dir / "convergence.png")
 
 

@@ -15,6 +15,7 @@ from parallel_eplus.buildings.model import AGENT_IDF
 from ..conftest import our_processes
 
 
+@pytest.mark.slow
 def test_killed_energyplus_raises_promptly_and_leaves_nothing(tmp_path, no_leaks):
     env = EnergyPlusEnv(weather="CA", run_days=2, output_dir=tmp_path)
     try:
@@ -33,6 +34,7 @@ def test_killed_energyplus_raises_promptly_and_leaves_nothing(tmp_path, no_leaks
         env.close()
 
 
+@pytest.mark.slow
 def test_hung_energyplus_hits_the_timeout(tmp_path, no_leaks):
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path, step_timeout_s=1.0)
     try:

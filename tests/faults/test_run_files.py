@@ -72,6 +72,7 @@ def test_a_taken_run_name_is_refused_and_overwrite_moves_the_old_run_aside(tmp_p
     assert not {p.name for p in tb.iterdir()} & {p.name for p in events}  # the new run's curves start alone
 
 
+@pytest.mark.slow
 def test_the_command_line_refuses_a_taken_run_name_in_one_line(tmp_path):
     (tmp_path / "runs" / "taken").mkdir(parents=True)
     (tmp_path / "runs" / "taken" / "config.json").write_text("{}")
@@ -86,6 +87,7 @@ def test_the_command_line_refuses_a_taken_run_name_in_one_line(tmp_path):
     assert sorted(p.name for p in (tmp_path / "runs" / "taken").iterdir()) == ["config.json"]
 
 
+@pytest.mark.slow
 def test_pickled_statistics_still_load_with_a_warning(legacy, caplog):
     stats = normalization_file(legacy / "model.zip")
     assert stats.name == "vecnormalize.pkl"

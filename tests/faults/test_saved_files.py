@@ -141,6 +141,7 @@ def _policy(tmp_path: Path, name: str, model_from: str, stats_from: str, config_
     return d / "model.zip"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "model_from, stats_from, config_from, expected",
     [  # statistics of a policy with time features beside one without them, and the other way round
