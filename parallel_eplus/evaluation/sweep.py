@@ -86,11 +86,11 @@ def policy_controller(spec: str) -> Controller:
     if not label and saved:
         algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
-    time_features, schedule_features = policy_features(path)
     space = saved.get("residual_space", "action")
     building = saved.get("building")
     if building and not Path(building).is_file():  # a built-in spec, saved by another checkout or install
         building = Path(building).stem
+    time_features, schedule_features = policy_features(path, building)
     sim = SimulationConfig(
         model=saved.get("model", "temp_fan"), building=building, residual_scale=residual,
         residual_space=space,
