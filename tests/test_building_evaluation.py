@@ -89,3 +89,16 @@ def test_a_specs_time_features_apply(tmp_path):
     )
     assert TrainConfig(building="office-small").resolved().time_features
     assert not TrainConfig(building=CRAC).resolved().time_features
+
+
+def test_a_building_policys_features_are_read_beside_its_sensors(tmp_path, no_leaks):
+    """office-small observes 8 sensors and the clock: its policy's 12 observations are that, not the data center's."""
+    from parallel_eplus.training.config import TrainConfig
+    from parallel_eplus.training.train import train
+
+    cfg = TrainConfig(
+        workers=1, weathers=["CA"], building="office-small", run_days=1, timesteps=32, batch_size=32, run_name="o",
+        runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
+    )  # fmt: skip
+    policy = policy_controller(str(train(cfg, progress=False)))
+    assert (policy.time_features, policy.schedule_features) == (True, False)

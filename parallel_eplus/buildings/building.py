@@ -7,6 +7,7 @@ the EnergyPlus side from `--building`), so they agree on every name and order by
 from __future__ import annotations
 
 import functools
+import importlib
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +45,18 @@ class Building:
 
     def bounds(self) -> tuple[list[float], list[float]]:
         return [s.low for s in self.sensors], [s.high for s in self.sensors]
+
+    def controller_class(self) -> type:
+        """The class the spec's `controller = "module:Class"` names: its rule-based controller (`--rbc`)."""
+        if not self.spec.controller:
+            raise ValueError(
+                f'{self.spec.path}: --rbc needs the spec to name a controller (controller = "module:Class")'
+            )
+        module, _, name = self.spec.controller.partition(":")
+        try:
+            return getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError) as e:
+            raise ValueError(f"{self.spec.path}: controller {self.spec.controller!r} cannot be imported: {e}") from None
 
     def control(self, model: str = "") -> ControlModel:
         """The spec's agent variant (its IDF, all its actions), or with "baseline" its built-in controls."""

@@ -60,7 +60,7 @@ class Controller:
             return lambda obs, info: empty
         if self.kind == "rbc":
             target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
-            cls = spec_controller(building) if building else RuleBasedController
+            cls = load_building(building).controller_class() if building else RuleBasedController
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
@@ -86,11 +86,11 @@ def policy_controller(spec: str) -> Controller:
     if not label and saved:
         algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
-    time_features, schedule_features = policy_features(path)
     space = saved.get("residual_space", "action")
     building = saved.get("building")
     if building and not Path(building).is_file():  # a built-in spec, saved by another checkout or install
         building = Path(building).stem
+    time_features, schedule_features = policy_features(path, building)
     sim = SimulationConfig(
         model=saved.get("model", "temp_fan"), building=building, residual_scale=residual,
         residual_space=space,
@@ -105,20 +105,6 @@ def policy_controller(spec: str) -> Controller:
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
         residual_space=saved.get("residual_space", "action"), building=building,
     )  # fmt: skip
-
-
-def spec_controller(building: str) -> type:
-    """The class a spec's `controller = "module:Class"` names, or a ValueError saying the spec has none."""
-    import importlib
-
-    spec = load_building(building).spec
-    if not spec.controller:
-        raise ValueError(f'{spec.path}: --rbc needs the spec to name a controller (controller = "module:Class")')
-    module, _, name = spec.controller.partition(":")
-    try:
-        return getattr(importlib.import_module(module), name)
-    except (ImportError, AttributeError) as e:
-        raise ValueError(f"{spec.path}: controller {spec.controller!r} cannot be imported: {e}") from None
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:

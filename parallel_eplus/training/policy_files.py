@@ -145,12 +145,16 @@ def _warm_start(model_zip: Path, model, env: VecNormalize) -> None:
     env.obs_rms.mean[:n], env.obs_rms.var[:n], env.obs_rms.count = stats.obs_mean, stats.obs_var, stats.obs_count
 
 
-def policy_features(model_zip: str | Path) -> tuple[bool, bool]:
+def policy_features(model_zip: str | Path, building: str | None = None) -> tuple[bool, bool]:
     """Whether a saved policy observes (`model.TIME_FEATURES`, `model.SCHEDULE_FEATURES`), read from
-    the size of its observation statistics."""
+    the size of its observation statistics beside the sensors of its building (None: the data center)."""
+    from parallel_eplus.buildings.building import load_building
+    from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES
+
     n = read_stats(normalization_file(Path(model_zip))).n_observations
+    sensors = len(load_building(building).sensors)
     options = [(t, s) for t in (False, True) for s in (False, True)]
-    found = [o for o in options if len(observation_names(*o)) == n]
+    found = [o for o in options if sensors + len(TIME_FEATURES) * o[0] + len(SCHEDULE_FEATURES) * o[1] == n]
     if not found:
         raise ValueError(f"{model_zip}: a policy over {n} observations does not fit this model")
     return found[0]
