@@ -10,13 +10,13 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.evaluation.plots import plot_path
+from parallel_eplus.evaluation.results import write_results
 from parallel_eplus.evaluation.sweep import (
     BASELINE_LABEL,
     RBC_LABEL,
     Controller,
     policy_controller,
     run_sweep,
-    write_results,
 )
 from parallel_eplus.training.config import TrainConfig, TRPOSettings
 from parallel_eplus.training.policy_files import _saved_policy

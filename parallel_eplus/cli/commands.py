@@ -134,13 +134,13 @@ def _temperatures(text: str, flag: str) -> list[float]:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.evaluation.results import write_results
     from parallel_eplus.evaluation.sweep import (
         BASELINE_LABEL,
         RBC_LABEL,
         Controller,
         policy_controller,
         run_sweep,
-        write_results,
     )
 
     # bad input fails here, before anything runs (a spec's own short names: in run_sweep, against the spec)

@@ -1,0 +1,100 @@
+"""The sweep's results on disk: results.csv, the paper's Table 1 layout in results.md, and the figures.
+
+Another building's results (its own zones and power) go through `building_table.py` instead.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pandas as pd
+
+from parallel_eplus import io
+from parallel_eplus.buildings.model import COMFORT_BAND_C
+from parallel_eplus.evaluation.sweep import BASELINE_LABEL
+
+log = logging.getLogger(__name__)
+
+
+RESULT_COLUMNS = [
+    "controller", "weather", "reward_mean", "power_kw", "it_power_kw", "hvac_power_kw",
+    "west_temp_mean", "west_temp_std", "west_temp_min", "west_temp_max",
+    "east_temp_mean", "east_temp_std", "east_temp_min", "east_temp_max",
+    "west_in_band_pct", "east_in_band_pct", "in_band_pct", "steps", "episode_dir",
+]  # fmt: skip
+
+
+def table_markdown(df: pd.DataFrame) -> str:
+    """The paper's Table 1 layout: weathers down, controllers across (reward, power), then averages."""
+    controllers = list(dict.fromkeys(df["controller"]))
+    weathers = list(dict.fromkeys(df["weather"]))
+    by = df.set_index(["controller", "weather"])
+    head = "| Test weather | " + " | ".join(f"{c}: reward | {c}: power (kW)" for c in controllers) + " |"
+    lines = [head, "|" + "---|" * (1 + 2 * len(controllers))]
+    for w in weathers:
+        cells = []
+        for c in controllers:
+            r = by.loc[(c, w)] if (c, w) in by.index else None
+            cells += ["–", "–"] if r is None else [f"{r.reward_mean:.2f}", f"{r.power_kw:.1f}"]
+        lines.append(f"| {w} | " + " | ".join(cells) + " |")
+    avg = df.groupby("controller", sort=False)["power_kw"].mean()
+    base = avg.get(BASELINE_LABEL)
+    cells = []
+    for c in controllers:
+        change = "" if base is None or c == BASELINE_LABEL else f" ({100 * (avg[c] / base - 1):+.1f} %)"
+        reward_avg = df[df.controller == c]["reward_mean"].mean()
+        cells += [f"{reward_avg:.2f}", f"**{avg[c]:.1f}**{change}"]
+    lines.append("| **Average** | " + " | ".join(cells) + " |")
+
+    band = "{:g}–{:g} °C".format(*COMFORT_BAND_C)  # the data center's (its spec's reward band)
+    lines += ["", f"Zone temperatures (°C) and share of zone samples within {band}:", ""]
+    lines.append(f"| Controller | Weather | West mean ± std [min, max] | East mean ± std [min, max] | in {band} |")
+    lines.append("|---|---|---|---|---|")
+    for _, r in df.iterrows():
+        lines.append(
+            f"| {r.controller} | {r.weather} "
+            f"| {r.west_temp_mean:.2f} ± {r.west_temp_std:.2f} [{r.west_temp_min:.1f}, {r.west_temp_max:.1f}] "
+            f"| {r.east_temp_mean:.2f} ± {r.east_temp_std:.2f} [{r.east_temp_min:.1f}, {r.east_temp_max:.1f}] "
+            f"| {r.in_band_pct:.2f} % |"
+        )
+    share = df.groupby("controller", sort=False)["in_band_pct"].mean()
+    lines += [
+        "",
+        f"| Controller | mean power (kW) | change vs baseline | zone samples in {band} |",
+        "|---|---|---|---|",
+    ]
+    for c in controllers:
+        change = "–" if base is None or c == BASELINE_LABEL else f"{100 * (avg[c] / base - 1):+.1f} %"
+        lines.append(f"| {c} | {avg[c]:.1f} | {change} | {share[c]:.2f} % |")
+    return "\n".join(lines) + "\n"
+
+
+def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
+    """results.csv, results.md and the figures; returns the files written."""
+    from parallel_eplus.evaluation import building_table, plots
+
+    if building_table.is_generic(df):  # another building: its power and zones, no paper figures
+        return building_table.write_results(df, out_dir, BASELINE_LABEL)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    io.write_text(out_dir / "results.csv", df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(index=False))
+    io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df))
+    files = [out_dir / "results.csv", out_dir / "results.md"]
+    shown = plots.with_references(df, plots.find_references(out_dir))  # a lone policy beside the references
+    files.append(plots.temperature_comparison(shown, out_dir / "temperatures.png"))
+    files.append(plots.power_comparison(shown, out_dir / "power.png"))
+    if histogram is None:
+        controller = df["controller"].iloc[-1]
+        weathers = list(df[df.controller == controller]["weather"])
+        histogram = (controller, "VA" if "VA" in weathers else weathers[-1])
+    row = df[(df.controller == histogram[0]) & (df.weather == histogram[1])]
+    if row.empty:
+        log.warning(
+            "no West-zone histogram: no episode of %r on %s (controllers: %s)",
+            histogram[0], histogram[1], ", ".join(df["controller"].unique()),
+        )  # fmt: skip
+    else:
+        files.append(
+            plots.west_zone_histogram(Path(row.iloc[0]["episode_dir"]), histogram, out_dir / "west_zone_histogram.png")
+        )
+    return files
