@@ -22,7 +22,8 @@ It also derives the other buildings' variants from their committed models in idf
    only, not the sizing periods as environments before it (sizing calculations stay on), as the 2-zone model
    does: an episode is the weather year. (The DOE file otherwise runs only its two design days.)
 5. 1ZoneDataCenterCRAC_wApproachTemp_agent.idf: the _year change, and SetpointManager:Warmest "Supply air
-   control" commented out: with it active the supply-node actuator has no effect (docs/notes/new-buildings.md).
+   control" commented out: with it active the supply-node actuator has no effect (docs/notes/new-buildings.md);
+   its two design days commented out too (without them the CO weather year starts; see crac_agent).
 """
 
 from __future__ import annotations
@@ -193,7 +194,20 @@ def crac_agent(text: str) -> str:
     text, n = re.subn(pattern, comment, year_only(text), flags=re.MULTILINE)
     if n != 1:
         raise SystemExit(f"make_models: expected 1 SetpointManager:Warmest 'Supply air control', found {n}")
-    return _derived(CRAC, "weather year only; SetpointManager:Warmest 'Supply air control' disabled.") + text
+    # Without the Warmest manager, EnergyPlus still simulated the Denver cooling design day ahead of the
+    # Golden (CO) weather year, and its IT-equipment inlet read an unset supply node (-289 C): a fatal
+    # RhoAir <= 0. Nothing here sizes from them, so the agent copy has no design days (CA's days unchanged).
+    design_day = r"^  SizingPeriod:DesignDay,\n(?:.*\n)*?.*;.*\n"
+
+    def drop(m: re.Match[str]) -> str:
+        note = "  ! Disabled in the agent variant: no sizing runs from it (make_models.crac_agent).\n"
+        return note + "".join("!" + line[1:] for line in m.group(0).splitlines(keepends=True))
+
+    text, n = re.subn(design_day, drop, text, flags=re.MULTILINE)
+    if n != 2:
+        raise SystemExit(f"make_models: expected 2 SizingPeriod:DesignDay objects in the CRAC model, found {n}")
+    return _derived(CRAC, "weather year only; SetpointManager:Warmest 'Supply air control' and the design days "
+                    "disabled.") + text  # fmt: skip
 
 
 def build(source: Path) -> dict[Path, str]:

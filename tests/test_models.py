@@ -61,3 +61,21 @@ def test_baseline_year_runs_without_severe_input_errors(tmp_path):
     assert "Severe" not in input_phase
     assert "not found Sensible Heat Ratio" not in err
     assert "ZoneAveraged" not in err
+
+
+@pytest.mark.slow
+def test_the_crac_agent_model_starts_on_the_golden_weather(tmp_path, no_leaks):
+    """Its design days made EnergyPlus fail at the first step of the CO year (an unset supply node, -289 C)."""
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
+
+    sim = Simulation(SimulationConfig(weather="CO", building="datacenter-crac", run_days=1, output_dir=str(tmp_path)))
+    try:
+        sim.launch()
+        obs, _ = sim.first_observation()
+        for _ in range(10):
+            sim.send([0.0, 0.0])  # mid-range supply temperature and fan flow
+            obs, _, _, _ = sim.receive()
+        assert 10 < obs[1] < 40  # the servers' inlet air, in °C
+    finally:
+        sim.close()
