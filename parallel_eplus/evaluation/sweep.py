@@ -86,8 +86,8 @@ def policy_controller(spec: str) -> Controller:
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     space = saved.get("residual_space", "action")
     building = saved.get("building")
-    if building and not Path(building).is_file():  # a built-in spec, saved by another checkout or install
-        building = Path(building).stem
+    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
+        building = Path(building).stem  # a built-in spec, saved by path by another checkout or install
     time_features, schedule_features = policy_features(path, building)
     sim = SimulationConfig(
         model=saved.get("model", "temp_fan"), building=building, residual_scale=residual,

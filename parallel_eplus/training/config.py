@@ -108,10 +108,15 @@ class TrainConfig:
         """Validate, and fill in the run name."""
         if self.building:
             from parallel_eplus.buildings.check import check_building
+            from parallel_eplus.buildings.resources import builtin_specs
             from parallel_eplus.buildings.spec import reward_config
 
             spec = check_building(self.building)  # a path, or a built-in spec's name
-            self.building = str(spec.path)
+            # A built-in spec is saved by name: the run's config.json then works from another checkout, an
+            # install, or a Ray node (whose package sits elsewhere).
+            builtin = builtin_specs().get(spec.path.stem)
+            same = builtin is not None and builtin.resolve() == spec.path.resolve()
+            self.building = spec.path.stem if same else str(spec.path)
             known = spec.weathers
             if self.reward == RewardConfig():  # the spec's reward unless the user gave constants
                 self.reward = reward_config(spec)
