@@ -47,6 +47,19 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
 
 
 @pytest.mark.slow
+def _env_day(tmp_path, actions: np.ndarray, building: str | None = None):
+    """One day through the env with these actions; returns its episode directory."""
+    sim = Simulation(SimulationConfig(building=building, run_days=1, output_dir=str(tmp_path / "env")))
+    try:
+        sim.start()
+        for a in actions[:, 0]:
+            sim.send(a)
+            sim.receive()
+        return sim.episode_dir
+    finally:
+        sim.close()
+
+
 @pytest.mark.parametrize("bridge", ["c", "python"])
 def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, bridge, monkeypatch):
     """The floor the benchmark measures against: replaying an env run's actions in raw EnergyPlus gives
@@ -58,15 +71,7 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
     elif native.bridge_library() is None:
         pytest.skip("no C compiler")
     actions = np.clip(np.random.default_rng(5).normal(size=(96, 1, 4)), -1, 1)
-    sim = Simulation(SimulationConfig(run_days=1, output_dir=str(tmp_path / "env")))
-    try:
-        sim.start()
-        for a in actions[:, 0]:
-            sim.send(a)
-            sim.receive()
-        env_dir = sim.episode_dir
-    finally:
-        sim.close()
+    env_dir = _env_day(tmp_path, actions)
     steps = read_steps(env_dir)
     sent = steps[[e.name for e in ACTIONS]].to_numpy()
     np.testing.assert_allclose(sent, [_physical(a) for a in actions[:, 0]])
@@ -88,15 +93,7 @@ def test_bench_runs_a_building_spec(tmp_path, no_leaks):
     steps = building.steps_per_day
     assert steps == 144
     actions = np.clip(np.random.default_rng(3).normal(size=(steps, 1, len(building.actions))), -1, 1)
-    sim = Simulation(SimulationConfig(building="datacenter-crac", run_days=1, output_dir=str(tmp_path / "env")))
-    try:
-        sim.start()
-        for a in actions[:, 0]:
-            sim.send(a)
-            sim.receive()
-        env_dir = sim.episode_dir
-    finally:
-        sim.close()
+    env_dir = _env_day(tmp_path, actions, "datacenter-crac")
     sent = read_steps(env_dir)[[e.name for e in building.actions]].to_numpy()
     np.testing.assert_allclose(sent, [_physical(a, "datacenter-crac") for a in actions[:, 0]])
     cfg = BenchConfig(building="datacenter-crac", raw_days=1)
