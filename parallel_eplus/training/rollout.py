@@ -7,9 +7,10 @@ callbacks and the algorithm's update, which still runs in torch.
 With Ray actors the loop runs where the workers are: one order out and one trajectory fragment back
 per actor and batch (fragments.py), instead of a call per step.
 
-With local workers the loop is also pipelined (pipeline.py): each worker gets its next action as soon as its own
-observation arrives, instead of every worker waiting for the slowest at every step (SB3's lockstep
-`VecEnv`). Each worker fills its own column of the buffer; callbacks still see whole vector steps.
+With local workers the loop is also pipelined (pipeline.py): each worker gets its next action as soon
+as its own observation arrives, instead of every worker waiting for the slowest at every step (SB3's
+lockstep `VecEnv`). Each worker fills its own column of the buffer; callbacks still see whole vector
+steps.
 Each worker draws its exploration noise from a stream of its own, so with fixed observation
 statistics both loops collect the same rollout. The price of pipelining: the running statistics are
 updated in the order workers are served, which depends on timing, so a seed no longer fixes a
@@ -35,7 +36,8 @@ from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 
 def _pipelinable(env: VecEnv) -> tuple[SB3VecEnv | None, VecNormalize | None]:
-    """Our local workers, and the observation normalization over them, when they can be stepped one by one."""
+    """Our workers, and the observation normalization over them, when they can be stepped one by one (local)
+    or collect fragments themselves (Ray)."""
     norm = None
     if isinstance(env, VecNormalize) and not env.norm_reward and not isinstance(env.obs_rms, dict):
         norm, env = env, env.venv
