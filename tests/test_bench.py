@@ -46,7 +46,6 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     assert "Ray backend" in table
 
 
-@pytest.mark.slow
 def _env_day(tmp_path, actions: np.ndarray, building: str | None = None):
     """One day through the env with these actions; returns its episode directory."""
     sim = Simulation(SimulationConfig(building=building, run_days=1, output_dir=str(tmp_path / "env")))
@@ -75,7 +74,7 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
     steps = read_steps(env_dir)
     sent = steps[[e.name for e in ACTIONS]].to_numpy()
     np.testing.assert_allclose(sent, [_physical(a) for a in actions[:, 0]])
-    assert raw_rate(BenchConfig(), tmp_path / "raw", actions) > 0
+    assert raw_rate(BenchConfig(), tmp_path / "raw", actions, energyplus_csv=True) > 0
     env_out = pd.read_csv(env_dir / "eplusout.csv")
     raw_out = pd.read_csv(tmp_path / "raw" / "copy0" / "eplusout.csv")
     assert len(env_out) == 96 and env_out["Date/Time"].equals(raw_out["Date/Time"])

@@ -14,7 +14,9 @@ from gymnasium.utils.env_checker import check_env
 import parallel_eplus
 from parallel_eplus import EnergyPlusEnv
 from parallel_eplus.buildings.model import SENSOR_NAMES, STEPS_PER_DAY
+from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import read_steps
+from parallel_eplus.engine.simulation import Simulation
 
 INFO_KEYS = {"power_w", "it_power_w", "hvac_power_w", "west_temp_c", "east_temp_c", "outdoor_temp_c", "time"}
 
@@ -74,6 +76,30 @@ def test_episode_records(tmp_path, no_leaks):
     eplus = pd.read_csv(ep / "eplusout.csv")
     col = next(c for c in eplus.columns if c.startswith("WEST ZONE:Zone Mean Air Temperature"))
     np.testing.assert_allclose(eplus[col].to_numpy()[-n:], steps["west_temp_c"], atol=1e-3)
+
+
+def test_without_energyplus_csv_the_simulation_is_the_same(tmp_path, no_leaks):
+    """Training turns EnergyPlus's own CSV off (it holds every value in memory all year): only the file goes,
+    every observation and reward stays the same to the bit, and only that one field of the model changes."""
+    actions = np.clip(np.random.default_rng(2).normal(size=(STEPS_PER_DAY, 4)), -1, 1)
+    steps, models = {}, {}
+    for csv in (True, False):
+        sim = Simulation(SimulationConfig(run_days=1, output_dir=str(tmp_path / f"csv-{csv}"), energyplus_csv=csv))
+        try:
+            sim.start()
+            for a in actions:
+                sim.send(a)
+                sim.receive()
+            episode = sim.episode_dir
+        finally:
+            sim.close()
+        assert (episode / "eplusout.csv").is_file() == csv
+        steps[csv] = read_steps(episode)
+        models[csv] = (episode / "model.idf").read_text(encoding="latin-1").splitlines()
+    pd.testing.assert_frame_equal(steps[True], steps[False])
+    changed = [(a, b) for a, b in zip(models[True], models[False], strict=True) if a != b]
+    assert [(a.split()[0], b.split()[0]) for a, b in changed] == [("Yes,", "No,")]
+    assert "Output CSV" in changed[0][0]
 
 
 def mean_zone_temps(tmp_path, west: float, east: float) -> tuple[float, float]:

@@ -67,9 +67,10 @@ def vector_rate(cfg: BenchConfig, workers: int, workdir: Path, pipelined: bool =
     and the cores it kept busy (CPU seconds of learner and workers, start-up included, per wall second).
 
     `pipelined`: each worker stepped as soon as it answers (as training steps them); else in lockstep."""
-    sim = SimulationConfig(
-        weather=cfg.weather, building=cfg.building, run_days=365, output_dir=str(workdir), keep_episodes=0
-    )
+    sim = SimulationConfig(  # EnergyPlus's own CSV off, as training runs it
+        weather=cfg.weather, building=cfg.building, run_days=365, output_dir=str(workdir), keep_episodes=0,
+        energyplus_csv=False,
+    )  # fmt: skip
     actions = _exploring_actions(cfg, workers)
     cpu0, wall0 = _cpu_seconds(), time.perf_counter()
     venv = EnergyPlusVectorEnv(sim, weather_shares([cfg.weather], workers))
@@ -119,7 +120,7 @@ def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
         ctx.Process(
             target=_step_alone,
             args=(SimulationConfig(weather=cfg.weather, building=cfg.building, output_dir=str(workdir / f"w{i}"),
-                                   keep_episodes=0), actions[:, i], cfg.workers, results),
+                                   keep_episodes=0, energyplus_csv=False), actions[:, i], cfg.workers, results),
         )
         for i in range(cfg.workers)
     ]  # fmt: skip

@@ -82,12 +82,13 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
     return seconds, stepping
 
 
-def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray) -> list[RawJob]:
-    """One job per column of `replays` (steps x copies x actions, normalized) on the bench's weather."""
+def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray, energyplus_csv: bool) -> list[RawJob]:
+    """One job per column of `replays` (steps x copies x actions, normalized) on the bench's weather, with
+    EnergyPlus's own CSV as the env side being compared writes it (the env's default: on; training: off)."""
     workdir.mkdir(parents=True, exist_ok=True)
     building = bench_building(cfg)
     idf = workdir / MODEL_FILE  # one model file for all: each run writes its outputs in its own directory
-    write_episode_idf(building.control().idf, idf, -(-len(replays) // building.steps_per_day))
+    write_episode_idf(building.control().idf, idf, -(-len(replays) // building.steps_per_day), energyplus_csv)
     epw = building.spec.weathers.get(cfg.weather) or resolve_weather(cfg.weather)
     model = building.spec.name if cfg.building else "temp_fan"
     return [
@@ -104,14 +105,14 @@ def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
     """
     building = bench_building(cfg)
     constant = np.full((cfg.raw_days * building.steps_per_day, copies, len(building.actions)), cfg.action)
-    return _raw_runs(_bench_jobs(cfg, workdir, constant), workdir)[0]
+    return _raw_runs(_bench_jobs(cfg, workdir, constant, energyplus_csv=True), workdir)[0]
 
 
-def raw_rate(cfg: BenchConfig, workdir: Path, actions: np.ndarray) -> float:
+def raw_rate(cfg: BenchConfig, workdir: Path, actions: np.ndarray, energyplus_csv: bool = False) -> float:
     """EnergyPlus alone under the vector env's exploring actions (steps x workers x actions), one process per
     worker, all at once, no pipes: aggregate steps/s from the first step on, as the vector env is timed.
     What the physics costs; the vector env and training are measured against it."""
-    _, stepping = _raw_runs(_bench_jobs(cfg, workdir, actions), workdir)
+    _, stepping = _raw_runs(_bench_jobs(cfg, workdir, actions, energyplus_csv), workdir)
     return sum(len(actions) / s for s in stepping)
 
 

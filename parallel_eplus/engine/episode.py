@@ -22,6 +22,8 @@ REWARD_PARTS = ("reward_comfort", "reward_band", "reward_power")
 
 _RUN_PERIOD = re.compile(r"^[ \t]*RunPeriod,[^;]*;", re.MULTILINE | re.IGNORECASE)
 _TIMESTEP = re.compile(r"^[ \t]*Timestep,[^;]*;", re.MULTILINE | re.IGNORECASE)
+# OutputControl:Files's first field, "Output CSV" (comments may sit between the object's name and it)
+_OUTPUT_CSV = re.compile(r"^([ \t]*OutputControl:Files\s*,(?:[ \t]*!.*)?\s*)Yes\b", re.MULTILINE | re.IGNORECASE)
 
 
 def run_period_end(run_days: int) -> tuple[int, int]:
@@ -32,8 +34,13 @@ def run_period_end(run_days: int) -> tuple[int, int]:
     return end.month, end.day
 
 
-def write_episode_idf(source: Path, target: Path, run_days: int) -> None:
-    """Copy the model with one run period of `run_days` from Jan 1, keeping the model's own timestep."""
+def write_episode_idf(source: Path, target: Path, run_days: int, energyplus_csv: bool = True) -> None:
+    """Copy the model with one run period of `run_days` from Jan 1, keeping the model's own timestep.
+
+    `energyplus_csv=False` turns off EnergyPlus's own CSV where the model asks for it: EnergyPlus holds
+    every reported value in memory until the run ends to write it (for the data center, a year costs
+    55 MB and 1.4 s), and our step records (steps.parquet) already have what training needs.
+    """
     from parallel_eplus.buildings.building import timesteps_per_hour
 
     per_hour = timesteps_per_hour(source)
@@ -48,6 +55,8 @@ def write_episode_idf(source: Path, target: Path, run_days: int) -> None:
     )
     text = _RUN_PERIOD.sub("", text)  # exactly one run period: the episode's
     text = _TIMESTEP.sub("", text)
+    if not energyplus_csv:
+        text = _OUTPUT_CSV.sub(r"\1No", text, count=1)
     text += f"\n{run_period}\n\n  Timestep,{per_hour};\n"
     target.write_text(text, encoding="latin-1")
 

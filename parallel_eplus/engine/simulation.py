@@ -148,7 +148,7 @@ class Simulation:
         if self.episode_dir.exists():
             shutil.rmtree(self.episode_dir)
         self.episode_dir.mkdir(parents=True)
-        write_episode_idf(self.idf, self.episode_dir / MODEL_FILE, self.config.run_days)
+        write_episode_idf(self.idf, self.episode_dir / MODEL_FILE, self.config.run_days, self.config.energyplus_csv)
         link_or_copy(epw, self.episode_dir / epw.name)
         args = [
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),

@@ -49,6 +49,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         run_days=cfg.run_days,
         output_dir=str(cfg.run_dir / "episodes"),
         keep_episodes=cfg.keep_episodes,
+        energyplus_csv=False,  # the kept episodes' records are steps.parquet
         reward=cfg.reward,
         time_features=cfg.time_features,
         schedule_features=cfg.schedule_features,
