@@ -28,8 +28,9 @@ def _cpu_seconds() -> float:
 def env_run(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
     """One `EnergyPlusEnv` episode under the constant action: wall seconds, first observation, steps/s."""
     env = EnergyPlusEnv(
-        weather=cfg.weather, run_days=cfg.raw_days, output_dir=workdir, keep_episodes=0, building=cfg.building
-    )
+        weather=cfg.weather, run_days=cfg.raw_days, output_dir=workdir, keep_episodes=0, building=cfg.building,
+        energyplus_csv=False,  # as training runs it, and as raw_seconds runs EnergyPlus alone
+    )  # fmt: skip
     action = np.full(env.action_space.shape, cfg.action, dtype=np.float32)
     try:
         t0 = time.perf_counter()

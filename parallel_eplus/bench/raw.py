@@ -84,7 +84,7 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
 
 def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray, energyplus_csv: bool) -> list[RawJob]:
     """One job per column of `replays` (steps x copies x actions, normalized) on the bench's weather, with
-    EnergyPlus's own CSV as the env side being compared writes it (the env's default: on; training: off)."""
+    EnergyPlus's own CSV off, as training runs EnergyPlus (on: a test compares the files)."""
     workdir.mkdir(parents=True, exist_ok=True)
     building = bench_building(cfg)
     idf = workdir / MODEL_FILE  # one model file for all: each run writes its outputs in its own directory
@@ -105,7 +105,7 @@ def raw_seconds(cfg: BenchConfig, workdir: Path, copies: int = 1) -> float:
     """
     building = bench_building(cfg)
     constant = np.full((cfg.raw_days * building.steps_per_day, copies, len(building.actions)), cfg.action)
-    return _raw_runs(_bench_jobs(cfg, workdir, constant, energyplus_csv=True), workdir)[0]
+    return _raw_runs(_bench_jobs(cfg, workdir, constant, energyplus_csv=False), workdir)[0]
 
 
 def raw_rate(cfg: BenchConfig, workdir: Path, actions: np.ndarray, energyplus_csv: bool = False) -> float:

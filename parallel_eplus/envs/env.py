@@ -71,7 +71,8 @@ class EnergyPlusEnv(gym.Env):
 
     ## Arguments
     `weather`: a short name (CA, CO, FL, IL, VA), an EPW path, or a list cycled episode by episode;
-    `run_days`; `output_dir` and `keep_episodes` for episode records; `reward`; `idf` to override the
+    `run_days`; `output_dir` and `keep_episodes` for episode records; `energyplus_csv=False` drops
+    EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `reward`; `idf` to override the
     model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the spec's);
     `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
@@ -97,6 +98,7 @@ class EnergyPlusEnv(gym.Env):
         residual_space: str = "action",
         rbc_target_c: float | None = None,
         building: str | Path | None = None,
+        energyplus_csv: bool = True,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
         if building is not None:  # a typo costs seconds and a message naming it, not a hung worker
@@ -122,6 +124,7 @@ class EnergyPlusEnv(gym.Env):
             residual_space=residual_space,
             rbc_target_c=rbc_target_c,
             building=None if building is None else str(building),
+            energyplus_csv=energyplus_csv,
         )
         self.sim = Simulation(self.config, weathers)
         if not self.sim.elements:
