@@ -1,6 +1,6 @@
-/* The per-step half of eplus_callback.py, in C: the steady-state exchange with no Python on its path.
+/* The per-step half of bridge.py, in C: the steady-state exchange with no Python on its path.
  *
- * eplus_callback.py registers bridge_apply_action and bridge_observe as the EnergyPlus callbacks. Until
+ * native.py registers bridge_apply_action and bridge_observe as the EnergyPlus callbacks. Until
  * Python arms this bridge they hand each call to the Python Bridge (setup, warmup, sizing, the first
  * exchange); once armed they do what Bridge._apply_action and Bridge._observe do, with the same frames
  * (pipe.py: int32 count, then float64 values; a negative count is a control code) and the same spin

@@ -1,0 +1,234 @@
+"""EnergyPlus's side of each control step, in Python: read the sensors, send them, apply the answer.
+
+Timing (one control step = one zone timestep, no shift between an observation and its action):
+- warmup and sizing hold the initial action and never produce a step;
+- at the run period's first AfterPredictorAfterHVACManagers, observation 0 (the state at the end of
+  warmup) goes out and action 1 comes back and is applied to timestep 1;
+- at the end of every zone timestep (after zone reporting) observation k goes out and action k+1
+  comes back; AfterPredictorAfterHVACManagers applies it to timestep k+1;
+- after timestep N the observation goes out as an END frame and no action is awaited.
+AfterPredictorAfterHVACManagers runs at every HVAC sub-timestep; actuators keep their values, so the
+action is written once per zone timestep. Frame values: year, day of year, hour, minute (when the
+observation was taken; EnergyPlus's own clock at this point is the last sub-timestep's), then the sensors.
+
+With the C bridge (native.py, eplus_callback.c) the callbacks EnergyPlus calls are C: they hand each call
+to this Bridge until its first exchange is done, then the Bridge arms them and every later step stays in C.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+import time
+import traceback
+
+import numpy as np
+
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.model import control_model
+from parallel_eplus.engine import pipe
+
+KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
+
+
+class Bridge:
+    """Holds the handles and the current action; its two methods are the EnergyPlus callbacks."""
+
+    def __init__(
+        self,
+        api,
+        act_fd: int | None,
+        obs_fd: int | None,
+        model: str,
+        steps: int,
+        initial: list[float],
+        spin_s: float = 0.0,
+        replay: np.ndarray | None = None,
+        building: str | None = None,
+    ):
+        """With no pipes (`--raw`): EnergyPlus alone, for benchmarks. It holds the initial action all run,
+        or with `replay` (steps x actions, physical units) takes each step's action from it instead."""
+        self.api = api
+        self.x = api.exchange
+        self.act_fd = act_fd
+        self.obs_fd = obs_fd
+        spec = load_building(building)  # None: the data center, whose variants `model` names
+        self.sensors = spec.sensors
+        # Meters and scaled values are read here, in Python: the C bridge reads output variables as they are.
+        self.python_only = any(s.meter or s.scale != 1.0 for s in self.sensors)
+        self.step_s = 900.0  # seconds per zone timestep, to turn a meter's joules into watts
+        self.elements = spec.actions if building and model != "baseline" else control_model(model).actions
+        if len(initial) != len(self.elements):
+            raise SystemExit(f"--initial-action needs {len(self.elements)} values, got {len(initial)}")
+        self.action = list(initial)
+        self.steps = steps
+        self.step = 0
+        self.started = False
+        self.done = False
+        self.pending = True  # the current action has not been written to the actuators yet
+        self.minutes = 15
+        self.error: BaseException | None = None
+        self.sensor_handles: list[int] = []
+        self.actuator_handles: list[tuple[int, int]] = []  # (handle, action index)
+        self.last_obs: list[float] = [0.0] * len(self.sensors)
+        self.raw = obs_fd is None
+        self._wait = None if act_fd is None else pipe.wait_readable(act_fd)
+        self._actions = None if act_fd is None else pipe.FrameReader(act_fd)
+        self.spin_s = spin_s
+        self.replay = None if replay is None else np.ascontiguousarray(replay, dtype=np.float64)
+        if self.replay is not None and (self.replay.ndim != 2 or self.replay.shape[1] != len(self.elements)):
+            raise SystemExit(f"--replay needs one row of {len(self.elements)} actions per step")
+        self.replayed = 0  # rows of `replay` applied so far
+        self.started_at = self.done_at = 0.0  # monotonic s: the run period's first exchange, the last step
+        self.native: ctypes.CDLL | None = None  # the C bridge (set by `register`) until it is armed
+        self._armed: ctypes.CDLL | None = None  # the C bridge once it steps EnergyPlus
+
+    # -- setup --------------------------------------------------------------------------------
+    def _handles_ready(self, state) -> bool:
+        if self.sensor_handles:
+            return True
+        if not self.x.api_data_fully_ready(state):
+            return False
+        missing = []
+        for s in self.sensors:
+            if s.meter:
+                h = self.x.get_meter_handle(state, s.variable)
+                if h < 0:
+                    missing.append(f"meter '{s.variable}'")
+            else:
+                h = self.x.get_variable_handle(state, s.variable, s.key)
+                if h < 0:
+                    missing.append(f"variable '{s.variable}' for '{s.key}'")
+            self.sensor_handles.append(h)
+        for i, elem in enumerate(self.elements):
+            for a in elem.actuators:
+                h = self.x.get_actuator_handle(state, a.component_type, a.control_type, a.key)
+                if h < 0:
+                    missing.append(f"actuator '{a.component_type}/{a.control_type}' for '{a.key}'")
+                self.actuator_handles.append((h, i))
+        if missing:
+            raise RuntimeError("the model lacks " + "; ".join(missing))
+        self.minutes = 60 // self.x.num_time_steps_in_hour(state)  # minutes per zone timestep
+        self.step_s = 3600.0 / self.x.num_time_steps_in_hour(state)
+        return True
+
+    def _in_run_period(self, state) -> bool:
+        return not self.x.warmup_flag(state) and self.x.kind_of_sim(state) == KIND_RUN_PERIOD_WEATHER
+
+    # -- exchange -----------------------------------------------------------------------------
+    # Per-step calls go to the C functions pyenergyplus has already typed (`exchange.api`): its Python
+    # wrappers re-check every argument, which cost ~5 us a call, about 60 us a step here.
+    def _read_sensors(self, state) -> list[float]:
+        get = self.x.api.getVariableValue
+        if not self.python_only:
+            return [get(state, h) for h in self.sensor_handles]
+        # A meter's value at the end of a zone timestep is the energy of that timestep (J): as a mean rate, W.
+        meter = self.x.api.getMeterValue
+        return [
+            (meter(state, h) / self.step_s if s.meter else get(state, h)) * s.scale
+            for s, h in zip(self.sensors, self.sensor_handles, strict=True)
+        ]
+
+    def _time(self, state, at_start: bool = False) -> list[float]:
+        c = self.x.api
+        if at_start:
+            return [c.calendarYear(state), c.dayOfYear(state), 0, 0]
+        return [c.calendarYear(state), c.dayOfYear(state), c.hour(state), c.zoneTimeStepNum(state) * self.minutes]
+
+    def _exchange(self, values: list[float]) -> None:
+        if self.raw:
+            if self.replay is not None and self.replayed < len(self.replay):
+                self.action = self.replay[self.replayed].tolist()
+                self.replayed += 1
+                self.pending = True
+            return
+        os.write(self.obs_fd, pipe.encode(values))
+        code, action = self._actions.read(self._wait, self.spin_s)
+        if code != pipe.DATA or len(action) != len(self.elements):
+            raise pipe.ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
+        self.action = action.tolist()
+        self.pending = True
+
+    def _guard(self, state, fn) -> None:
+        """Exceptions cannot cross the C callback boundary: record them and stop EnergyPlus."""
+        if self.error is not None or self.done:
+            return
+        try:
+            fn(state)
+        except BaseException as e:  # noqa: BLE001 - reported to the env as an ERROR frame
+            self.error = e
+            traceback.print_exc()
+            self.api.runtime.stop_simulation(state)
+
+    def apply_action(self, state) -> None:
+        self._guard(state, self._apply_action)
+
+    def observe(self, state) -> None:
+        self._guard(state, self._observe)
+
+    def _apply_action(self, state) -> None:
+        if not self._handles_ready(state):
+            return
+        if not self.started and self._in_run_period(state):
+            self.started = True
+            self.started_at = time.monotonic()
+            self._exchange(self._time(state, at_start=True) + self.last_obs)
+        if self.pending:
+            self.pending = False
+            set_value = self.x.api.setActuatorValue
+            action = self.action
+            for h, i in self.actuator_handles:
+                set_value(state, h, action[i])
+        if self.native is not None and self.started and not self.python_only:
+            self._arm()
+
+    def _arm(self) -> None:
+        """Hand every later step to the C callbacks, in the state this Bridge has reached."""
+        if self._actions is not None and self._actions.buf:
+            raise pipe.ProtocolError("bytes beyond the action frame")
+        ints = lambda xs: (ctypes.c_int * len(xs))(*xs)  # noqa: E731
+        handles = [h for h, _ in self.actuator_handles]
+        indices = [i for _, i in self.actuator_handles]
+        replay = self.replay if self.replay is not None else np.zeros((0, len(self.action)))
+        status = self.native.bridge_arm(
+            -1 if self.raw else self.obs_fd, -1 if self.raw else self.act_fd,
+            len(self.sensor_handles), ints(self.sensor_handles), len(handles), ints(handles), ints(indices),
+            len(self.action), (ctypes.c_double * len(self.action))(*self.action), int(self.pending),
+            self.step, self.steps, self.minutes, self.spin_s,
+            replay.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(replay), self.replayed,
+        )  # fmt: skip
+        if status != 0:
+            raise RuntimeError("the C bridge refused the model's sensors or actuators (too many, or unmapped)")
+        self.native, self._armed = None, self.native
+
+    def collect(self) -> None:
+        """After the run: take the step count, completion and any error from the C side if it was armed."""
+        lib = self._armed
+        if lib is None:
+            return
+        self.step, self.done, self.done_at = lib.bridge_step(), bool(lib.bridge_done()), lib.bridge_done_at()
+        message = lib.bridge_error()
+        if message and self.error is None:
+            self.error = RuntimeError(message.decode())
+            print(f"C bridge: {message.decode()}", file=sys.stderr)
+
+    def _observe(self, state) -> None:
+        if not self._handles_ready(state):
+            return
+        sensors = self._read_sensors(state)
+        if not self.started:  # warmup or sizing: keep the latest state for observation 0
+            self.last_obs = sensors
+            self.pending = True  # re-assert the held action each zone timestep until the run starts
+            return
+        self.step += 1
+        values = self._time(state) + sensors
+        if self.step >= self.steps:
+            if self.raw:  # the rest of the day would run under the last action; nobody wants it
+                self.api.runtime.stop_simulation(state)
+            else:
+                os.write(self.obs_fd, pipe.encode(values, pipe.END))
+            self.done = True
+            self.done_at = time.monotonic()
+            return
+        self._exchange(values)
