@@ -70,3 +70,13 @@ def no_leaks():
     yield
     assert our_processes() == []
     assert our_pipe_dirs() - before == set()
+
+
+@pytest.fixture
+def broken_weather(tmp_path) -> Path:
+    """An EPW cut after its header: EnergyPlus starts, then stops on its first weather line."""
+    from parallel_eplus.buildings.weather import resolve_weather
+
+    broken = tmp_path / "Broken.epw"
+    broken.write_text("".join(resolve_weather("CA").read_text(encoding="latin-1").splitlines(True)[:8]))
+    return broken

@@ -132,9 +132,11 @@ def _temperatures(text: str, flag: str) -> list[float]:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    from parallel_eplus import io
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
-    from parallel_eplus.evaluation.results import write_results
+    from parallel_eplus.errors import EnergyPlusError
+    from parallel_eplus.evaluation.results import failures_markdown, write_results
     from parallel_eplus.evaluation.sweep import (
         BASELINE_LABEL,
         RBC_LABEL,
@@ -162,8 +164,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
-        not args.quiet, args.building, args.backend, args.ray_address,
+        not args.quiet, args.building, args.backend, args.ray_address, keep_going=True,
     )  # fmt: skip
+    failures = df.attrs.get("failures", [])
+    if df.empty:
+        raise EnergyPlusError("no episode finished:\n" + failures_markdown(failures).strip())
     if args.online:
         import pandas as pd
 
@@ -175,9 +180,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         online = run_online(policies, weathers, args.run_days, args.workers, args.out, args.online_batch)
         df = pd.concat([df, online], ignore_index=True)
     files = write_results(df, args.out, histogram)
+    if failures:  # the finished episodes are written; the report says which did not and why
+        io.write_text(args.out / "results.md", (args.out / "results.md").read_text() + failures_markdown(failures))
     print((args.out / "results.md").read_text())
     print("written: " + ", ".join(str(f) for f in files))
-    return 0
+    return 1 if failures else 0
 
 
 def cmd_plot(args: argparse.Namespace) -> int:

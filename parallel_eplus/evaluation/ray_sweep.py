@@ -18,6 +18,8 @@ from pathlib import Path
 from parallel_eplus import io
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.ray_session import connect
+from parallel_eplus.errors import EnergyPlusError
+from parallel_eplus.evaluation.sweep import failure_row
 
 log = logging.getLogger(__name__)
 
@@ -57,8 +59,10 @@ def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None) 
         return {"controller": controller.label, **info["episode_summary"], "episode_dir": episode_dir.name}, out
 
 
-def run_jobs(jobs: list[tuple], workers: int, address: str | None, bar, deadline_s: float) -> list[dict]:
-    """Run (controller, SimulationConfig) jobs as Ray tasks; returns their rows as the local sweep makes them.
+def run_jobs(
+    jobs: list[tuple], workers: int, address: str | None, bar, deadline_s: float, keep_going: bool = False
+) -> tuple[list[dict], list[dict]]:
+    """Run (controller, SimulationConfig) jobs as Ray tasks; returns (rows, failures) as the local sweep does.
 
     `workers`: CPUs of a Ray started here (no `address`); on a cluster, its CPUs decide. `deadline_s`:
     the longest wait for any next episode to finish (each EnergyPlus step has its own deadline too).
@@ -78,14 +82,21 @@ def run_jobs(jobs: list[tuple], workers: int, address: str | None, bar, deadline
                 files = shipped[controller.path]
             pending[task.remote(controller, cfg, files)] = (controller, cfg)
         log.info("Ray evaluation: %d episodes over %.0f CPUs", len(jobs), ray.cluster_resources().get("CPU", 0))
-        rows = []
+        rows: list[dict] = []
+        failures: list[dict] = []
         while pending:
             t0 = time.monotonic()
             done, _ = ray.wait(list(pending), num_returns=1, timeout=deadline_s)
             if not done:
                 raise TimeoutError(f"no evaluation episode finished within {deadline_s:.0f} s on the Ray cluster")
             controller, cfg = pending.pop(done[0])
-            row, files = ray.get(done[0], timeout=60)
+            try:
+                row, files = ray.get(done[0], timeout=60)
+            except EnergyPlusError as e:  # Ray's task error is also the task's own exception type
+                if not keep_going:
+                    raise
+                failures.append(failure_row(controller, cfg, e))
+                continue
             local = Path(cfg.output_dir) / row["episode_dir"]  # where a local sweep would have written it
             local.mkdir(parents=True, exist_ok=True)
             for name, data in files.items():
@@ -95,7 +106,7 @@ def run_jobs(jobs: list[tuple], workers: int, address: str | None, bar, deadline
             bar.update(int(row.get("steps", 0)))
             bar.set_postfix(done=len(rows), last=f"{controller.label} {row['weather']}")
             log.debug("%s %s: %.0f s", controller.label, row["weather"], time.monotonic() - t0)
-        return rows
+        return rows, failures
     finally:
         for ref in pending:  # failed or interrupted: stop what still runs (its EnergyPlus sees its pipes close)
             ray.cancel(ref, force=True)

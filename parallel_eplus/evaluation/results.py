@@ -70,6 +70,16 @@ def table_markdown(df: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
+def failures_markdown(failures: list[dict]) -> str:
+    """The episodes a sweep left out, for the end of results.md: a table that silently lost rows would mislead."""
+    if not failures:
+        return ""
+    lines = ["", "## Episodes that did not finish", "", "| Controller | Weather | EnergyPlus said | episode |",
+             "|---|---|---|---|"]  # fmt: skip
+    lines += [f"| {f['controller']} | {f['weather']} | {f['error']} | `{f['episode_dir']}` |" for f in failures]
+    return "\n".join(lines) + "\n"
+
+
 def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
     """results.csv, results.md and the figures; returns the files written."""
     from parallel_eplus.evaluation import building_table, plots

@@ -25,6 +25,7 @@ from parallel_eplus.buildings.reward import RewardConfig
 from parallel_eplus.buildings.weather import parse_weathers, weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.simulation import Simulation, wait_any
+from parallel_eplus.errors import EnergyPlusError
 
 log = logging.getLogger(__name__)
 
@@ -131,12 +132,17 @@ def run_sweep(
     building: str | None = None,
     backend: str = "local",
     ray_address: str | None = None,
+    keep_going: bool = False,
 ) -> pd.DataFrame:
     """One episode per (controller, weather), up to `workers` at once; returns results.csv's table.
 
     `backend` "ray": each episode is a Ray task (ray_sweep.py), on `ray_address`'s cluster or a local Ray.
 
-    `building`: a spec (checked first); its "baseline" is its model's own controls (`baseline_idf`)."""
+    `building`: a spec (checked first); its "baseline" is its model's own controls (`baseline_idf`).
+
+    `keep_going`: an episode whose EnergyPlus fails (a model's own controls can fail on a weather) is left out
+    and the others run on; the table's `attrs["failures"]` lists what failed, why and where (`failure_rows`).
+    Otherwise the first failure stops the sweep, as any caller averaging over the weathers needs."""
     known = None
     if building:
         from parallel_eplus.buildings.check import check_building
@@ -166,17 +172,33 @@ def run_sweep(
 
             # each EnergyPlus step has its own deadline; this bounds the wait for any next episode to end
             deadline_s = 600.0 + run_days * steps_per_day * 0.05
-            rows = ray_sweep.run_jobs(jobs, workers, ray_address, bar, deadline_s)
+            rows, failures = ray_sweep.run_jobs(jobs, workers, ray_address, bar, deadline_s, keep_going)
         else:
-            rows = _run_local(jobs, workers, bar)
+            rows, failures = _run_local(jobs, workers, bar, keep_going)
     finally:
         bar.close()
     rows = [{**row, **band} for row in rows]  # a spec's band, beside its "% in band"
     order = {c.label: i for i, c in enumerate(controllers)}
     worder = {weather_label(w): i for i, w in enumerate(weathers)}
     df = pd.DataFrame(rows)
-    df = df.sort_values(by=["controller", "weather"], key=lambda s: s.map({**order, **worder}))
-    return df.reset_index(drop=True)
+    if rows:
+        df = df.sort_values(by=["controller", "weather"], key=lambda s: s.map({**order, **worder}))
+    df = df.reset_index(drop=True)
+    df.attrs["failures"] = failures
+    return df
+
+
+def failure_row(controller: Controller, cfg: SimulationConfig, error: BaseException) -> dict:
+    """What a failed episode leaves in the sweep's report: who, where, EnergyPlus's own words, the folder."""
+    log.error("%s on %s failed: %s", controller.label, weather_label(cfg.weather), error)
+    first = (str(error).strip().splitlines() or [type(error).__name__])[0]
+    severe = [ln.strip() for ln in getattr(error, "err_tail", "").splitlines() if "** Severe" in ln or "** Fatal" in ln]
+    return {
+        "controller": controller.label,
+        "weather": weather_label(cfg.weather),
+        "error": "; ".join([first, *severe[:1]]),
+        "episode_dir": str(getattr(error, "episode_dir", None) or cfg.output_dir),
+    }
 
 
 def _job_config(
@@ -193,36 +215,58 @@ def _job_config(
     )  # fmt: skip
 
 
-def _run_local(jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar) -> list[dict]:
-    """The jobs as EnergyPlus processes of this machine, up to `workers` at once."""
+def _run_local(
+    jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar, keep_going: bool = False
+) -> tuple[list[dict], list[dict]]:
+    """The jobs as EnergyPlus processes of this machine, up to `workers` at once: (rows, failures)."""
     queue = deque(jobs)
     rows: list[dict] = []
+    failures: list[dict] = []
     active: list[dict] = []
+
+    def failed(job: dict, error: EnergyPlusError) -> None:
+        if not keep_going:
+            raise error
+        failures.append(failure_row(job["controller"], job["cfg"], error))
+        active.remove(job)
+        job["sim"].close()
+
     try:
         while queue or active:
             started = []
             while queue and len(active) < workers:
                 controller, cfg = queue.popleft()
                 sim = Simulation(cfg, name=controller.label, siblings=workers)
-                sim.launch()
-                job = {"controller": controller, "sim": sim, "act": controller.make(cfg.building)}
+                job = {"controller": controller, "cfg": cfg, "sim": sim, "act": controller.make(cfg.building)}
                 active.append(job)
-                started.append(job)
+                try:
+                    sim.launch()
+                    started.append(job)
+                except EnergyPlusError as e:
+                    failed(job, e)
             for job in started:
-                obs, info = job["sim"].first_observation()
-                job["sim"].send(job["act"](obs, info))
+                try:
+                    obs, info = job["sim"].first_observation()
+                    job["sim"].send(job["act"](obs, info))
+                except EnergyPlusError as e:
+                    failed(job, e)
             # Pipelined: each job gets its next action as soon as it answers, so a cheap episode (the
             # built-in controller's) runs ahead of a costly one instead of at its pace.
-            finished = []
+            finished, broken = [], []
             for k in wait_any([job["sim"] for job in active], range(len(active))):
                 job = active[k]
-                obs, _, terminated, info = job["sim"].receive()
-                bar.update(1)
-                if terminated:
-                    job["info"] = info
-                    finished.append(job)
-                else:
-                    job["sim"].send(job["act"](obs, info))
+                try:
+                    obs, _, terminated, info = job["sim"].receive()
+                    bar.update(1)
+                    if terminated:
+                        job["info"] = info
+                        finished.append(job)
+                    else:
+                        job["sim"].send(job["act"](obs, info))
+                except EnergyPlusError as e:
+                    broken.append((job, e))
+            for job, e in broken:  # after the loop: `wait_any`'s indices are into `active` as it was
+                failed(job, e)
             for job in finished:
                 active.remove(job)
                 summary = job["info"]["episode_summary"]
@@ -234,4 +278,4 @@ def _run_local(jobs: list[tuple[Controller, SimulationConfig]], workers: int, ba
     finally:
         for job in active:
             job["sim"].close()
-    return rows
+    return rows, failures

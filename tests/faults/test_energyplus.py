@@ -91,3 +91,30 @@ def test_the_energyplus_side_exits_when_its_env_died_before_it_opened_the_pipes(
     done = subprocess.run([sys.executable, "-m", CALLBACK_MODULE, *map(str, args)], capture_output=True, text=True,
                           timeout=30)  # fmt: skip
     assert done.returncode == 1 and "the env is gone" in done.stderr
+
+
+def test_a_failed_episode_leaves_the_evaluation_standing(tmp_path, no_leaks, capsys, broken_weather):
+    """One weather's EnergyPlus fails: the other episodes finish and are written, the report names the
+    failed one with EnergyPlus's own words, and the command exits 1 (a model's own controls can fail on
+    one weather: the CRAC's on CO)."""
+    import pandas as pd
+
+    from parallel_eplus.cli import main
+
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--baseline", "--weathers", f"CA,{broken_weather}", "--run-days", "1"]
+    assert main([*argv, "--workers", "2", "--out", str(out), "--quiet"]) == 1
+    assert list(pd.read_csv(out / "results.csv")["weather"]) == ["CA"]
+    report = (out / "results.md").read_text()
+    assert "## Episodes that did not finish" in report
+    assert "| Baseline | Broken |" in report and "Invalid Date info in Weather Line" in report
+    assert "Invalid Date info in Weather Line" in capsys.readouterr().out
+
+
+def test_a_failed_episode_stops_a_sweep_that_averages(tmp_path, no_leaks, broken_weather):
+    """Without `keep_going` (the algorithm comparison averages over weathers) the failure is raised."""
+    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+
+    with pytest.raises(EnergyPlusError, match="Broken"):
+        run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA", str(broken_weather)], 1, 2,
+                  tmp_path / "eval", progress=False)  # fmt: skip

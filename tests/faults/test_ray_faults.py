@@ -115,3 +115,14 @@ def test_ctrl_c_during_ray_training_saves_a_checkpoint_and_leaves_no_ray_energyp
     assert "checkpoint saved" in out
     time.sleep(1.0)
     assert _ours("ray::") == [] and _ours("raylet") == [] and _ours("gcs_server") == []
+
+
+def test_a_failed_ray_episode_leaves_the_evaluation_standing(tmp_path, no_leaks, broken_weather):
+    """The Ray sweep keeps going past a failed episode as the local one does, naming it and why."""
+    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+
+    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA", str(broken_weather)], 1, 2, tmp_path / "eval",
+                   progress=False, backend="ray", keep_going=True)  # fmt: skip
+    assert list(df["weather"]) == ["CA"]
+    (failure,) = df.attrs["failures"]
+    assert failure["weather"] == "Broken" and "Invalid Date info in Weather Line" in failure["error"]
