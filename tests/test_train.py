@@ -51,8 +51,8 @@ def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path
     assert sorted((run / "checkpoints").glob("model_vecnormalize_*_steps.npz"))
     assert (run / "config.json").is_file() and (run / "episodes.csv").is_file()
     assert sorted((run / "checkpoints").glob("model_*_steps.zip"))
-    kept = sorted((run / "episodes").glob("worker-*/episode-*"))
-    assert kept and all((ep / "steps.parquet").is_file() for ep in kept)
+    kept = sorted((run / "episodes").glob("worker-*/episode-*/steps.parquet"))  # the newest 2 per worker
+    assert len(kept) == 4 and all((ep.parent / "model.idf").is_file() for ep in kept)
     assert not list((run / "episodes").rglob("eplusout.csv"))  # EnergyPlus's own CSV is off in training
     tags = scalars(tmp_path / "tb" / "short")
     for weather in ("CA", "CO", "FL"):  # worker 0 cycles CA, CO, FL; worker 1 CO, FL, CA
