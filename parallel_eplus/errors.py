@@ -23,6 +23,13 @@ class EnergyPlusError(RuntimeError):
             text += "\n  tail of the EnergyPlus log:\n" + "\n".join("    " + ln for ln in err_tail.splitlines())
         super().__init__(text)
 
+    @property
+    def headline(self) -> str:
+        """One line for a log or a table: the message's first line and EnergyPlus's own first severe error."""
+        first = (str(self).strip().splitlines() or [type(self).__name__])[0]
+        severe = [ln.strip() for ln in self.err_tail.splitlines() if "** Severe" in ln or "** Fatal" in ln]
+        return "; ".join([first, *severe[:1]])
+
 
 class ProtocolError(EnergyPlusError):
     """A malformed or truncated frame on the pipe."""

@@ -18,6 +18,7 @@ from parallel_eplus.buildings.model import COMFORT_BAND_C, SENSOR_NAMES, ZONE_TE
 STEPS_FILE = "steps.parquet"  # binary: a year writes in ~0.1 s where CSV takes ~0.8 s
 SUMMARY_FILE = "summary.json"
 MODEL_FILE = "model.idf"
+FAILURE_FILE = "failure.txt"  # beside a failed episode's files: the error, and a mark that keeps them
 REWARD_PARTS = ("reward_comfort", "reward_band", "reward_power")
 
 _RUN_PERIOD = re.compile(r"^[ \t]*RunPeriod,[^;]*;", re.MULTILINE | re.IGNORECASE)
@@ -152,11 +153,18 @@ def write_records(episode_dir: Path, steps: pd.DataFrame, extra: dict, **signals
     return summary
 
 
+def record_failure(episode_dir: Path | None, error: BaseException) -> None:
+    """Write why an episode failed into its directory, which pruning then keeps whole: the evidence (EnergyPlus's
+    error file, the model, the steps up to the failure) outlives the restart that follows."""
+    if episode_dir is not None and Path(episode_dir).is_dir():
+        (Path(episode_dir) / FAILURE_FILE).write_text(f"{error}\n")
+
+
 def prune_episodes(output_dir: Path, keep: int | None) -> None:
-    """Keep the newest `keep` episode directories whole; older ones keep only their summary."""
+    """Keep the newest `keep` episode directories whole, and every failed one; older ones keep only their summary."""
     if keep is None:
         return
-    dirs = sorted(p for p in output_dir.glob("episode-*") if p.is_dir())
+    dirs = sorted(p for p in output_dir.glob("episode-*") if p.is_dir() and not (p / FAILURE_FILE).is_file())
     full = [d for d in dirs if any(f.name != SUMMARY_FILE for f in d.iterdir())]
     for d in full[: max(len(full) - keep, 0)]:
         for f in d.iterdir():

@@ -23,6 +23,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import record_failure
 from parallel_eplus.engine.simulation import Simulation, wait_any
 from parallel_eplus.envs.env import action_space, observation_space
 from parallel_eplus.errors import EnergyPlusError
@@ -199,6 +200,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         """Relaunch worker i's episode on the same weather, or fail the run after too many tries."""
         self._failures[i] += 1
         sim = self.sims[i]
+        record_failure(error.episode_dir, error)
         if self._failures[i] > self.max_restarts:
             raise EnergyPlusError(
                 f"worker {sim.name} failed {self._failures[i]} times in a row on weather {sim.weather}; "
@@ -207,7 +209,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             ) from error
         log.warning(
             "worker %s: EnergyPlus failed (%s); restarting its episode (%d/%d)",
-            sim.name, str(error).splitlines()[0], self._failures[i], self.max_restarts,
+            sim.name, error.headline, self._failures[i], self.max_restarts,
         )  # fmt: skip
         sim.launch(sim.weather_index)
 

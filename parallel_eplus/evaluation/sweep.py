@@ -188,15 +188,13 @@ def run_sweep(
     return df
 
 
-def failure_row(controller: Controller, cfg: SimulationConfig, error: BaseException) -> dict:
+def failure_row(controller: Controller, cfg: SimulationConfig, error: EnergyPlusError) -> dict:
     """What a failed episode leaves in the sweep's report: who, where, EnergyPlus's own words, the folder."""
     log.error("%s on %s failed: %s", controller.label, weather_label(cfg.weather), error)
-    first = (str(error).strip().splitlines() or [type(error).__name__])[0]
-    severe = [ln.strip() for ln in getattr(error, "err_tail", "").splitlines() if "** Severe" in ln or "** Fatal" in ln]
     return {
         "controller": controller.label,
         "weather": weather_label(cfg.weather),
-        "error": "; ".join([first, *severe[:1]]),
+        "error": error.headline,
         "episode_dir": str(getattr(error, "episode_dir", None) or cfg.output_dir),
     }
 

@@ -157,7 +157,14 @@ def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_compl
     # 60-day episodes (5,760 steps, a few seconds each even on a quiet machine): long enough that a worker past
     # its start-up is struck mid-episode, not as it finishes (a one-day episode can end before it is old enough)
     cfg = small_config(
-        tmp_path, "hit", weathers=["CA"], run_days=60, timesteps=23040, batch_size=1152, step_timeout_s=2
+        tmp_path,
+        "hit",
+        weathers=["CA"],
+        run_days=60,
+        timesteps=23040,
+        batch_size=1152,
+        step_timeout_s=2,
+        keep_episodes=1,
     )
     hit: list[int] = []
     stop = _strike_later(cfg.run_dir.resolve() / "episodes.csv", sig, hit, until=lambda: "restarting" in caplog.text)
@@ -168,6 +175,9 @@ def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_compl
     assert hit, "no EnergyPlus process to hit"
     assert "restarting its episode" in caplog.text
     assert final.is_file() and pd.read_csv(final.parent / "episodes.csv")["timesteps"].max() >= 23040 - 2 * 5760
+    # The struck episode keeps its evidence whole, whatever --keep-episodes prunes: why, and EnergyPlus's own log
+    [failure] = (final.parent / "episodes").glob("worker-*/episode-*/failure.txt")
+    assert "EnergyPlus" in failure.read_text() and (failure.parent / "eplusout.err").is_file()
 
 
 @pytest.mark.slow
