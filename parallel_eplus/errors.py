@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import re
 import signal
 from pathlib import Path
+
+_SEVERE = re.compile(r"\*\*\s+(Severe|Fatal)\s+\*\*")  # EnergyPlus's "** Severe  **", "**  Fatal  **"
 
 
 class EnergyPlusError(RuntimeError):
@@ -25,10 +28,13 @@ class EnergyPlusError(RuntimeError):
 
     @property
     def headline(self) -> str:
-        """One line for a log or a table: the message's first line and EnergyPlus's own first severe error."""
+        """One line for a log or a table: the message's first line and EnergyPlus's own first severe error
+        (the cause, usually; the tail of a long error file holds only its summary)."""
         first = (str(self).strip().splitlines() or [type(self).__name__])[0]
-        severe = [ln.strip() for ln in self.err_tail.splitlines() if "** Severe" in ln or "** Fatal" in ln]
-        return "; ".join([first, *severe[:1]])
+        err = Path(self.episode_dir) / "eplusout.err" if self.episode_dir else None
+        lines = err.read_text(errors="replace").splitlines() if err and err.is_file() else self.err_tail.splitlines()
+        severe = next((ln.strip() for ln in lines if _SEVERE.search(ln)), None)
+        return f"{first}; {severe}" if severe else first
 
 
 class ProtocolError(EnergyPlusError):

@@ -118,3 +118,18 @@ def test_a_failed_episode_stops_a_sweep_that_averages(tmp_path, no_leaks, broken
     with pytest.raises(EnergyPlusError, match="Broken"):
         run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA", str(broken_weather)], 1, 2,
                   tmp_path / "eval", progress=False)  # fmt: skip
+
+
+def test_an_error_headline_quotes_energyplus_first_severe_line(tmp_path):
+    """The cause, not the summary: the first severe line of the error file, else of the tail it carries."""
+    (tmp_path / "eplusout.err").write_text(
+        "   ** Warning ** something minor\n   ** Severe  ** Temperature (high) out of bounds (201.85]\n"
+        "   ** Severe  ** Temperature (high) out of bounds (202.05]\n   **  Fatal  ** too many errors\n"
+    )
+    assert EnergyPlusError("[CO] failed", tmp_path).headline == (
+        "[CO] failed; ** Severe  ** Temperature (high) out of bounds (201.85]"
+    )
+    assert EnergyPlusError("[CA] failed", None, "   **  Fatal  ** Error in Reading Weather Data").headline == (
+        "[CA] failed; **  Fatal  ** Error in Reading Weather Data"
+    )
+    assert EnergyPlusError("[CA] failed").headline == "[CA] failed"
