@@ -79,6 +79,21 @@ def test_building_results_name_the_band(tmp_path):
     assert {f.name for f in files} >= {"results.csv", "results.md", "temperatures.png", "power.png"}
 
 
+def test_averages_leave_out_a_weather_a_controller_did_not_finish():
+    """The CRAC's own controls fail on CO: its average and the policy's are both over the other weathers."""
+    from parallel_eplus.evaluation.building_table import table_markdown
+
+    rows = [(BASELINE_LABEL, "CA", 100.0), (BASELINE_LABEL, "FL", 120.0),
+            ("TRPO", "CA", 90.0), ("TRPO", "CO", 10.0), ("TRPO", "FL", 108.0)]  # fmt: skip
+    df = pd.DataFrame(
+        [{"controller": c, "weather": w, "power_kw": p, "zone_in_band_pct": 100.0, "in_band_pct": 100.0}
+         for c, w, p in rows]
+    )  # fmt: skip
+    text = table_markdown(df, BASELINE_LABEL)
+    assert "Averages over CA, FL, the weathers every controller finished (not CO)." in text
+    assert "| TRPO | 99.00 | -10.0 % | 100.00 % |" in text  # (90 + 108) / 2 against (100 + 120) / 2
+
+
 def test_a_specs_time_features_apply(tmp_path):
     """office-small declares `time_features = true`: its env and its training runs observe the clock."""
     from parallel_eplus.envs.env import EnergyPlusEnv

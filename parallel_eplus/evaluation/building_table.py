@@ -20,6 +20,21 @@ def band_of(df: pd.DataFrame) -> tuple[float, float] | None:
     return float(df["band_low_c"].iloc[0]), float(df["band_high_c"].iloc[0])
 
 
+def comparable(df: pd.DataFrame) -> tuple[pd.DataFrame, str]:
+    """The rows to average across controllers: the weathers every controller finished (an episode that failed,
+    as the CRAC's own controls do on CO, must not tilt one controller's average), and a note saying so."""
+    per = [set(g) for _, g in df.groupby("controller", sort=False)["weather"]]
+    common = set.intersection(*per) if per else set()
+    if all(s == common for s in per):
+        return df, ""
+    kept = df[df["weather"].isin(common)]
+    left = [w for w in dict.fromkeys(df["weather"]) if w not in common]
+    return kept, (
+        f"Averages over {', '.join(dict.fromkeys(kept['weather'])) or 'no weather'}, the weathers every controller "
+        f"finished (not {', '.join(left)}).\n"
+    )
+
+
 def table_markdown(df: pd.DataFrame, baseline: str) -> str:
     zones = [c.removesuffix("_in_band_pct") for c in df.columns if c.endswith("_in_band_pct") and c != "in_band_pct"]
     band = band_of(df)
@@ -38,8 +53,10 @@ def table_markdown(df: pd.DataFrame, baseline: str) -> str:
             f"| {r.controller} | {r.weather} | {r.power_kw:.2f} | {change} | " + " | ".join(cells)
             + f" | {r.in_band_pct:.2f} % |"
         )  # fmt: skip
-    avg = df.groupby("controller", sort=False)[["power_kw", "in_band_pct"]].mean()
-    lines += ["", f"| Controller | mean power (kW) | vs baseline | all {named} |", "|---|---|---|---|"]
+    shared, note = comparable(df)
+    avg = shared.groupby("controller", sort=False)[["power_kw", "in_band_pct"]].mean()
+    lines += ["", *([note] if note else []), f"| Controller | mean power (kW) | vs baseline | all {named} |",
+              "|---|---|---|---|"]  # fmt: skip
     for c, r in avg.iterrows():
         change = (
             "–"

@@ -12,6 +12,7 @@ import pandas as pd
 
 from parallel_eplus import io
 from parallel_eplus.buildings.model import COMFORT_BAND_C
+from parallel_eplus.evaluation.building_table import comparable
 from parallel_eplus.evaluation.sweep import BASELINE_LABEL
 
 log = logging.getLogger(__name__)
@@ -38,12 +39,13 @@ def table_markdown(df: pd.DataFrame) -> str:
             r = by.loc[(c, w)] if (c, w) in by.index else None
             cells += ["–", "–"] if r is None else [f"{r.reward_mean:.2f}", f"{r.power_kw:.1f}"]
         lines.append(f"| {w} | " + " | ".join(cells) + " |")
-    avg = df.groupby("controller", sort=False)["power_kw"].mean()
+    shared, note = comparable(df)  # averages over the weathers every controller finished
+    avg = shared.groupby("controller", sort=False)["power_kw"].mean()
     base = avg.get(BASELINE_LABEL)
     cells = []
     for c in controllers:
         change = "" if base is None or c == BASELINE_LABEL else f" ({100 * (avg[c] / base - 1):+.1f} %)"
-        reward_avg = df[df.controller == c]["reward_mean"].mean()
+        reward_avg = shared[shared.controller == c]["reward_mean"].mean()
         cells += [f"{reward_avg:.2f}", f"**{avg[c]:.1f}**{change}"]
     lines.append("| **Average** | " + " | ".join(cells) + " |")
 
@@ -58,9 +60,10 @@ def table_markdown(df: pd.DataFrame) -> str:
             f"| {r.east_temp_mean:.2f} ± {r.east_temp_std:.2f} [{r.east_temp_min:.1f}, {r.east_temp_max:.1f}] "
             f"| {r.in_band_pct:.2f} % |"
         )
-    share = df.groupby("controller", sort=False)["in_band_pct"].mean()
+    share = shared.groupby("controller", sort=False)["in_band_pct"].mean()
     lines += [
         "",
+        *([note] if note else []),
         f"| Controller | mean power (kW) | change vs baseline | zone samples in {band} |",
         "|---|---|---|---|",
     ]
