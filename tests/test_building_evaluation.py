@@ -92,6 +92,9 @@ def test_averages_leave_out_a_weather_a_controller_did_not_finish():
     text = table_markdown(df, BASELINE_LABEL)
     assert "Averages over CA, FL, the weathers every controller finished (not CO)." in text
     assert "| TRPO | 99.00 | -10.0 % | 100.00 % |" in text  # (90 + 108) / 2 against (100 + 120) / 2
+    from parallel_eplus.evaluation.plots import weather_order
+
+    assert weather_order(df["weather"]) == ["CA", "CO", "FL"]  # in the figures too, CO keeps its place
 
 
 def test_a_specs_time_features_apply(tmp_path):

@@ -68,12 +68,17 @@ def table_markdown(df: pd.DataFrame, baseline: str) -> str:
 
 
 def write_results(df: pd.DataFrame, out_dir: Path, baseline: str) -> list[Path]:
-    from parallel_eplus.evaluation import plots
-
     out_dir.mkdir(parents=True, exist_ok=True)
     df.to_csv(out_dir / "results.csv", index=False)
     (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df, baseline))
-    files = [out_dir / "results.csv", out_dir / "results.md"]
+    return [out_dir / "results.csv", out_dir / "results.md", *figures(df, out_dir)]
+
+
+def figures(df: pd.DataFrame, out_dir: Path) -> list[Path]:
+    """The building's own figures: its zones against its band, its power; no data-center references."""
+    from parallel_eplus.evaluation import plots
+
+    files = []
     if plots.zones_of(df):
         files.append(
             plots.temperature_comparison(df, out_dir / "temperatures.png", band_of(df) or plots.COMFORT_BAND_C)

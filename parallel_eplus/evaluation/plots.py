@@ -18,6 +18,7 @@ from parallel_eplus import io  # noqa: E402
 from parallel_eplus.buildings.building import load_building  # noqa: E402
 from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
 from parallel_eplus.buildings.reward import RewardConfig  # noqa: E402
+from parallel_eplus.buildings.weather import WEATHER_FILES  # noqa: E402
 from parallel_eplus.engine.episode import REWARD_PARTS, STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
 
 # One colour per controller in every figure: the references fixed, other labels by a stable hash.
@@ -99,7 +100,7 @@ def temperature_comparison(df: pd.DataFrame, path: Path, band: tuple[float, floa
 
     Any building's: its reported temperatures (`zones_of`) and its reward band."""
     controllers = list(dict.fromkeys(df["controller"]))
-    weathers = list(dict.fromkeys(df["weather"]))
+    weathers = weather_order(df["weather"])
     colors = zone_colors(zones_of(df))
     width = 0.7 / len(colors)
     fig, ax = _figure((min(16, max(7, 0.45 * len(controllers) * len(weathers) + 2.5)), 4.4))
@@ -140,10 +141,17 @@ def temperature_comparison(df: pd.DataFrame, path: Path, band: tuple[float, floa
     return _save(fig, path)
 
 
+def weather_order(weathers) -> list[str]:
+    """The paper's weathers in its order (CA, CO, FL, IL, VA), others after them as they came: a weather the
+    first controller did not finish (a failed episode) keeps its place."""
+    known, seen = list(WEATHER_FILES), list(dict.fromkeys(weathers))
+    return sorted(seen, key=lambda w: known.index(w) if w in known else len(known) + seen.index(w))
+
+
 def power_comparison(df: pd.DataFrame, path: Path) -> Path:
     """Average total power per controller and weather."""
     table = df.pivot(index="weather", columns="controller", values="power_kw")
-    table = table.loc[list(dict.fromkeys(df["weather"])), list(dict.fromkeys(df["controller"]))]
+    table = table.loc[weather_order(df["weather"]), list(dict.fromkeys(df["controller"]))]
     fig, ax = _figure((9, 4))
     colors = controller_colors(table.columns)
     table.plot.bar(ax=ax, rot=0, color=[colors[c] for c in table.columns], legend=False)
@@ -254,9 +262,14 @@ def sweep(out_dir: Path) -> list[Path]:
     """Redraws a saved sweep's temperatures.png and power.png from its results.csv, with the references.
 
     The built-in and rule-based controllers come from `reference/results.csv` above `out_dir` when
-    the sweep did not run them itself.
+    the sweep did not run them itself; another building's sweep draws only its own rows, against its band.
     """
-    df = with_references(pd.read_csv(out_dir / "results.csv"), find_references(out_dir))
+    from parallel_eplus.evaluation import building_table
+
+    df = pd.read_csv(out_dir / "results.csv")
+    if building_table.is_generic(df):
+        return building_table.figures(df, out_dir)
+    df = with_references(df, find_references(out_dir))
     return [temperature_comparison(df, out_dir / "temperatures.png"), power_comparison(df, out_dir / "power.png")]
 
 
