@@ -25,6 +25,7 @@ def test_figure_and_table_show_each_algorithm_beside_the_reference_controllers(t
     table = compare_table(progress, refs)
     assert "| TRPO | 2,000 |" in table and "| SAC | 2,000 |" in table and "| Rule-based |" in table
     assert "| Baseline | - | - | 100.00 |" in table
+    assert table.splitlines()[-1].endswith("| 0.10 |")  # the reward per step, the objective all three optimise
 
 
 def test_figure_keeps_its_legend_outside_the_data_and_the_references_in_their_colours():

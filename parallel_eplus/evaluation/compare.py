@@ -71,18 +71,18 @@ def _steps_of(model_zip: Path) -> int:
     return int(data["num_timesteps"])
 
 
-def references(results_csv: Path) -> dict[str, tuple[float, float]]:
-    """The built-in and rule-based controllers' five-weather means: label -> (in-band %, power kW)."""
+def references(results_csv: Path) -> dict[str, tuple[float, float, float]]:
+    """The built-in and rule-based controllers' five-weather means: label -> (in-band %, power kW, reward/step)."""
     df = pd.read_csv(results_csv)
     df = df[df["weather"].isin(ALL_WEATHERS)]
     return {
-        label: (g["in_band_pct"].mean(), g["power_kw"].mean())
+        label: (g["in_band_pct"].mean(), g["power_kw"].mean(), g["reward_mean"].mean())
         for label, g in df.groupby("controller")
         if label in (BASELINE_LABEL, RBC_LABEL)
     }
 
 
-def draw_comparison(progress: pd.DataFrame, refs: dict[str, tuple[float, float]]) -> plt.Figure:
+def draw_comparison(progress: pd.DataFrame, refs: dict[str, tuple[float, float, float]]) -> plt.Figure:
     """In-band % and power saved (against the built-in controller) vs. env steps and vs. wall time.
 
     The references are lines in their colours of every other figure (`plots.REFERENCE_COLORS`); the legend
@@ -98,7 +98,7 @@ def draw_comparison(progress: pd.DataFrame, refs: dict[str, tuple[float, float]]
         for col, x in enumerate((g["steps"], g["wall_s"] / 3600)):
             axes[0, col].plot(x, g["in_band_pct"], **style)
             axes[1, col].plot(x, saved, **style)
-    for label, (in_band, kw) in refs.items():
+    for label, (in_band, kw, _) in refs.items():
         style = {"color": colors[label], "linestyle": ":" if label == BASELINE_LABEL else "--", "linewidth": 1,
                  "label": label}  # fmt: skip
         for col in range(2):
@@ -113,7 +113,7 @@ def draw_comparison(progress: pd.DataFrame, refs: dict[str, tuple[float, float]]
     return fig
 
 
-def compare_figure(progress: pd.DataFrame, refs: dict[str, tuple[float, float]], path: Path) -> Path:
+def compare_figure(progress: pd.DataFrame, refs: dict[str, tuple[float, float, float]], path: Path) -> Path:
     """`draw_comparison`, saved to `path`."""
     fig = draw_comparison(progress, refs)
     fig.savefig(path, dpi=120)
@@ -121,16 +121,17 @@ def compare_figure(progress: pd.DataFrame, refs: dict[str, tuple[float, float]],
     return path
 
 
-def compare_table(progress: pd.DataFrame, refs: dict[str, tuple[float, float]]) -> str:
+def compare_table(progress: pd.DataFrame, refs: dict[str, tuple[float, float, float]]) -> str:
     """Markdown: each algorithm's last evaluation beside the reference controllers."""
     baseline_kw = refs[BASELINE_LABEL][1]
-    lines = ["| controller | env steps | wall time (h) | in 22-25 °C (%) | power (kW) | power saved (%) |",
-             "|---|---:|---:|---:|---:|---:|"]  # fmt: skip
-    for label, (in_band, kw) in refs.items():
-        lines.append(f"| {label} | - | - | {in_band:.2f} | {kw:.2f} | {100 * (baseline_kw - kw) / baseline_kw:.1f} |")
+    lines = ["| controller | env steps | wall time (h) | in 22-25 °C (%) | power (kW) | power saved (%) "
+             "| reward per step |", "|---|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    for label, (in_band, kw, reward) in refs.items():
+        lines.append(f"| {label} | - | - | {in_band:.2f} | {kw:.2f} | {100 * (baseline_kw - kw) / baseline_kw:.1f} "
+                     f"| {reward:.2f} |")  # fmt: skip
     for algorithm, g in progress.groupby("algorithm", sort=False):
         r = g.sort_values("steps").iloc[-1]
         saved = 100 * (baseline_kw - r.power_kw) / baseline_kw
         lines.append(f"| {algorithm.upper()} | {int(r.steps):,} | {r.wall_s / 3600:.2f} | {r.in_band_pct:.2f} "
-                     f"| {r.power_kw:.2f} | {saved:.1f} |")  # fmt: skip
+                     f"| {r.power_kw:.2f} | {saved:.1f} | {r.reward_mean:.2f} |")  # fmt: skip
     return "\n".join(lines) + "\n"
