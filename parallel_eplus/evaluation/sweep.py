@@ -141,7 +141,7 @@ def run_sweep(
     `building`: a spec (checked first); its "baseline" is its model's own controls (`baseline_idf`).
 
     `keep_going`: an episode whose EnergyPlus fails (a model's own controls can fail on a weather) is left out
-    and the others run on; the table's `attrs["failures"]` lists what failed, why and where (`failure_rows`).
+    and the others run on; the table's `attrs["failures"]` lists what failed, why and where (`failure_row`).
     Otherwise the first failure stops the sweep, as any caller averaging over the weathers needs."""
     known = None
     if building:
