@@ -32,7 +32,16 @@ def _format_summary(summary: dict) -> str:
             f"{label:10s}  mean {z['temp_mean']:5.2f} C  std {z['temp_std']:4.2f}"
             f"  min {z['temp_min']:5.2f}  max {z['temp_max']:5.2f}  in band {z['in_band_pct']:5.1f} %"
         )
-    lines.append(f"samples in band       {summary['in_band_pct']:8.2f} %")
+    where = (
+        ""
+        if summary.get("comfort_steps_pct", 100.0) == 100.0
+        else (f" (where comfort applies: {summary['comfort_steps_pct']:.1f} % of steps)")
+    )
+    lines.append(f"samples in band       {summary['in_band_pct']:8.2f} %{where}")
+    if "energy_kwh" in summary:  # BOPTEST's figures (buildings/comfort.py)
+        lines.append(f"discomfort            {summary['discomfort_kh']:8.2f} K·h per zone")
+        lines.append(f"energy, every fuel    {summary['energy_kwh']:8.1f} kWh")
+        lines.append(f"peak electric power   {summary['peak_power_kw']:8.1f} kW")
     return "\n".join(lines)
 
 

@@ -24,7 +24,7 @@ class SimulationConfig:
     output_dir: str | None = None  # None: a temporary directory removed on close
     keep_episodes: int | None = None  # newest full episode directories kept; None keeps all
     # EnergyPlus's own eplusout.csv in each episode (where the model asks for one): training turns it off,
-    # its cost being memory and time (episode.write_episode_idf), its content ours in steps.parquet.
+    # its cost being memory and time (engine/idf_prep.py), its content ours in steps.parquet.
     energyplus_csv: bool = True
     reward: RewardConfig = field(default_factory=RewardConfig)
     start_timeout_s: float = 180.0  # sizing and warmup come before the first observation

@@ -19,7 +19,14 @@ from parallel_eplus.buildings.building import load_building  # noqa: E402
 from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
 from parallel_eplus.buildings.reward import RewardConfig  # noqa: E402
 from parallel_eplus.buildings.weather import WEATHER_FILES  # noqa: E402
-from parallel_eplus.engine.episode import REWARD_PARTS, STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
+from parallel_eplus.engine.episode import (  # noqa: E402
+    REWARD_PARTS,
+    STEP_FLAGS,
+    STEPS_FILE,
+    SUMMARY_FILE,
+    read_steps,
+    summarize,
+)
 
 # One colour per controller in every figure: the references fixed, other labels by a stable hash.
 REFERENCE_COLORS = {"Baseline": "tab:gray", "Rule-based": "tab:green"}
@@ -218,9 +225,10 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
     steps = read_steps(episode_dir)
     saved = json.loads((episode_dir / SUMMARY_FILE).read_text()) if (episode_dir / SUMMARY_FILE).is_file() else {}
     building = load_building(saved.get("building"))
-    summary = summarize(steps, building.temperatures, building.power, building.band)
+    summary = summarize(steps, building.comfort)
     sensors = set(building.sensor_names)
-    actions = [c for c in steps.columns[1:] if c not in sensors and c != "reward" and c not in REWARD_PARTS]
+    skip = {"reward", *REWARD_PARTS, *STEP_FLAGS}
+    actions = [c for c in steps.columns[1:] if c not in sensors and c not in skip]
     in_c = [c for c in actions if c.endswith("_c")]
     other = [c for c in actions if not c.endswith("_c")]
     temps = [c for c in ("outdoor_temp_c",) if c in steps.columns] + list(building.temperatures)
