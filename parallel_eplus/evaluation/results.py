@@ -22,7 +22,8 @@ RESULT_COLUMNS = [
     "controller", "weather", "reward_mean", "power_kw", "it_power_kw", "hvac_power_kw",
     "west_temp_mean", "west_temp_std", "west_temp_min", "west_temp_max",
     "east_temp_mean", "east_temp_std", "east_temp_min", "east_temp_max",
-    "west_in_band_pct", "east_in_band_pct", "in_band_pct", "steps", "episode_dir",
+    "west_in_band_pct", "east_in_band_pct", "in_band_pct",
+    "energy_kwh", "peak_power_kw", "discomfort_kh", "west_discomfort_kh", "east_discomfort_kh", "steps", "episode_dir",
 ]  # fmt: skip
 
 
@@ -70,6 +71,19 @@ def table_markdown(df: pd.DataFrame) -> str:
     for c in controllers:
         change = "–" if base is None or c == BASELINE_LABEL else f"{100 * (avg[c] / base - 1):+.1f} %"
         lines.append(f"| {c} | {avg[c]:.1f} | {change} | {share[c]:.2f} % |")
+    if "energy_kwh" in shared.columns:  # BOPTEST's figures (buildings/comfort.py), per weather's year, averaged
+        kpi = shared.groupby("controller", sort=False)[["energy_kwh", "peak_power_kw", "discomfort_kh"]].mean()
+        lines += [
+            "",
+            "BOPTEST's figures, averaged over the weathers: energy over the run, peak electric power (highest "
+            "15-minute mean), thermal discomfort outside the band:",
+            "",
+            "| Controller | energy (MWh) | peak (kW) | discomfort (K·h per zone) |",
+            "|---|---|---|---|",
+        ]
+        for c in controllers:
+            r = kpi.loc[c]
+            lines.append(f"| {c} | {r.energy_kwh / 1000:,.1f} | {r.peak_power_kw:.1f} | {r.discomfort_kh:.2f} |")
     return "\n".join(lines) + "\n"
 
 
