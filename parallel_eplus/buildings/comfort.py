@@ -74,6 +74,18 @@ class Comfort:
                 n, dist = n + 1, dist + t - high
         return n, dist
 
+    def cost(self, temps: tuple[float, ...], margin_c: float) -> tuple[float, int]:
+        """A step's comfort cost where the band applies (training/lagrangian.py): per zone 0 inside the band shrunk
+        by `margin_c` on each side, rising linearly to 1 at the band's edge and 1 beyond, averaged over the zones;
+        and the number of zones outside the band itself."""
+        low, high = self.band
+        total, out = 0.0, 0
+        for t in temps:
+            d = max(low + margin_c - t, t - high + margin_c, 0.0) / margin_c
+            total += d if d < 1.0 else 1.0
+            out += t < low or t > high
+        return total / len(temps), out
+
     def summarize(self, steps: pd.DataFrame) -> dict[str, float]:
         """An episode's comfort and energy figures from its step table (`zone` names drop `_temp_c`)."""
         out: dict[str, float] = {}

@@ -46,6 +46,16 @@ class ActuatorSpec:
     key: str
 
 
+# Where the building's own controls' choice for an actuator can be read back (an output variable on the same key),
+# for `train --init-from-baseline`; other actuators need `readback = { variable = ..., key = ... }` in the spec.
+READBACKS = {
+    ("system node setpoint", "temperature setpoint"): "System Node Setpoint Temperature",
+    ("fan", "fan air mass flow rate"): "Fan Air Mass Flow Rate",
+    ("zone temperature control", "cooling setpoint"): "Zone Thermostat Cooling Setpoint Temperature",
+    ("zone temperature control", "heating setpoint"): "Zone Thermostat Heating Setpoint Temperature",
+}
+
+
 @dataclass(frozen=True)
 class ActionSpec:
     """One element of the action: scaled from [-1, 1] to [low, high] and written to every actuator listed."""
@@ -56,6 +66,17 @@ class ActionSpec:
     initial: float
     actuators: tuple[ActuatorSpec, ...]
     unit: str = ""
+    readback_named: tuple[str, str] | None = None  # (variable, key) the spec names
+
+    @property
+    def readback(self) -> tuple[str, str] | None:
+        """(variable, key): what the building's own controls set this action's first actuator to, as an output
+        variable; the spec's own, else inferred from the actuator's kind (`READBACKS`); None: unknown."""
+        if self.readback_named:
+            return self.readback_named
+        a = self.actuators[0] if self.actuators else None
+        variable = READBACKS.get((a.component.lower(), a.control.lower())) if a else None
+        return (variable, a.key) if variable else None
 
 
 @dataclass(frozen=True)
@@ -205,7 +226,14 @@ def load_spec(path: str | Path) -> BuildingSpec:
         for j, a in enumerate(need(t, "actuators", where, list) or []):
             aw = f"{where}actuators[{j}]."
             acts.append(ActuatorSpec(need(a, "component", aw), need(a, "control", aw), need(a, "key", aw)))
-        actions.append(ActionSpec(n, low, high, initial, tuple(acts), t.get("unit", "")))
+        readback = t.get("readback")
+        if readback is not None and not (
+            isinstance(readback, dict) and isinstance(readback.get("variable"), str) and "key" in readback
+        ):
+            errors.append(f'{where}readback: {readback!r} is not {{ variable = "...", key = "..." }}')
+            readback = None
+        named = (readback["variable"], str(readback["key"])) if readback else None
+        actions.append(ActionSpec(n, low, high, initial, tuple(acts), t.get("unit", ""), named))
 
     r = data.get("reward")
     occupied = None

@@ -110,8 +110,12 @@ def _simulation_control(kinds: set[str]) -> str:
     return _object("SimulationControl", fields, "the weather year only, set by parallel-eplus")
 
 
-def prepare_idf(source: Path, target: Path, run_days: int, energyplus_csv: bool = True) -> None:
-    """Write the episode's copy of `source` to `target` (see the module's docstring for what changes)."""
+def prepare_idf(
+    source: Path, target: Path, run_days: int, energyplus_csv: bool = True, outputs: tuple[tuple[str, str], ...] = ()
+) -> None:
+    """Write the episode's copy of `source` to `target` (see the module's docstring for what changes).
+
+    `outputs`: (key, variable) pairs reported every timestep in EnergyPlus's CSV (which they turn on)."""
     text = source.read_text(encoding="latin-1")
     objects = idf_objects(text)
     kinds = {o.kind.lower() for o in objects}
@@ -126,8 +130,9 @@ def prepare_idf(source: Path, target: Path, run_days: int, energyplus_csv: bool 
     if control is not None:
         replace[control.start] = (control.end, _set_fields(text, control, _WEATHER_YEAR))
     files = by_kind.get("outputcontrol:files", [])
-    if not energyplus_csv and files and files[0].fields and files[0].fields[0].lower() == "yes":
-        replace[files[0].start] = (files[0].end, _set_fields(text, files[0], {0: "No"}))
+    csv = energyplus_csv or bool(outputs)  # read-backs are read from EnergyPlus's CSV
+    if files and files[0].fields and (files[0].fields[0].lower() == "yes") != csv:
+        replace[files[0].start] = (files[0].end, _set_fields(text, files[0], {0: "Yes" if csv else "No"}))
     out, pos = [], 0
     for start in sorted(replace):
         end, new = replace[start]
@@ -137,4 +142,8 @@ def prepare_idf(source: Path, target: Path, run_days: int, energyplus_csv: bool 
     added = [] if periods else [_run_period(None, run_days)]
     if control is None:
         added.append(_simulation_control(kinds))
+    added += [_object("Output:Variable", [key, variable, "Timestep"], "read back by parallel-eplus")
+              for key, variable in outputs]  # fmt: skip
+    if outputs and not files:
+        added.append(_object("OutputControl:Files", ["Yes"], "EnergyPlus's CSV for the read-backs"))
     target.write_text("".join(out) + "".join(f"\n\n{a}\n" for a in added), encoding="latin-1")

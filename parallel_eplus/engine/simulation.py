@@ -149,7 +149,8 @@ class Simulation:
         if self.episode_dir.exists():
             shutil.rmtree(self.episode_dir)
         self.episode_dir.mkdir(parents=True)
-        prepare_idf(self.idf, self.episode_dir / MODEL_FILE, self.config.run_days, self.config.energyplus_csv)
+        cfg = self.config
+        prepare_idf(self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
         link_or_copy(epw, self.episode_dir / epw.name)
         args = [
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
@@ -200,9 +201,13 @@ class Simulation:
         comfort = self.comfort
         applies = comfort.always or comfort.applies(info["time"], info)
         temps = tuple(info[t] for t in self._temps)
-        r, parts = reward(temps, comfort.energy_w(info), self.config.reward, applies)
+        margin = self.config.comfort_margin_c
+        r, parts = reward(temps, comfort.energy_w(info), self.config.reward, applies and margin is None)
         info.update(parts)
         info["comfort_applies"] = applies
+        if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward
+            cost, out = comfort.cost(temps, margin) if applies else (0.0, 0)
+            info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
         row = [*values[pipe.TIME_FIELDS :].tolist(), *self._action, r, *parts.values(), float(applies)]
         self.records.add(info["time"], row)
         terminated = code == pipe.END

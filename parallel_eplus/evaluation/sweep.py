@@ -174,7 +174,7 @@ def run_sweep(
             deadline_s = 600.0 + run_days * steps_per_day * 0.05
             rows, failures = ray_sweep.run_jobs(jobs, workers, ray_address, bar, deadline_s, keep_going)
         else:
-            rows, failures = _run_local(jobs, workers, bar, keep_going)
+            rows, failures = run_local(jobs, workers, bar, keep_going)
     finally:
         bar.close()
     rows = [{**row, **band} for row in rows]  # a spec's band, beside its "% in band"
@@ -213,7 +213,7 @@ def _job_config(
     )  # fmt: skip
 
 
-def _run_local(
+def run_local(
     jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar, keep_going: bool = False
 ) -> tuple[list[dict], list[dict]]:
     """The jobs as EnergyPlus processes of this machine, up to `workers` at once: (rows, failures)."""
