@@ -49,7 +49,8 @@ def _crac_with(tmp_path: Path, action_extra: str, component: str | None = None) 
 
 @pytest.mark.slow
 def test_a_named_read_back_is_checked_and_an_unknown_one_is_a_note(tmp_path):
-    bad = _crac_with(tmp_path, 'readback = { variable = "System Node Setpoint Temperature", key = "Supply Outlet Nod" }')
+    typo = 'readback = { variable = "System Node Setpoint Temperature", key = "Supply Outlet Nod" }'
+    bad = _crac_with(tmp_path, typo)
     result = check_spec(load_spec(bad), use_cache=False)
     assert not result.ok and any("actions[0].readback" in p and "Supply Outlet Node" in p for p in result.problems)
     unknown = _crac_with(tmp_path, "", 'component = "System Node Setpoint", control = "Temperature Maximum Setpoint"')
@@ -72,7 +73,7 @@ def test_the_cloned_policy_tracks_what_the_built_in_controls_chose(tmp_path, no_
     assert len(demos) == 2 * 2 * 96 and demos.observations.shape[1] == 6
     assert set(demos.weathers) == {"CA", "FL"}
     # what the controls chose, read back: setpoints in their range, fans near the top of theirs
-    assert 10 <= demos.physical[:, :2].min() and demos.physical[:, :2].max() <= 20
+    assert demos.physical[:, :2].min() >= 10 and demos.physical[:, :2].max() <= 20
     assert demos.physical[:, 2:].min() > 4.0
 
     class Shape(gym.Env):  # the spaces SB3 builds the policy from; never stepped
