@@ -154,7 +154,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         BASELINE_LABEL,
         RBC_LABEL,
         Controller,
-        policy_controller,
+        policy_controllers,
         run_sweep,
     )
 
@@ -171,7 +171,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(RBC_LABEL, "rbc"))
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    controllers += [policy_controller(p) for p in args.policy or []]
+    controllers += [c for p in args.policy or [] for c in policy_controllers(p)]
     if not controllers:
         raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas

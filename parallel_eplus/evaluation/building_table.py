@@ -84,14 +84,26 @@ def table_markdown(df: pd.DataFrame, baseline: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_results(df: pd.DataFrame, out_dir: Path, baseline: str) -> list[Path]:
+def write_results(
+    df: pd.DataFrame, out_dir: Path, baseline: str, full: pd.DataFrame | None = None, across: pd.DataFrame | None = None
+) -> list[Path]:
+    """`df`: one row per controller and weather (runs averaged); `full`: every run's rows; `across`: the seed
+    table (seeds.py) of controllers with several runs."""
+    from parallel_eplus.evaluation import seeds
+
+    full = df if full is None else full
     out_dir.mkdir(parents=True, exist_ok=True)
-    df.to_csv(out_dir / "results.csv", index=False)
-    (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df, baseline))
-    return [out_dir / "results.csv", out_dir / "results.md", *figures(df, out_dir)]
+    full.to_csv(out_dir / "results.csv", index=False)
+    extra = seeds.seeds_markdown(across) if across is not None else ""
+    (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df, baseline) + extra)
+    files = [out_dir / "results.csv", out_dir / "results.md"]
+    if across is not None and not across.empty:
+        across.to_csv(out_dir / "seeds.csv", index=False)
+        files.append(out_dir / "seeds.csv")
+    return files + figures(df, out_dir, full)
 
 
-def figures(df: pd.DataFrame, out_dir: Path) -> list[Path]:
+def figures(df: pd.DataFrame, out_dir: Path, full: pd.DataFrame | None = None) -> list[Path]:
     """The building's own figures: its zones against its band, its power; no data-center references."""
     from parallel_eplus.evaluation import plots
 
@@ -100,5 +112,5 @@ def figures(df: pd.DataFrame, out_dir: Path) -> list[Path]:
         files.append(
             plots.temperature_comparison(df, out_dir / "temperatures.png", band_of(df) or plots.COMFORT_BAND_C)
         )
-    files.append(plots.power_comparison(df, out_dir / "power.png"))
+    files.append(plots.power_comparison(df, out_dir / "power.png", full))
     return files

@@ -155,13 +155,25 @@ def weather_order(weathers) -> list[str]:
     return sorted(seen, key=lambda w: known.index(w) if w in known else len(known) + seen.index(w))
 
 
-def power_comparison(df: pd.DataFrame, path: Path) -> Path:
-    """Average total power per controller and weather."""
+def power_comparison(df: pd.DataFrame, path: Path, runs: pd.DataFrame | None = None) -> Path:
+    """Average total power per controller and weather; with every run's rows (`runs`), a controller with several
+    runs is drawn at their mean with its 95 % bootstrap interval (seeds.py)."""
+    from parallel_eplus.evaluation.seeds import interval
+
     table = df.pivot(index="weather", columns="controller", values="power_kw")
     table = table.loc[weather_order(df["weather"]), list(dict.fromkeys(df["controller"]))]
+    errors = np.zeros((len(table.columns), 2, len(table.index)))
+    if runs is not None and "run" in runs.columns:
+        for i, c in enumerate(table.columns):
+            for j, w in enumerate(table.index):
+                values = runs[(runs.controller == c) & (runs.weather == w)]["power_kw"].to_numpy()
+                if len(values) > 1:
+                    mean, low, high = interval([values])
+                    errors[i, :, j] = mean - low, high - mean
     fig, ax = _figure((9, 4))
     colors = controller_colors(table.columns)
-    table.plot.bar(ax=ax, rot=0, color=[colors[c] for c in table.columns], legend=False)
+    table.plot.bar(ax=ax, rot=0, color=[colors[c] for c in table.columns], legend=False,
+                   yerr=errors if errors.any() else None, capsize=3, error_kw={"lw": 1})  # fmt: skip
     ax.set_ylabel("average total power (kW)")
     ax.set_xlabel("test weather")
     ax.set_title("Average power per controller and weather", fontsize=10)

@@ -98,18 +98,27 @@ def failures_markdown(failures: list[dict]) -> str:
 
 
 def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
-    """results.csv, results.md and the figures; returns the files written."""
-    from parallel_eplus.evaluation import building_table, plots
+    """results.csv (every run's rows), results.md and the figures; returns the files written.
 
+    Several runs of one controller (policies sharing a label) are averaged in the tables and figures, and
+    reported across runs, with intervals, in results.md's last section and seeds.csv (seeds.py)."""
+    from parallel_eplus.evaluation import building_table, plots, seeds
+
+    across = seeds.seed_table(df, BASELINE_LABEL)
+    full, df = df, seeds.collapse(df)
     if building_table.is_generic(df):  # another building: its power and zones, no paper figures
-        return building_table.write_results(df, out_dir, BASELINE_LABEL)
+        return building_table.write_results(df, out_dir, BASELINE_LABEL, full, across)
     out_dir.mkdir(parents=True, exist_ok=True)
-    io.write_text(out_dir / "results.csv", df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(index=False))
-    io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df))
+    columns = [c for c in ("controller", "run", *RESULT_COLUMNS[1:]) if c in full.columns]
+    io.write_text(out_dir / "results.csv", full[columns].to_csv(index=False))
+    io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df) + seeds.seeds_markdown(across))
     files = [out_dir / "results.csv", out_dir / "results.md"]
+    if not across.empty:
+        io.write_text(out_dir / "seeds.csv", across.to_csv(index=False))
+        files.append(out_dir / "seeds.csv")
     shown = plots.with_references(df, plots.find_references(out_dir))  # a lone policy beside the references
     files.append(plots.temperature_comparison(shown, out_dir / "temperatures.png"))
-    files.append(plots.power_comparison(shown, out_dir / "power.png"))
+    files.append(plots.power_comparison(shown, out_dir / "power.png", full))
     if histogram is None:
         controller = df["controller"].iloc[-1]
         weathers = list(df[df.controller == controller]["weather"])
