@@ -189,7 +189,9 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
     work = cfg.run_dir / "baseline-record"
     demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, work,
                             (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
-    report = clone(model, env, demos, cfg.imitation, cfg.seed)
+    building = load_building(cfg.building)
+    regulated = [building.sensor_names.index(t) for t in building.temperatures]
+    report = clone(model, env, demos, cfg.imitation, cfg.seed, regulated, building.band)
     shutil.rmtree(work, ignore_errors=True)  # a year's EnergyPlus CSV per weather: the fit is what is kept
     report |= {"weathers": cfg.weathers, "days_per_weather": days}
     io.write_text(cfg.run_dir / "imitation.json", json.dumps(report, indent=2))
