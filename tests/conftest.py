@@ -32,7 +32,7 @@ def pytest_sessionfinish(session, exitstatus):
     if left:
         reporter = session.config.pluginmanager.get_plugin("terminalreporter")
         if reporter is not None:
-            reporter.write_line(f"FAILED: the tests left in the temp folder: {', '.join(left)}", red=True)
+            reporter.write_line(f"\nFAILED: the tests left in the temp folder: {', '.join(left)}", red=True)
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
     shutil.rmtree(SESSION_TMP, ignore_errors=True)
 
