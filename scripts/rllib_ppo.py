@@ -39,8 +39,8 @@ def main() -> None:
         for i in range(1, args.iterations + 1):
             result = algo.train()
             runners = result["env_runners"]
-            print(f"iteration {i}: {result['num_env_steps_sampled_lifetime']} env steps, "
-                  f"{runners.get('num_episodes_lifetime', 0)} episodes, "
+            print(f"iteration {i}: {int(result['num_env_steps_sampled_lifetime'])} env steps, "
+                  f"{int(runners.get('num_episodes_lifetime', 0))} episodes, "
                   f"mean return {runners.get('episode_return_mean', float('nan')):.2f}")  # fmt: skip
     finally:
         algo.stop()  # closes every env: no EnergyPlus process or pipe left

@@ -23,8 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from parallel_eplus.engine import pipe_sweep
-from parallel_eplus.training.policy_files import MODEL_FILE, saves_newest_first
-from parallel_eplus.training.run_status import read_status
+from parallel_eplus.training.run_files import MODEL_FILE, read_status, saves_newest_first
 
 log = logging.getLogger(__name__)
 
@@ -155,14 +154,11 @@ def read_run(run_dir: Path, folder: Path | None = None) -> RunInfo:
     except (OSError, ValueError, KeyError):
         planned = None
     planned = int(status["planned"]) if status and status.get("planned") else planned
+    wall: float | None = None
     if status is not None:
         wall = float(status.get("wall_s", 0.0))
         if state == "running":  # as of now, not as of its last update
             wall += max(_age_s(status.get("updated")) or 0.0, 0.0)
-    else:  # from config.json (written at the start) to the newest file written since
-        files = [run_dir / EPISODES_FILE, *saves]
-        newest = max((p.stat().st_mtime for p in files if p.is_file()), default=None)
-        wall = None if newest is None else max(newest - (run_dir / CONFIG_FILE).stat().st_mtime, 0.0)
     name = run_dir.relative_to(folder).as_posix() if folder and run_dir != Path(folder) else run_dir.name
     return RunInfo(name, run_dir, state, process, steps, planned, episodes, wall, saves[0] if saves else None,
                    latest, note, status)  # fmt: skip

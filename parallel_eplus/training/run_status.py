@@ -21,26 +21,16 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus import io
 from parallel_eplus.engine.pipe_sweep import start_time
+from parallel_eplus.training.run_files import STATUS_FILE, read_status
 
 log = logging.getLogger(__name__)
 
-STATUS_FILE = "status.json"
 TRIAL_VARIABLE = "PARALLEL_EPLUS_TRIAL"  # set by whatever runs this training as a Ray Tune trial
-STATES = ("running", "finished", "stopped", "failed")
 EVERY_S = 10.0
 
 
 def now_iso() -> str:
     return dt.datetime.now().astimezone().isoformat(timespec="seconds")
-
-
-def read_status(run_dir: Path) -> dict | None:
-    """The run's status.json, or None if it has none (a run from before it existed) or it cannot be read."""
-    try:
-        status = json.loads((Path(run_dir) / STATUS_FILE).read_text())
-    except (OSError, ValueError):
-        return None
-    return status if isinstance(status, dict) and status.get("state") in STATES else None
 
 
 class RunStatus(BaseCallback):
