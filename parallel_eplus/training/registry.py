@@ -185,16 +185,29 @@ def stop_run(info: RunInfo, timeout_s: float = 300.0) -> tuple[RunInfo, list[str
         if time.monotonic() > deadline:
             raise TimeoutError(f"run {info.name} (pid {pid}) did not stop within {timeout_s:.0f} s")
         time.sleep(0.2)
-    return read_run(info.path), _left_behind(pid)
+    return read_run(info.path), _left_behind(pid, info.path)
 
 
-def _left_behind(pid: int, wait_s: float = 10.0) -> list[str]:
-    """EnergyPlus processes and pipe directories of the trainer `pid` still there (after `wait_s` of grace)."""
+def _energyplus_of(run_dir: Path) -> list[int]:
+    """EnergyPlus processes (ours: the callback module) writing into `run_dir`, whichever process started them
+    (the trainer itself, or a Ray actor on this host)."""
+    inside = str(run_dir.resolve()) + "/"
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            with contextlib.suppress(OSError):
+                args = (proc / "cmdline").read_bytes().decode(errors="replace").split("\0")
+                if pipe_sweep.CALLBACK_MODULE in args and any(a.startswith(inside) for a in args):
+                    found.append(int(proc.name))
+    return found
+
+
+def _left_behind(pid: int, run_dir: Path, wait_s: float = 10.0) -> list[str]:
+    """The run's EnergyPlus processes and the trainer's pipe directories still there (after `wait_s` of grace)."""
     prefix = f"{pipe_sweep.PREFIX}{pid}-"
     deadline = time.monotonic() + wait_s
     while True:
-        procs = [p for p in pipe_sweep.leftover_processes() if p.pipe_dir and p.pipe_dir.name.startswith(prefix)]
-        left = [f"EnergyPlus process {p.pid}" for p in procs]
+        left = [f"EnergyPlus process {p}" for p in _energyplus_of(run_dir)]
         left += [f"pipe directory {d}" for d in pipe_sweep.pipe_dirs() if d.name.startswith(prefix)]
         if not left or time.monotonic() > deadline:
             return left
