@@ -35,7 +35,7 @@ def now_iso() -> str:
 
 class RunStatus(BaseCallback):
     """The run's status.json: a context manager around the whole run (how it ended) and a callback while it
-    learns (steps done, at most every `every_s` seconds and after each rollout)."""
+    learns (steps done, at most every `every_s` seconds: a write is an fsync)."""
 
     def __init__(self, run_dir: Path, planned: int, every_s: float = EVERY_S):
         super().__init__()
@@ -92,5 +92,5 @@ class RunStatus(BaseCallback):
             self.write(steps=int(self.num_timesteps))
         return True
 
-    def _on_rollout_end(self) -> None:
-        self.write(steps=int(self.num_timesteps))
+    def _on_rollout_end(self) -> None:  # a batch collected (SAC: every vector step, hence the same limit)
+        self._on_step()
