@@ -78,6 +78,8 @@ def our_pipe_dirs(tmp: str | None = None) -> set[str]:
     """Pipe directories under `tmp` (a `parallel-eplus-*` folder with an `act` FIFO), less those of
     another run on the machine: named as another process's, or held open by one."""
     tmp = tmp or tempfile.gettempdir()
+    if not os.path.isdir(tmp):  # the session's own, removed at its end (an interrupted session tears down late)
+        return set()
     names = {
         d for d in os.listdir(tmp) if d.startswith("parallel-eplus-") and os.path.exists(os.path.join(tmp, d, "act"))
     }
