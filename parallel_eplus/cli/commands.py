@@ -261,6 +261,31 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_runs(args: argparse.Namespace) -> int:
+    from parallel_eplus.training import registry, registry_view
+
+    if args.runs_command is None:
+        runs = registry.list_runs(args.dir)
+        print(registry_view.table(runs) if runs else f"no runs in {args.dir}")
+        return 0
+    info = registry.read_run(registry.resolve_run(args.name, args.dir), args.dir)
+    if args.runs_command == "show":
+        print(registry_view.details(info))
+        return 0
+    print(f"stopping {info.name} ({info.process}) ...", flush=True)
+    try:
+        info, left = registry.stop_run(info, args.timeout)
+    except TimeoutError as e:
+        print(f"{e}: it may still be saving; run `parallel-eplus runs` again to see", file=sys.stderr)
+        return 1
+    print(f"{info.name}: {info.state} at step {info.steps}; checkpoint: {info.checkpoint or 'none'}")
+    if left:
+        print("left behind: " + "; ".join(left) + " (parallel-eplus clean --kill removes them)")
+        return 1
+    print(f"no EnergyPlus process or pipe left; continue it with: parallel-eplus train --resume {info.path}")
+    return 0
+
+
 def cmd_clean(args: argparse.Namespace) -> int:
     from parallel_eplus.engine import pipe_sweep
 

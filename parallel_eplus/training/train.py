@@ -36,6 +36,7 @@ from parallel_eplus.training.policy_files import (
     run_dir_of,
 )
 from parallel_eplus.training.run_names import claim_run_name
+from parallel_eplus.training.run_status import RunStatus
 from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 log = logging.getLogger(__name__)
@@ -89,9 +90,15 @@ def train(
     """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first.
 
     A new run whose name is taken is refused, or with `overwrite` the old one is moved aside (run_names.py).
+    runs/<name>/status.json says how far it got and how it ended (run_status.py; `parallel-eplus runs`).
     """
-    from parallel_eplus.training.rollout import ALGORITHMS
+    cfg, checkpoint = _prepare(cfg, resume, overwrite)
+    with RunStatus(cfg.run_dir, cfg.timesteps) as status:
+        return _learn(cfg, checkpoint, progress, timer, status)
 
+
+def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tuple[TrainConfig, Path | None]:
+    """The run's settings (a resumed run's own) and checkpoint; a new run claims its name. Writes config.json."""
     checkpoint = None
     if resume is not None and cfg.init_from is not None:
         raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
@@ -111,8 +118,16 @@ def train(
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     io.write_text(run_dir / "config.json", cfg.to_json())
-    th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
+    return cfg, checkpoint
 
+
+def _learn(
+    cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus
+) -> Path:
+    from parallel_eplus.training.rollout import ALGORITHMS
+
+    run_dir = cfg.run_dir
+    th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
     venv = make_vec_env(cfg)
     bar = None
     try:
@@ -135,6 +150,7 @@ def train(
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers
         end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
+        status.write(steps=model.num_timesteps, planned=end)
         bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
         callbacks = CallbackList([
@@ -142,6 +158,7 @@ def train(
             EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * load_building(cfg.building).steps_per_day),
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
             *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.algorithm == "sac" else []),
+            status,
         ])  # fmt: skip
         try:
             with Interrupts():
