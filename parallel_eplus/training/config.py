@@ -77,7 +77,7 @@ class ComfortConstraint:
     rate: float = 0.3  # log-multiplier step per e-fold of measured over allowed samples out of band
     floor_pct: float = 0.05  # added to both shares out of band: a batch with none out lowers it, finitely
     multiplier_min: float = 0.1
-    multiplier_max: float = 1000.0
+    multiplier_max: float = 100.0  # there, 1 % of samples out of band costs about what all the energy does
 
     def check(self) -> None:
         if self.target_pct is not None and not 0.0 < self.target_pct < 100.0:
