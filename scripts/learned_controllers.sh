@@ -27,7 +27,7 @@ recipe() {
     case $1 in
     datacenter-2zone) echo "--timesteps 1000000 --batch-size 4096 --comfort-target 99.6 --time-features --schedule-features" ;;
     datacenter-crac) echo "--timesteps 500000 --batch-size 4096 --comfort-target 99.9 --time-features" ;;
-    office-small) echo "--timesteps 500000 --batch-size 4096 --comfort-target 98" ;;
+    office-small) echo "--timesteps 500000 --batch-size 4096 --comfort-target 97.5" ;;
     *) echo "unknown building $1" >&2; exit 2 ;;
     esac
 }
