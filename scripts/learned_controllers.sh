@@ -47,7 +47,7 @@ run_one() {  # building seed: resume or start it, to the end
     cd "$WORK"
     local cmd=("$PY" -m parallel_eplus.cli train)
     if [ -n "$(latest "$dir")" ]; then
-        cmd+=(--resume "$dir")
+        cmd+=(--resume "$dir" --quiet)
     else
         # shellcheck disable=SC2046
         cmd+=("${args[@]}" --run-name "$name" --init-from-baseline $(recipe "$b"))
@@ -77,10 +77,10 @@ status)
         steps=$(tail -1 "$d/episodes.csv" 2>/dev/null | cut -d, -f1)
         echo "$(basename "$d"): $( [ -f "$d/model.zip" ] && echo finished || echo "checkpoint $(basename "$(latest "$d")")"), last episode at step ${steps:-?}"
     done
-    tail -3 "$WORK/learned.log" 2>/dev/null || true
+    tail -c 3000 "$WORK/learned.log" 2>/dev/null | tr '\r' '\n' | grep -av '^$' | tail -3 || true
     ;;
 stop)
-    pkill -INT -f "parallel_eplus.cli train" && echo "asked the trainer to checkpoint and stop"
+    pkill -INT -f "parallel_eplus.cli train.*-seed[0-9]" && echo "asked the trainer to checkpoint and stop"
     kill "$(cat "$WORK/learned.pid")" 2>/dev/null || true
     ;;
 save)

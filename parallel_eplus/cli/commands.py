@@ -82,7 +82,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
-    from parallel_eplus.training.config import ComfortConstraint, ImitationSettings, TrainConfig, TRPOSettings
+    from parallel_eplus.training.config import (
+        ComfortConstraint,
+        ImitationSettings,
+        SACSettings,
+        TrainConfig,
+        TRPOSettings,
+    )
     from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
@@ -117,7 +123,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         reward=RewardConfig.from_any(args.reward),
         comfort=ComfortConstraint(target_pct=args.comfort_target, margin_c=args.comfort_margin),
         init_from_baseline=args.init_from_baseline,
-        trpo=TRPOSettings(log_std_init=args.log_std_init),
+        trpo=TRPOSettings(log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda),
+        sac=SACSettings(gamma=args.gamma),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)

@@ -78,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="first fit the policy to the building's own controls on the training weathers (imitation), then learn; "
         "the cloned policy is saved in runs/<name>/cloned/",
     )  # fmt: skip
+    tr.add_argument(
+        "--gamma", type=float, default=0.99,
+        help="discount factor (default 0.99, the paper's): shorter horizons learn faster where actions act quickly",
+    )  # fmt: skip
+    tr.add_argument("--gae-lambda", type=float, default=0.98, help="TRPO/PPO GAE lambda (default 0.98, the paper's)")
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")
