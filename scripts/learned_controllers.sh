@@ -22,12 +22,15 @@ NICE=${NICE:-0}
 PY=$REPO/.venv/bin/python
 SAVED=$REPO/results/learned
 
-# The recipe per building (chosen from pilots: docs/comfort.md, results/learned/README.md).
+# The recipe per building (chosen from pilots: results/learned/README.md). Every one imitates the building's own
+# controls, then learns with comfort as a constraint; a short horizon (the actions act within hours) and a small
+# exploration spread around the clone.
+COMMON="--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2.5"
 recipe() {
     case $1 in
-    datacenter-2zone) echo "--timesteps 1000000 --batch-size 4096 --comfort-target 99.6 --time-features --schedule-features" ;;
-    datacenter-crac) echo "--timesteps 500000 --batch-size 4096 --comfort-target 99.9 --time-features" ;;
-    office-small) echo "--timesteps 500000 --batch-size 4096 --comfort-target 97.5" ;;
+    datacenter-2zone) echo "$COMMON --timesteps 1000000 --comfort-target 99.6 --time-features --schedule-features" ;;
+    datacenter-crac) echo "$COMMON --timesteps 500000 --comfort-target 99.9 --time-features" ;;
+    office-small) echo "$COMMON --timesteps 500000 --comfort-target 97.5" ;;
     *) echo "unknown building $1" >&2; exit 2 ;;
     esac
 }
@@ -65,7 +68,7 @@ start)
     code="$WORK/code-$COMMIT"
     [ -d "$code" ] || { mkdir -p "$code" && git archive "$COMMIT" parallel_eplus idf | tar -x -C "$code"; }
     export -f run_one recipe latest
-    export WORK COMMIT PY SAVED REPO NICE
+    export WORK COMMIT PY SAVED REPO NICE COMMON
     # seeds outer: every building's first seed before any second one
     nohup bash -c "for s in $SEEDS; do for b in $BUILDINGS; do run_one \$b \$s; done; done" >>"$WORK/learned.log" 2>&1 &
     echo $! >"$WORK/learned.pid"
