@@ -48,6 +48,29 @@ def test_numpy_policy_matches_torch():
         np.testing.assert_allclose(fast.log_prob(actions.numpy(), fast.mean(obs)), log_prob, rtol=1e-5, atol=1e-5)
 
 
+def test_numpy_gsde_samples_as_sb3_scores_them_and_holds_its_noise():
+    """gSDE: the numpy sample's log-probability is SB3's `evaluate_actions` (what the update uses); each worker's
+    noise matrix is held `sde_sample_freq` of its steps, then drawn anew."""
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    from parallel_eplus.envs.env import action_space, observation_space
+
+    policy = ActorCriticPolicy(observation_space(), action_space(4), lambda _: 3e-4, net_arch=[32, 32],
+                               activation_fn=th.nn.Tanh, use_sde=True, log_std_init=-1.0)  # fmt: skip
+    assert NumpyPolicy.supports(policy)
+    fast = NumpyPolicy(policy, sde_sample_freq=2)
+    obs = np.random.default_rng(0).normal(size=(3, 6)).astype(np.float32)
+    rngs = [np.random.default_rng(i) for i in range(3)]
+    actions, values, log_prob = fast.sample(obs, rngs)
+    with th.no_grad():
+        _, expected, _ = policy.evaluate_actions(th.as_tensor(obs), th.as_tensor(actions))
+    np.testing.assert_allclose(log_prob, expected.numpy(), rtol=1e-5, atol=1e-5)
+    held, _, _ = fast.sample(obs[:1], rngs[:1])  # worker 0's second step: the same matrix, the same action
+    np.testing.assert_array_equal(held[0], actions[0])
+    fresh, _, _ = fast.sample(obs[:1], rngs[:1])  # its third: a new matrix
+    assert not np.array_equal(fresh[0], actions[0])
+
+
 def test_numpy_policy_samples_with_the_policys_spread():
     policy = _policy(False)
     fast = NumpyPolicy(policy)

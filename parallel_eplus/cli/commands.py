@@ -123,7 +123,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         reward=RewardConfig.from_any(args.reward),
         comfort=ComfortConstraint(target_pct=args.comfort_target, margin_c=args.comfort_margin),
         init_from_baseline=args.init_from_baseline,
-        trpo=TRPOSettings(log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda),
+        trpo=TRPOSettings(
+            log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
+        ),  # fmt: skip
         sac=SACSettings(gamma=args.gamma),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration

@@ -83,6 +83,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="discount factor (default 0.99, the paper's): shorter horizons learn faster where actions act quickly",
     )  # fmt: skip
     tr.add_argument("--gae-lambda", type=float, default=0.98, help="TRPO/PPO GAE lambda (default 0.98, the paper's)")
+    tr.add_argument(
+        "--sde-freq", type=int, default=0, metavar="STEPS",
+        help="TRPO/PPO: state-dependent exploration (gSDE), each worker's noise held STEPS steps (e.g. 96, a day "
+        "of 15-minute steps); default 0, independent noise every step",
+    )  # fmt: skip
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")

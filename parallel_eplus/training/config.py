@@ -33,6 +33,9 @@ class TRPOSettings:
     # The Gaussian policy's initial log standard deviation (SB3's default, 0, is the paper's too). A residual
     # policy starts from a working controller, where noise of one action unit would unsettle it.
     log_std_init: float = 0.0
+    # > 0: gSDE (state-dependent exploration) with a noise matrix held this many steps per worker, so an offset
+    # lasts long enough for the building to respond (96: a day of the data center); 0: independent noise per step.
+    sde_sample_freq: int = 0
 
 
 @dataclass

@@ -204,7 +204,14 @@ def clone(
     policy.set_training_mode(False)
     if hasattr(policy, "log_std"):
         with th.no_grad():
-            policy.log_std.fill_(settings.log_std)
+            spread = settings.log_std
+            if policy.use_sde:  # noise = latent @ matrix: scale it so its typical spread is exp(log_std)
+                x_record = th.as_tensor(env.normalize_obs(demos.observations), dtype=th.float32)
+                latent = policy.mlp_extractor.forward_actor(
+                    policy.extract_features(x_record, policy.pi_features_extractor)
+                )
+                spread -= 0.5 * float(th.log((latent**2).sum(dim=1).mean()))
+            policy.log_std.fill_(spread)
     with th.no_grad():  # on the record itself
         x = th.as_tensor(env.normalize_obs(demos.observations), dtype=th.float32)
         fitted = demos.to_physical(_actor_mean(policy, x).numpy())

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from stable_baselines3.common.distributions import DiagGaussianDistribution
+from stable_baselines3.common.distributions import DiagGaussianDistribution, StateDependentNoiseDistribution
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
@@ -48,13 +48,21 @@ class NumpyPolicy:
     """A snapshot of an SB3 `MlpPolicy` (Box observations, diagonal Gaussian, tanh MLP) in numpy.
 
     Take a new snapshot after every update; `supports(policy)` says whether a policy has this shape.
+    With gSDE (`use_sde`, Raffin et al. 2022) the exploration noise is the policy's last hidden layer times a
+    matrix drawn per worker and kept for `sde_sample_freq` of its steps (the whole batch if <= 0), as SB3 does:
+    an offset that persists long enough for a building to respond to it.
     """
 
-    def __init__(self, policy: ActorCriticPolicy):
-        self.actor = _layers(policy.mlp_extractor.policy_net) + _layers(policy.action_net)
+    def __init__(self, policy: ActorCriticPolicy, sde_sample_freq: int = -1):
+        self.latent = _layers(policy.mlp_extractor.policy_net)
+        self.head = _layers(policy.action_net)
+        self.actor = self.latent + self.head
         self.critic = _layers(policy.mlp_extractor.value_net) + _layers(policy.value_net)
         log_std = policy.log_std.detach().numpy().astype(np.float64)
         self.std = np.exp(log_std)
+        self.sde = bool(policy.use_sde)
+        self.sde_sample_freq = sde_sample_freq
+        self._matrices: dict[int, list] = {}  # a worker's generator -> [exploration matrix, steps drawn with it]
         self._log_prob_const = -(log_std.sum() + _HALF_LOG_2PI * log_std.size)
 
     @staticmethod
@@ -68,9 +76,16 @@ class NumpyPolicy:
             and not (policy.normalize_images and is_image_space(obs_space))
             and isinstance(act_space, spaces.Box)
             and len(act_space.shape) == 1
-            and type(policy.action_dist) is DiagGaussianDistribution
+            and (
+                type(policy.action_dist) is DiagGaussianDistribution
+                or (
+                    type(policy.action_dist) is StateDependentNoiseDistribution
+                    and policy.action_dist.full_std
+                    and not policy.action_dist.use_expln
+                    and policy.action_dist.bijector is None
+                )
+            )
             and not policy.squash_output
-            and not policy.use_sde
             and type(policy.mlp_extractor) is MlpExtractor
             and type(policy.pi_features_extractor) is FlattenExtractor
             and type(policy.vf_features_extractor) is FlattenExtractor
@@ -107,6 +122,8 @@ class NumpyPolicy:
         `rng`: one generator for every row, or one per row (each worker's own stream).
         """
         x = self._flat(obs)
+        if self.sde:
+            return self._sample_sde(x, [rng] * len(x) if isinstance(rng, np.random.Generator) else rng)
         mean = _run(self.actor, x)
         if isinstance(rng, np.random.Generator):
             noise = rng.standard_normal(mean.shape)
@@ -114,3 +131,20 @@ class NumpyPolicy:
             noise = np.array([r.standard_normal(mean.shape[1]) for r in rng])
         actions = (mean + self.std * noise).astype(np.float32)
         return actions, _run(self.critic, x)[:, 0], self.log_prob(actions, mean)
+
+    def _sample_sde(self, x: np.ndarray, rngs: list[np.random.Generator]):
+        """gSDE's sample: noise = latent @ the worker's matrix; log-probability under N(mean, latent² @ std²)."""
+        latent = _run(self.latent, x)
+        mean = _run(self.head, latent)
+        noise = np.empty_like(mean)
+        for i, r in enumerate(rngs):
+            held = self._matrices.setdefault(id(r), [None, 0])
+            if held[0] is None or (self.sde_sample_freq > 0 and held[1] % self.sde_sample_freq == 0):
+                held[0] = r.standard_normal(self.std.shape) * self.std
+            held[1] += 1
+            noise[i] = latent[i] @ held[0]
+        actions = (mean + noise).astype(np.float32)
+        var = (latent * latent) @ (self.std * self.std) + 1e-6  # SB3's epsilon
+        z2 = (actions - mean) ** 2 / var
+        log_prob = -0.5 * (z2 + np.log(var)).sum(axis=1) - _HALF_LOG_2PI * mean.shape[1]
+        return actions, _run(self.critic, x)[:, 0], log_prob

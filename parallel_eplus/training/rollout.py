@@ -77,7 +77,7 @@ class NumpyRollouts:
             return super().collect_rollouts(env, callback, rollout_buffer, n_rollout_steps)
         assert self._last_obs is not None, "No previous observation was provided"
         self.policy.set_training_mode(False)
-        policy = NumpyPolicy(self.policy)
+        policy = NumpyPolicy(self.policy, self.sde_sample_freq)
         workers, norm = (None, None) if self.lockstep else _pipelinable(env)
         if workers is not None:
             return self._collect_pipelined(policy, workers, norm, callback, rollout_buffer, n_rollout_steps)

@@ -69,6 +69,8 @@ def load_policy_network(model_zip: Path):
     # Every cloudpickled entry is replaced by None, so SB3 reads only the JSON and the weights (weights_only).
     serialized = {k: None for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v}
     _, params, _ = load_from_zip_file(model_zip, device="cpu", custom_objects=serialized)
+    if data.get("use_sde") is True and module == "stable_baselines3.common.policies":
+        kwargs["use_sde"] = True  # gSDE's exploration parameters: a matrix of log-stds (acting ignores them)
     policy = _class(POLICY_CLASSES[module])(obs_space, act_space, lambda _: 0.0, **kwargs)
     try:
         policy.load_state_dict(params["policy"])
