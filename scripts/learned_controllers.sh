@@ -28,7 +28,7 @@ SAVED=$REPO/results/learned
 COMMON="--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2.5"
 recipe() {
     case $1 in
-    datacenter-2zone) echo "$COMMON --timesteps 1000000 --comfort-target 99.6 --time-features --schedule-features" ;;
+    datacenter-2zone) echo "--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -3 --algorithm ppo --timesteps 1000000 --comfort-target 99.6 --time-features --schedule-features" ;;
     datacenter-crac) echo "$COMMON --timesteps 500000 --comfort-target 99.9 --time-features" ;;
     office-small) echo "$COMMON --timesteps 500000 --comfort-target 97.5" ;;
     *) echo "unknown building $1" >&2; exit 2 ;;
