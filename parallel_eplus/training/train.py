@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
 import torch as th
-from stable_baselines3.common.callbacks import CallbackList
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
@@ -83,10 +84,12 @@ def train(
     progress: bool = True,
     timer: UpdateTimer | None = None,
     overwrite: bool = False,
+    callbacks: Sequence[BaseCallback] = (),
 ) -> Path:
     """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first.
 
     A new run whose name is taken is refused, or with `overwrite` the old one is moved aside (run_names.py).
+    `callbacks` run after ours (a sweep's trial reports each batch to Ray Tune with one: training/tune_trial.py).
     """
     from parallel_eplus.training.rollout import ALGORITHMS
 
@@ -137,6 +140,7 @@ def train(
             timer or UpdateTimer(),
             EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * load_building(cfg.building).steps_per_day),
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
+            *callbacks,
         ])  # fmt: skip
         try:
             with Interrupts():
