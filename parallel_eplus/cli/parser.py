@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument(
         "--seeds", metavar="S,S,...",
-        help="one run per seed as a sweep's Ray Tune trials, queued by cores: runs/<run-name>/seed=<S>/ (sweep --help)",
+        help="one run per seed as a sweep's Ray Tune trials, queued by cores: runs/<run-name>/seed-<S>/ (sweep --help)",
     )  # fmt: skip
     tr.add_argument("--run-name", help="default: trpo-<weathers>-<time>")
     tr.add_argument("--resume", help="a checkpoint .zip or a run directory to continue")

@@ -158,7 +158,7 @@ def _outcome(result, root: Path) -> TrialOutcome:
         outcome.state, outcome.error = "failed", cause.removeprefix("RuntimeError: ")
     elif metrics.get("done"):
         outcome.state = "finished"
-    elif metrics:
+    elif metrics.get("training_iteration"):
         outcome.state = "stopped"
     return outcome
 

@@ -195,12 +195,18 @@ def trial_config(settings: dict[str, Any], runs_dir: str, tensorboard_dir: str, 
 
 
 def trial_name(config: dict[str, Any], varied: list[str], number: int | None = None) -> str:
-    """A trial's folder name from what tells it apart, e.g. `algorithm=ppo_seed=1` (a search's: `0003_...`)."""
+    """A trial's folder name from what tells it apart, e.g. `algorithm-ppo_seed-1` (a search's: `0003_...`).
+
+    No `=`: `evaluate --policy PATH=LABEL` reads one as the start of a label."""
 
     def shown(value) -> str:
+        if isinstance(value, (list, tuple)):
+            return "+".join(shown(v) for v in value)
+        if isinstance(value, str) and "/" in value:  # a file: its name
+            value = Path(value).stem
         text = f"{value:.4g}" if isinstance(value, float) else str(value)
         return re.sub(r"[^A-Za-z0-9.+-]+", "-", text).strip("-") or "x"
 
-    parts = [f"{key.split('.')[-1]}={shown(config[key])}" for key in varied if key in config]
+    parts = [f"{key.split('.')[-1]}-{shown(config[key])}" for key in varied if key in config]
     prefix = [f"{number:04d}"] if number is not None else []
     return "_".join(prefix + parts) or "trial"

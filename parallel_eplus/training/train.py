@@ -14,7 +14,6 @@ from pathlib import Path
 import pandas as pd
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
-from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
@@ -23,7 +22,7 @@ from parallel_eplus.buildings.building import load_building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError, Interrupts
-from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather
+from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather, tensorboard_logger
 from parallel_eplus.training.checkpoints import AtomicCheckpoint, resume_point, save_checkpoint
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.norm_stats import read_stats
@@ -129,7 +128,7 @@ def train(
                 _warm_start(Path(cfg.init_from), model, env)
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
         model.lockstep = cfg.lockstep
-        model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
+        model.set_logger(tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name)))
         start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers

@@ -20,6 +20,7 @@ from pathlib import Path
 from ray import tune
 from stable_baselines3.common.callbacks import BaseCallback
 
+from parallel_eplus.training.callbacks import episodes_per_weather
 from parallel_eplus.training.policy_files import saves_newest_first
 from parallel_eplus.training.sweep_spec import trial_config
 
@@ -77,6 +78,7 @@ class TrialRun(tune.Trainable):
 
     def setup(self, config, base=None, runs_dir="runs", tensorboard_dir="tensorboard_logs"):
         os.environ[TRIAL_ENV] = self.trial_name  # read by `parallel-eplus runs` through the run's status
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")  # as train's are
         self._results: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self._run_dir = Path(runs_dir) / self.trial_name
@@ -93,8 +95,7 @@ class TrialRun(tune.Trainable):
         try:
             cfg = trial_config(settings, runs_dir, tensorboard_dir, self.trial_name)
             resume = cfg.run_dir if saves_newest_first(cfg.run_dir) else None
-            if resume is not None:
-                log.info("trial %s continues from its last checkpoint in %s", self.trial_name, resume)
+            report.episodes = sum(episodes_per_weather(cfg.run_dir / "episodes.csv").values()) if resume else 0
             # a folder without a checkpoint (a trial killed early) is moved aside, not trained into
             train(cfg, resume=resume, progress=False, overwrite=resume is None, callbacks=[report])
             self._results.put(("done", report.result()))
