@@ -20,7 +20,7 @@
 #
 # Settings (environment): RAYCL_DIR (/tmp/raycl), RAYCL_NS (raywrk), RAYCL_PORT (6379),
 # RAYCL_WORKER_CPUS (2), RAYCL_OBJECT_STORE_BYTES (500000000), RAY_BIN (<repo>/.venv/bin/ray),
-# RAYCL_DASHBOARD_PORT (8265: the dashboard, which serves `ray job submit`; 0 turns it off),
+# RAYCL_DASHBOARD_PORT (8265: the dashboard, which serves `ray job submit`; 0 turns it off), RAYCL_AGENT_PORT (52375),
 # RAYCL_KEEP_LOGS=1 keeps the state dir on `down`.
 set -euo pipefail
 
@@ -41,6 +41,7 @@ PORT=${RAYCL_PORT:-6379}
 WORKER_CPUS=${RAYCL_WORKER_CPUS:-2}
 OBJ_MEM=${RAYCL_OBJECT_STORE_BYTES:-500000000}
 DASH_PORT=${RAYCL_DASHBOARD_PORT:-8265}
+AGENT_PORT=${RAYCL_AGENT_PORT:-52375}
 TOKEN=$STATE/auth_token
 TAG="raycl:$STATE"          # put into every node's environment; used to find leftovers on `down`
 ADDR=$HEAD_IP:$PORT
@@ -102,7 +103,9 @@ start_head() {
   if wait_port "$HEAD_IP" "$PORT" 1; then die "$ADDR is already in use by something else"; fi
   log "starting head on $ADDR"
   local dash=(--include-dashboard=false)
-  [[ $DASH_PORT != 0 ]] && dash=(--include-dashboard=true --dashboard-host "$HEAD_IP" --dashboard-port "$DASH_PORT")
+  # the job server hands each job to the head's agent: its own port, not the 52365 any local Ray on this host takes
+  [[ $DASH_PORT != 0 ]] && dash=(--include-dashboard=true --dashboard-host "$HEAD_IP" --dashboard-port "$DASH_PORT"
+    --dashboard-agent-listen-port "$AGENT_PORT")
   ray_env setsid -f sh -c 'echo $$ >"$0/head.pid"; exec "$@" >"$0/head.log" 2>&1 </dev/null' "$STATE" \
     "$RAY_BIN" start --head --block --port "$PORT" --node-ip-address "$HEAD_IP" --num-cpus 0 \
     "${dash[@]}" --disable-usage-stats --temp-dir "$STATE/head" \

@@ -50,6 +50,13 @@ class TrialOutcome:
     error: str = ""
 
 
+def _quiet_tune_hints(record: logging.LogRecord) -> bool:
+    """Drop Tune's advice that does not apply here: its restore call (re-running the sweep resumes it) and
+    the missing metrics of trials that had not started."""
+    text = record.getMessage()
+    return "Tuner.restore" not in text and "Failed to fetch metrics" not in text
+
+
 def _param_space(spec: SweepSpec) -> dict:
     from ray import tune
 
@@ -108,7 +115,7 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
     numbered = spec.search is not None
 
     def name_of(trial) -> str:
-        return trial_name(trial.config, varied, int(trial.trial_id.rsplit("_", 1)[-1]) if numbered else None)
+        return trial_name(trial.config, varied, trial.trial_id if numbered else None)
 
     trainable = tune.with_resources(
         tune.with_parameters(TrialRun, base=spec.base, runs_dir=str(root), tensorboard_dir=str(tb_root)),
@@ -120,6 +127,8 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
 
         search_alg = OptunaSearch(metric=spec.search.metric, mode=spec.search.mode, seed=spec.seeds[0])
     os.environ["TUNE_DISABLE_AUTO_CALLBACK_LOGGERS"] = "1"  # ours is TensorBoard under tensorboard_logs/
+    for name in ("ray.tune.tune", "ray.tune.analysis.experiment_analysis"):
+        logging.getLogger(name).addFilter(_quiet_tune_hints)
     started = connect(ray_address, os.cpu_count() or 1)
     old_term = signal.signal(signal.SIGTERM, lambda *_: os.kill(os.getpid(), signal.SIGINT))  # Tune's graceful stop
     try:

@@ -194,8 +194,9 @@ def trial_config(settings: dict[str, Any], runs_dir: str, tensorboard_dir: str, 
         raise ValueError(f"trial {name}: {e}") from None
 
 
-def trial_name(config: dict[str, Any], varied: list[str], number: int | None = None) -> str:
-    """A trial's folder name from what tells it apart, e.g. `algorithm-ppo_seed-1` (a search's: `0003_...`).
+def trial_name(config: dict[str, Any], varied: list[str], prefix: str | None = None) -> str:
+    """A trial's folder name from what tells it apart, e.g. `algorithm-ppo_seed-1` (a search's: `<trial id>_...`,
+    so that trials drawn with the same shown values, or by a search run again, never share a folder).
 
     No `=`: `evaluate --policy PATH=LABEL` reads one as the start of a label."""
 
@@ -208,5 +209,4 @@ def trial_name(config: dict[str, Any], varied: list[str], number: int | None = N
         return re.sub(r"[^A-Za-z0-9.+-]+", "-", text).strip("-") or "x"
 
     parts = [f"{key.split('.')[-1]}-{shown(config[key])}" for key in varied if key in config]
-    prefix = [f"{number:04d}"] if number is not None else []
-    return "_".join(prefix + parts) or "trial"
+    return "_".join(([prefix] if prefix else []) + parts) or "trial"
