@@ -31,6 +31,7 @@ from pathlib import Path
 
 from parallel_eplus import io
 from parallel_eplus.errors import RunExistsError
+from parallel_eplus.training.policy_files import MODEL_FILE, saves_newest_first
 from parallel_eplus.training.sweep_spec import SweepSpec, trial_name
 
 log = logging.getLogger(__name__)
@@ -169,6 +170,9 @@ def _outcome(result, root: Path) -> TrialOutcome:
         outcome.state = "finished"
     elif metrics.get("training_iteration"):
         outcome.state = "stopped"
+        saves = saves_newest_first(outcome.run_dir)  # the stop's checkpoint, after the last reported batch
+        if saves and saves[0].name != MODEL_FILE:
+            outcome.timesteps = max(outcome.timesteps, int(saves[0].stem.split("_")[1]))
     return outcome
 
 

@@ -9,19 +9,22 @@ the run saves a checkpoint and stops its EnergyPlus workers, and only then does 
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
 import queue
 import threading
 import time
+import zipfile
 from pathlib import Path
 
+import pandas as pd
 from ray import tune
 from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus.training.callbacks import episodes_per_weather
-from parallel_eplus.training.policy_files import saves_newest_first
+from parallel_eplus.training.policy_files import MODEL_FILE, saves_newest_first
 from parallel_eplus.training.sweep_spec import trial_config
 
 log = logging.getLogger(__name__)
@@ -72,6 +75,21 @@ class TuneReport(BaseCallback):
         return {"timesteps": int(self.num_timesteps), "episodes": self.episodes, **self.latest}
 
 
+def _finished(cfg) -> dict | None:
+    """A finished run's last result (its final model reached the planned steps), or None."""
+    saves = saves_newest_first(cfg.run_dir)
+    if not saves or saves[0].name != MODEL_FILE:
+        return None
+    with zipfile.ZipFile(saves[0]) as z:
+        steps = int(json.loads(z.read("data"))["num_timesteps"])
+    if steps < cfg.timesteps:
+        return None
+    episodes = pd.read_csv(cfg.run_dir / "episodes.csv")
+    last = episodes[episodes["timesteps"] > steps - cfg.batch_size]  # the last batch's episodes
+    means = {"in_band_pct": "in_band_pct", "power_kw": "power_kw", "reward": "reward_mean"}
+    return {"timesteps": steps, "episodes": len(episodes), **{k: float(last[c].mean()) for k, c in means.items()}}
+
+
 class TrialRun(tune.Trainable):
     """A sweep's trial: `setup` starts the run in a thread, `step` hands Tune its next batch's result,
     `cleanup` stops it with a checkpoint. A trial whose run folder holds a checkpoint continues from it."""
@@ -94,6 +112,10 @@ class TrialRun(tune.Trainable):
         report = TuneReport(self._results.put, self._stop)
         try:
             cfg = trial_config(settings, runs_dir, tensorboard_dir, self.trial_name)
+            done = _finished(cfg)
+            if done is not None:  # a sweep run again: this trial had finished
+                self._results.put(("done", done))
+                return
             resume = cfg.run_dir if saves_newest_first(cfg.run_dir) else None
             report.episodes = sum(episodes_per_weather(cfg.run_dir / "episodes.csv").values()) if resume else 0
             # a folder without a checkpoint (a trial killed early) is moved aside, not trained into
