@@ -166,3 +166,30 @@ def test_ctrl_c_stops_every_trial_with_a_checkpoint_and_the_same_command_resumes
     assert steps.is_monotonic_increasing and steps.max() > cut_at
     assert (tmp_path / "runs" / "cut" / "seed-1" / "model.zip").is_file()
     assert our_processes() == [] and our_pipe_dirs() - pipes_before == set()
+
+
+@pytest.mark.slow
+def test_an_optuna_search_draws_its_trials_and_names_the_best(tmp_path, monkeypatch, capsys, no_leaks):
+    pytest.importorskip("optuna")
+    monkeypatch.chdir(tmp_path)
+    spec = write_spec(
+        tmp_path,
+        f"""name = "search"
+{BASE.replace("workers = 2", "workers = 1").replace("batch_size = 192", "")}
+[search]
+samples = 2
+metric = "power_kw"
+[search.space]
+batch_size = {{ choice = [96, 192] }}
+"trpo.target_kl" = {{ loguniform = [0.003, 0.03] }}
+""",
+    )
+    assert main(["sweep", str(spec)]) == 0
+    out = capsys.readouterr().out
+    trials = [p for p in (tmp_path / "runs" / "search").iterdir() if "_batch_size-" in p.name]
+    assert len(trials) == 2 and all((p / "model.zip").is_file() for p in trials)
+    for p in trials:  # each trial trained with what the search drew
+        saved = json.loads((p / "config.json").read_text())
+        assert p.name.split("_batch_size-")[1].startswith(f"{saved['batch_size']}_target_kl-")
+        assert 0.003 <= saved["trpo"]["target_kl"] <= 0.03
+    assert "best by power_kw (min): " in out

@@ -152,7 +152,7 @@ def _run_sweep(spec, ray_address: str | None, overwrite: bool) -> int:
     from parallel_eplus.training.sweep import format_outcomes, run_sweep
 
     outcomes = run_sweep(spec, ray_address, overwrite)
-    print(format_outcomes(outcomes))
+    print(format_outcomes(outcomes, spec))
     root = outcomes[0].run_dir.parent if outcomes else spec.runs_dir
     print(f"runs: {root}/<trial>/   TensorBoard: {Path(sys.executable).parent / 'tensorboard'} --logdir "
           f"{Path(spec.tensorboard_dir).resolve() / spec.name}")  # fmt: skip

@@ -176,11 +176,19 @@ def _outcome(result, root: Path) -> TrialOutcome:
     return outcome
 
 
-def format_outcomes(outcomes: list[TrialOutcome]) -> str:
-    """The sweep's closing table: one line per trial, then each failure's cause."""
-    lines = [f"{'trial':<28} {'state':<9} {'steps':>8} {'in band %':>9} {'power kW':>9} {'reward':>7}"]
+def format_outcomes(outcomes: list[TrialOutcome], spec: SweepSpec | None = None) -> str:
+    """The sweep's closing table: one line per trial, each failure's cause, and a search's best trial."""
+    w = max([28] + [len(o.name) for o in outcomes])
+    lines = [f"{'trial':<{w}} {'state':<9} {'steps':>8} {'in band %':>9} {'power kW':>9} {'reward':>7}"]
     for o in outcomes:
-        lines.append(f"{o.name:<28} {o.state:<9} {o.timesteps:>8} {o.in_band_pct:>9.2f} {o.power_kw:>9.1f} "
+        lines.append(f"{o.name:<{w}} {o.state:<9} {o.timesteps:>8} {o.in_band_pct:>9.2f} {o.power_kw:>9.1f} "
                      f"{o.reward:>7.3f}")  # fmt: skip
     lines += [f"{o.name} failed: {o.error}" for o in outcomes if o.state == "failed"]
+    search = spec.search if spec is not None else None
+    done = [o for o in outcomes if o.state == "finished" and getattr(o, search.metric) == getattr(o, search.metric)] \
+        if search else []  # fmt: skip
+    if done:
+        pick = max if search.mode == "max" else min
+        best = pick(done, key=lambda o: getattr(o, search.metric))
+        lines.append(f"best by {search.metric} ({search.mode}): {best.name}")
     return "\n".join(lines)
