@@ -87,6 +87,17 @@ algorithm = ["trpo", "ppo"]
     assert trial_name({"seed": 2}, ["seed"]) == "seed-2"
 
 
+@pytest.mark.parametrize(
+    "extra, message",
+    [(["--seeds", "0,x"], "--seeds takes whole numbers"), (["--seeds", "1,1"], "distinct whole numbers"),
+     (["--seeds", "0,1", "--backend", "ray"], "drop --backend ray")],
+)  # fmt: skip
+def test_train_seeds_refuses_bad_input_before_ray_starts(tmp_path, monkeypatch, caplog, extra, message):
+    monkeypatch.chdir(tmp_path)
+    assert main(["train", "--workers", "1", "--run-name", "s", *extra]) == 2
+    assert message in caplog.text and not (tmp_path / "runs").exists()
+
+
 def run_span(run: Path) -> tuple[float, float]:
     """When a run started (its config.json) and finished (its model.zip)."""
     return (run / "config.json").stat().st_mtime, (run / "model.zip").stat().st_mtime

@@ -96,6 +96,10 @@ def _claim(spec: SweepSpec, root: Path, tb_root: Path, overwrite: bool) -> None:
 
 def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool = False) -> list[TrialOutcome]:
     """Run every trial of `spec` (queued by cores, on this machine or the cluster at `ray_address`)."""
+    import importlib.util
+
+    if importlib.util.find_spec("ray") is None:
+        raise ValueError("seeds and sweeps run on Ray Tune: .venv/bin/pip install 'ray[default]' (setup.sh does)")
     import ray
     from ray import tune
     from ray.tune.logger import CSVLoggerCallback, JsonLoggerCallback
@@ -105,12 +109,9 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
 
     root = Path(spec.runs_dir).resolve() / spec.name
     tb_root = Path(spec.tensorboard_dir).resolve() / spec.name
+    if spec.search is not None and importlib.util.find_spec("optuna") is None:
+        raise ValueError("a [search] needs Optuna: .venv/bin/pip install optuna (a grid or seeds do not)")
     _claim(spec, root, tb_root, overwrite)
-    if spec.search is not None:
-        import importlib.util
-
-        if importlib.util.find_spec("optuna") is None:
-            raise ValueError("a [search] needs Optuna: .venv/bin/pip install optuna (a grid or seeds do not)")
     base_workers = int(spec.base.get("workers", os.cpu_count() or 1))
     varied = spec.varied
     numbered = spec.search is not None
