@@ -17,13 +17,12 @@ Changes, in order:
 3. Agent variant: the two SetpointManager:SingleZone:Cooling objects are commented out, so the
    agent's actuators own the controlled nodes' setpoints.
 
-It also derives the other buildings' variants from their committed models in idf/ (see those specs):
-4. *_year.idf (the CRAC data center, the DOE small office): SimulationControl runs the weather-file run period
-   only, not the sizing periods as environments before it (sizing calculations stay on), as the 2-zone model
-   does: an episode is the weather year. (The DOE file otherwise runs only its two design days.)
-5. 1ZoneDataCenterCRAC_wApproachTemp_agent.idf: the _year change, and SetpointManager:Warmest "Supply air
-   control" commented out: with it active the supply-node actuator has no effect (docs/notes/new-buildings.md);
-   its two design days commented out too (without them the CO weather year starts; see crac_agent).
+It also derives the CRAC data center's agent variant from its committed model in idf/ (see its spec):
+4. 1ZoneDataCenterCRAC_wApproachTemp_agent.idf: SetpointManager:Warmest "Supply air control" commented out: with
+   it active the supply-node actuator has no effect (docs/notes/new-buildings.md); its two design days commented
+   out too (without them the CO weather year starts; see crac_agent).
+Running the weather year rather than the design days, and the run period, are not model edits: the engine
+prepares every run's copy of any model (parallel_eplus/engine/idf_prep.py).
 """
 
 from __future__ import annotations
@@ -38,10 +37,7 @@ DEFAULT_SOURCE = ROOT.parent / "shared" / "reference" / "2ZoneDataCenterHVAC_wEc
 BASELINE = ROOT / "idf" / "2ZoneDataCenterHVAC_wEconomizer.idf"
 AGENT = ROOT / "idf" / "2ZoneDataCenterHVAC_wEconomizer_agent.idf"
 CRAC = ROOT / "idf" / "1ZoneDataCenterCRAC_wApproachTemp.idf"
-CRAC_YEAR = ROOT / "idf" / "1ZoneDataCenterCRAC_wApproachTemp_year.idf"
 CRAC_AGENT = ROOT / "idf" / "1ZoneDataCenterCRAC_wApproachTemp_agent.idf"
-OFFICE = ROOT / "idf" / "RefBldgSmallOfficeNew2004_Chicago.idf"
-OFFICE_YEAR = ROOT / "idf" / "RefBldgSmallOfficeNew2004_Chicago_year.idf"
 
 HEADER = """\
 ! Derived by scripts/make_models.py from the 2ZoneDataCenterHVAC_wEconomizer baseline model as
@@ -172,17 +168,6 @@ def _derived(source: Path, change: str) -> str:
     )
 
 
-def year_only(text: str) -> str:
-    """Run the weather file's year and not the design days as environments (sizing calculations stay on)."""
-    return _sub_once(
-        r"^(    )(?:YES|Yes),( +)!- Run Simulation for Sizing Periods\n"
-        r"    (?:NO, |Yes,)( +!- Run Simulation for Weather File Run Periods)",
-        r"\1No, \2!- Run Simulation for Sizing Periods\n\1Yes,\3",
-        text,
-        1,
-    )
-
-
 def crac_agent(text: str) -> str:
     """Comment out the Warmest manager so the supply-node actuator owns the CRAC's supply temperature."""
     pattern = r"^  SetpointManager:Warmest,\n    Supply air control,(?:.*\n)*?.*;.*\n"
@@ -191,7 +176,7 @@ def crac_agent(text: str) -> str:
         note = "  ! Disabled in the agent variant: parallel-eplus actuators own this setpoint.\n"
         return note + "".join("!" + line[1:] for line in m.group(0).splitlines(keepends=True))
 
-    text, n = re.subn(pattern, comment, year_only(text), flags=re.MULTILINE)
+    text, n = re.subn(pattern, comment, text, flags=re.MULTILINE)
     if n != 1:
         raise SystemExit(f"make_models: expected 1 SetpointManager:Warmest 'Supply air control', found {n}")
     # Without the Warmest manager, EnergyPlus still simulated the Denver cooling design day ahead of the
@@ -206,19 +191,15 @@ def crac_agent(text: str) -> str:
     text, n = re.subn(design_day, drop, text, flags=re.MULTILINE)
     if n != 2:
         raise SystemExit(f"make_models: expected 2 SizingPeriod:DesignDay objects in the CRAC model, found {n}")
-    return _derived(CRAC, "weather year only; SetpointManager:Warmest 'Supply air control' and the design days "
-                    "disabled.") + text  # fmt: skip
+    return _derived(CRAC, "SetpointManager:Warmest 'Supply air control' and the design days disabled.") + text
 
 
 def build(source: Path) -> dict[Path, str]:
     baseline = transition(source.read_text(encoding="latin-1"))
-    crac, office = CRAC.read_text(encoding="latin-1"), OFFICE.read_text(encoding="latin-1")
     return {
         BASELINE: baseline,
         AGENT: agent_variant(baseline),
-        CRAC_YEAR: _derived(CRAC, "weather year only.") + year_only(crac),
-        CRAC_AGENT: crac_agent(crac),
-        OFFICE_YEAR: _derived(OFFICE, "weather year only.") + year_only(office),
+        CRAC_AGENT: crac_agent(CRAC.read_text(encoding="latin-1")),
     }
 
 

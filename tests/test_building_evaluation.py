@@ -104,11 +104,11 @@ def test_a_specs_time_features_apply(tmp_path):
 
     env = EnergyPlusEnv(building="office-small", output_dir=tmp_path)
     try:
-        assert env.observation_space.shape == (8 + 4,) and env.config.time_features
+        assert env.observation_space.shape == (10 + 4,) and env.config.time_features  # 8 sensors, gas, occupancy
     finally:
         env.close()
     assert EnergyPlusEnv(building="office-small", time_features=False, output_dir=tmp_path).observation_space.shape == (
-        8,
+        10,
     )
     assert TrainConfig(building="office-small").resolved().time_features
     assert not TrainConfig(building=CRAC).resolved().time_features

@@ -70,6 +70,10 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
     (together,) = load_spec(out).actions
     assert together.name == "cooling_setpoint_c" and len(together.actuators) == 5
     assert "Air Node" not in text  # zone air nodes' setpoints are the thermostat's, not candidates
+    # Comfort is scored while its People follow their schedule; energy counts every fuel it meters.
+    assert spec.reward.occupied is not None and spec.reward.occupied.observation == "occupancy"
+    assert any(o.variable == "Schedule Value" and o.key == "BLDG_OCC_SCH_wo_SB" for o in spec.observations)
+    assert spec.reward.energy_terms == ("power_w", "naturalgas_w")
     # Every candidate names an actuator EnergyPlus listed for this model.
     listed = {(r[1], r[2], r[3].upper()) for r in survey(PROTOTYPE, weather, days=0).rows if r[0] == "Actuator"}
     for a in actions:
@@ -84,3 +88,30 @@ def test_init_bad_model_fails_with_a_message(tmp_path):
     with pytest.raises(ValueError, match="stopped before its first timestep"):
         init_spec(broken)
     assert not (tmp_path / "broken.toml").exists()
+
+
+@pytest.mark.slow
+def test_an_unmodified_prototype_from_init_to_evaluate(tmp_path, monkeypatch, capsys, no_leaks):
+    """The wheel's small office as it ships (it simulates only its design days): init, check, train and evaluate
+    with no edit of the model; the engine prepares each run's copy, and the user's file stays as it was."""
+    monkeypatch.chdir(tmp_path)
+    idf = tmp_path / "office.idf"
+    shutil.copy(dataset.ref_models["small_office"], idf)
+    original = idf.read_bytes()
+    assert main(["building", "init", str(idf), "--weather", "CO", "-o", "office.toml"]) == 0
+    spec = tmp_path / "office.toml"
+    spec.write_text(uncomment_actions(spec.read_text(), r"^# all 5 thermostats' (cooling|heating)"))
+    reward = load_spec(spec).reward  # its furnaces burn gas: the energy figure counts it
+    assert reward.energy == ("power_w", "naturalgas_w") and reward.occupied is not None
+    assert main(["building", "check", str(spec), "--no-cache"]) == 0
+    train = ["train", "--building", str(spec), "--weathers", "CO", "--workers", "1", "--run-days", "1",
+             "--timesteps", "144", "--batch-size", "144", "--run-name", "office", "--quiet"]  # fmt: skip
+    assert main(train) == 0
+    out = tmp_path / "eval"
+    evaluate = ["evaluate", "--building", str(spec), "--policy", "runs/office/model.zip", "--baseline",
+                "--weathers", "CO", "--run-days", "2", "--workers", "2", "--out", str(out), "--quiet"]  # fmt: skip
+    assert main(evaluate) == 0
+    results = (out / "results.csv").read_text()
+    assert results.count("\n") == 3  # a header, the built-in controls and the policy
+    assert idf.read_bytes() == original
+    capsys.readouterr()

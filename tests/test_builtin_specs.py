@@ -1,7 +1,7 @@
 """The shipped specs name variables and actuators their models have, and the actuators take effect.
 
-A short run through the EnergyPlus API (one simulated day after warm-up, no env, no pipes), so these hold
-before the spec is wired through the engine and stay cheap after.
+A short run through the EnergyPlus API (one simulated day after warm-up, no env, no pipes, on the copy of the
+model the engine prepares), so these hold before the spec is wired through the engine and stay cheap after.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import pytest
 from parallel_eplus.buildings import resources
 from parallel_eplus.buildings.spec import BuildingSpec, load_spec
 from parallel_eplus.buildings.survey import RUN_PERIOD_WEATHER
+from parallel_eplus.engine.idf_prep import prepare_idf
 
 SPECS = sorted(resources.spec_dir().glob("*.toml"))
 
@@ -27,7 +28,8 @@ def run_day(spec: BuildingSpec, actions: dict[str, float] | None = None, idf: Pa
     state = api.state_manager.new_state()
     api.runtime.set_console_output_status(state, False)
     for o in spec.observations:
-        api.exchange.request_variable(state, o.variable, o.key)
+        if o.meter is None:
+            api.exchange.request_variable(state, o.variable, o.key)
     values = {a.name: (actions or {}).get(a.name, a.initial) for a in spec.actions}
     handles: dict = {}
     samples: dict[str, list[float]] = {o.name: [] for o in spec.observations}
@@ -36,7 +38,11 @@ def run_day(spec: BuildingSpec, actions: dict[str, float] | None = None, idf: Pa
         if not api.exchange.api_data_fully_ready(s):
             return
         if not handles:
-            handles["obs"] = {o.name: api.exchange.get_variable_handle(s, o.variable, o.key) for o in spec.observations}
+            x = api.exchange
+            handles["obs"] = {
+                o.name: x.get_meter_handle(s, o.meter) if o.meter else x.get_variable_handle(s, o.variable, o.key)
+                for o in spec.observations
+            }
             handles["act"] = [
                 (a.name, x, api.exchange.get_actuator_handle(s, x.component, x.control, x.key))
                 for a in spec.actions
@@ -53,8 +59,11 @@ def run_day(spec: BuildingSpec, actions: dict[str, float] | None = None, idf: Pa
             return
         if api.exchange.kind_of_sim(s) != RUN_PERIOD_WEATHER:  # sizing's design days (the office runs two first)
             return
-        for name, h in handles["obs"].items():
-            samples[name].append(api.exchange.get_variable_value(s, h))
+        step_s = 3600 / api.exchange.num_time_steps_in_hour(s)
+        for o in spec.observations:  # a meter as its mean rate over the step (J -> W), as the engine reads it
+            h = handles["obs"][o.name]
+            value = api.exchange.get_meter_value(s, h) / step_s if o.meter else api.exchange.get_variable_value(s, h)
+            samples[o.name].append(value * o.scale)
         if len(samples[spec.observations[0].name]) >= 24 * api.exchange.num_time_steps_in_hour(s):
             api.runtime.stop_simulation(s)
 
@@ -62,7 +71,9 @@ def run_day(spec: BuildingSpec, actions: dict[str, float] | None = None, idf: Pa
     api.runtime.callback_end_zone_timestep_after_zone_reporting(state, after_zone)
     with tempfile.TemporaryDirectory(prefix="eplus-spec-check-") as out:
         weather = next(iter(spec.weathers.values()))
-        api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(idf or spec.idf)])
+        model = Path(out) / "model.idf"
+        prepare_idf(idf or spec.idf, model, run_days=2)
+        api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(model)])
     api.state_manager.delete_state(state)
     missing = [f"observation {n}" for n, h in handles.get("obs", {}).items() if h == -1]
     missing += [f"{n}: {x.component}/{x.control}/{x.key}" for n, x, h in handles.get("act", []) if h == -1]

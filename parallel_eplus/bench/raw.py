@@ -18,7 +18,8 @@ from parallel_eplus.buildings.model import control_model
 from parallel_eplus.buildings.weather import resolve_weather
 from parallel_eplus.engine import native
 from parallel_eplus.engine.actions import scale_action
-from parallel_eplus.engine.episode import MODEL_FILE, write_episode_idf
+from parallel_eplus.engine.episode import MODEL_FILE
+from parallel_eplus.engine.idf_prep import prepare_idf
 
 
 def _physical(action, building: str | None = None) -> list[float]:
@@ -88,7 +89,7 @@ def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray, energyplus
     workdir.mkdir(parents=True, exist_ok=True)
     building = bench_building(cfg)
     idf = workdir / MODEL_FILE  # one model file for all: each run writes its outputs in its own directory
-    write_episode_idf(building.control().idf, idf, -(-len(replays) // building.steps_per_day), energyplus_csv)
+    prepare_idf(building.control().idf, idf, -(-len(replays) // building.steps_per_day), energyplus_csv)
     epw = building.spec.weathers.get(cfg.weather) or resolve_weather(cfg.weather)
     model = building.spec.name if cfg.building else "temp_fan"
     return [

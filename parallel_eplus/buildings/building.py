@@ -13,12 +13,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from parallel_eplus.buildings import model
+from parallel_eplus.buildings.comfort import Comfort
 from parallel_eplus.buildings.model import ActionElement, ControlModel, Sensor, action_elements
 from parallel_eplus.buildings.spec import BuildingSpec, load_spec
 
 
 @dataclass(frozen=True)
 class Building:
+    """A spec resolved for the engine; loaded once per spec file (`load_building` caches it)."""
+
     spec: BuildingSpec
     sensors: tuple[Sensor, ...]
     actions: tuple[ActionElement, ...]
@@ -42,6 +45,11 @@ class Building:
     @property
     def steps_per_day(self) -> int:
         return 24 * (self.spec.timesteps_per_hour or timesteps_per_hour(self.spec.idf))
+
+    @functools.cached_property
+    def comfort(self) -> Comfort:
+        """Its reward signals: zones, band, when the band applies, power and energy (buildings/comfort.py)."""
+        return Comfort.of(self.spec, self.steps_per_day // 24)
 
     def bounds(self) -> tuple[list[float], list[float]]:
         return [s.low for s in self.sensors], [s.high for s in self.sensors]

@@ -35,6 +35,7 @@ class CheckResult:
     timesteps_per_hour: int
     seconds: float
     cached: bool = False
+    notes: tuple[str, ...] = ()  # not failures: e.g. an action whose read-back (--init-from-baseline) is unknown
 
     @property
     def ok(self) -> bool:
@@ -47,8 +48,11 @@ def cache_dir() -> Path:
     return Path(base) / "parallel-eplus" / "checks"
 
 
+CHECK_VERSION = b"2"  # what a check resolves (2: read-backs, on the prepared copy): older passes do not count
+
+
 def _digest(spec: BuildingSpec, weather: Path) -> str:
-    h = hashlib.sha256()
+    h = hashlib.sha256(CHECK_VERSION)
     for path in (spec.path, spec.idf, weather):
         h.update(Path(path).read_bytes())
         h.update(b"\0")
@@ -69,16 +73,28 @@ def _weather_of(spec: BuildingSpec, weather: str | Path | None) -> Path:
 
 def _requests(spec: BuildingSpec) -> dict:
     """What the probe resolves: (spec key, kind, names) for every variable, meter and actuator."""
-    items = []
+    items = []  # [where, kind, names, required]: one that is not required gives a note, not a problem
     for i, o in enumerate(spec.observations):
         if o.meter:
-            items.append([f"observations[{i}]", "meter", [o.meter]])
+            items.append([f"observations[{i}]", "meter", [o.meter], True])
         else:
-            items.append([f"observations[{i}]", "variable", [o.variable, o.key]])
+            items.append([f"observations[{i}]", "variable", [o.variable, o.key], True])
     for i, a in enumerate(spec.actions):
         for j, act in enumerate(a.actuators):
-            items.append([f"actions[{i}].actuators[{j}]", "actuator", [act.component, act.control, act.key]])
+            items.append([f"actions[{i}].actuators[{j}]", "actuator", [act.component, act.control, act.key], True])
+        if a.readback:  # what --init-from-baseline reads; an inferred one that fails is a note
+            items.append([f"actions[{i}].readback", "variable", list(a.readback), a.readback_named is not None])
     return {"idf": str(spec.idf), "items": items}
+
+
+def _unknown_readbacks(spec: BuildingSpec) -> list[str]:
+    return [
+        f'actions[{i}].readback: none known for "{a.actuators[0].component}/{a.actuators[0].control}": name the '
+        'output variable holding what the building\'s own controls set (readback = { variable = "...", key = "..." }) '
+        "to use --init-from-baseline"
+        for i, a in enumerate(spec.actions)
+        if a.actuators and a.readback is None
+    ]
 
 
 def check_spec(
@@ -90,7 +106,7 @@ def check_spec(
     cached = cache_dir() / f"{_digest(spec, epw)}.json"
     if use_cache and cached.is_file():
         data = json.loads(cached.read_text())
-        return CheckResult((), data["timesteps_per_hour"], 0.0, cached=True)
+        return CheckResult((), data["timesteps_per_hour"], 0.0, True, tuple(data.get("notes", ())))
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="eplus-check-") as tmp:
         request = Path(tmp, "request.json")
@@ -110,11 +126,12 @@ def check_spec(
     tph = int(data["timesteps_per_hour"])
     if spec.timesteps_per_hour is not None and tph and spec.timesteps_per_hour != tph:
         problems.append(f"timesteps_per_hour: {spec.timesteps_per_hour}, but the model's Timestep gives {tph}")
-    result = CheckResult(tuple(problems), tph, time.monotonic() - t0)
+    notes = tuple(data.get("notes", [])) + tuple(_unknown_readbacks(spec))
+    result = CheckResult(tuple(problems), tph, time.monotonic() - t0, notes=notes)
     if result.ok and use_cache:
         cached.parent.mkdir(parents=True, exist_ok=True)
         tmp_file = cached.with_suffix(f".{os.getpid()}.tmp")
-        tmp_file.write_text(json.dumps({"spec": str(spec.path), "timesteps_per_hour": tph}))
+        tmp_file.write_text(json.dumps({"spec": str(spec.path), "timesteps_per_hour": tph, "notes": notes}))
         os.replace(tmp_file, cached)
     return result
 
@@ -186,13 +203,14 @@ def _probe(request_file: Path, weather: Path) -> None:
 
     from parallel_eplus.buildings.init import _idf_names
     from parallel_eplus.buildings.survey import api_listing
+    from parallel_eplus.engine.idf_prep import prepare_idf
 
     request = json.loads(request_file.read_text())
     _IDF_NAMES.update(_idf_names(Path(request["idf"])))
     api = EnergyPlusAPI()
     state = api.state_manager.new_state()
     api.runtime.set_console_output_status(state, False)
-    for _, kind, names in request["items"]:
+    for _, kind, names, _ in request["items"]:
         if kind == "variable":
             api.exchange.request_variable(state, names[0], names[1])
     report: dict = {}
@@ -201,8 +219,8 @@ def _probe(request_file: Path, weather: Path) -> None:
         if report or not api.exchange.api_data_fully_ready(s):
             return
         listing = api_listing(api, s)
-        problems = []
-        for where, kind, names in request["items"]:
+        problems, notes = [], []
+        for where, kind, names, required in request["items"]:
             if kind == "variable":
                 handle = api.exchange.get_variable_handle(s, *names)
             elif kind == "meter":
@@ -210,12 +228,14 @@ def _probe(request_file: Path, weather: Path) -> None:
             else:
                 handle = api.exchange.get_actuator_handle(s, *names)
             if handle < 0:
-                problems.append(f"{where}: {_diagnose(kind, names, listing)}")
-        report.update(problems=problems, timesteps_per_hour=api.exchange.num_time_steps_in_hour(s))
+                (problems if required else notes).append(f"{where}: {_diagnose(kind, names, listing)}")
+        report.update(problems=problems, notes=notes, timesteps_per_hour=api.exchange.num_time_steps_in_hour(s))
         api.runtime.stop_simulation(s)
 
     api.runtime.callback_begin_zone_timestep_after_init_heat_balance(state, on_step)
-    api.runtime.run_energyplus(state, ["-d", str(request_file.parent / "out"), "-w", str(weather), request["idf"]])
+    model = request_file.parent / "model.idf"  # the copy every run prepares (engine/idf_prep.py)
+    prepare_idf(Path(request["idf"]), model, run_days=1)
+    api.runtime.run_energyplus(state, ["-d", str(request_file.parent / "out"), "-w", str(weather), str(model)])
     if report:
         Path(request_file.parent, "report.json").write_text(json.dumps(report))
     else:

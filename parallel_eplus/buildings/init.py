@@ -14,7 +14,11 @@ import math
 import re
 from pathlib import Path
 
-from parallel_eplus.buildings.survey import NO_SETPOINT, Survey, simulation_control, summary, survey
+from parallel_eplus.buildings.survey import NO_SETPOINT, Survey, summary, survey
+
+# Fuels besides electricity that a facility meter may count (EnergyPlus's resource types), for the energy figure.
+FUELS = ("NaturalGas", "Propane", "FuelOilNo1", "FuelOilNo2", "Diesel", "Gasoline", "Coal", "OtherFuel1",
+         "OtherFuel2", "DistrictCooling", "DistrictHeatingWater", "DistrictHeatingSteam")  # fmt: skip
 
 
 def _idf_names(idf: Path) -> dict[str, str]:
@@ -88,6 +92,15 @@ def _zone_air_nodes(idf: Path) -> set[str]:
     return {f.split(",")[4].strip().upper() for f in found if len(f.split(",")) > 4}
 
 
+def occupancy_schedule(idf: Path) -> str | None:
+    """The schedule most of the model's People objects follow (their 'Number of People Schedule Name')."""
+    from parallel_eplus.engine.idf_prep import idf_objects
+
+    names = [o.fields[2] for o in idf_objects(idf.read_text(encoding="latin-1"))
+             if o.kind.lower() == "people" and len(o.fields) > 2 and o.fields[2]]  # fmt: skip
+    return max(dict.fromkeys(names), key=names.count) if names else None
+
+
 def seen_text(v: tuple[float, float] | None) -> str:
     return f" (seen {v[0]:.1f}..{v[1]:.1f} C)" if v else ""
 
@@ -112,14 +125,6 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         "# should own, check the bounds (they come from one day of the model's own control), then run",
         "# `parallel-eplus building check` on this file. Keys are matched case-insensitively by EnergyPlus.",
     ]
-    sizing_periods, weather_periods = simulation_control(idf)
-    if sizing_periods or not weather_periods:
-        lines += [
-            "# NOTE: in the copy you train on, set SimulationControl's 'Run Simulation for Sizing Periods' to No and",
-            "# 'Run Simulation for Weather File Run Periods' to Yes, so that an episode is the weather year",
-            f"# (now: sizing periods {'Yes' if sizing_periods else 'No'}, weather periods "
-            f"{'Yes' if weather_periods else 'No'}; sizing calculations are separate fields and stay on).",
-        ]
     lines += [
         f"name = {_str(name)}",
         f"idf = {_str(_path(idf, spec_dir))}",
@@ -165,6 +170,14 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
             power = power or n
     if not obs or power is None:
         raise ValueError(f"{idf}: EnergyPlus offered no zone temperature or facility power to observe")
+    energy = [power]
+    for fuel in FUELS:  # every other fuel the model meters counts in the energy figure and the reward
+        if f"{fuel}:FACILITY".upper() in s.meters():
+            n = _snake(fuel) + "_w"
+            lines += [f"[[observations]]  # {fuel}, as a mean rate over the control step", f"name = {_str(n)}",
+                      f'meter = "{fuel}:Facility"', "low = 0.0", "high = 1e9", ""]  # fmt: skip
+            obs.append(n)
+            energy.append(n)
     temps = temps or [n for n in obs if n.endswith("_temp_c") and n != "outdoor_temp_c"] or ite
     lines += ["# ---- candidate actions (uncomment at least one) ----", ""]
     zones = s.keys("Actuator", "Zone Temperature Control", "Cooling Setpoint")
@@ -219,8 +232,15 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
     ]
     if ite and temps != ite:
         lines.append(f"# temperatures = [{', '.join(map(_str, ite))}]  # data centers: the IT inlet air")
+    lines += [f"power = {_str(power)}  # electric: peak power"]
+    if len(energy) > 1:
+        lines.append(f"energy = [{', '.join(map(_str, energy))}]  # every fuel: the energy figure and the reward")
+    occupancy = occupancy_schedule(idf)
+    if occupancy:
+        lines.append(f"occupied = {{ schedule = {_str(occupancy)} }}  # the band applies where its value is above 0")
+    else:
+        lines.append('# occupied = { hours = [8, 18], weekdays = ["Mon", "Tue", "Wed", "Thu", "Fri"] }  # else always')
     lines += [
-        f"power = {_str(power)}",
         "band = [22.0, 25.0]  # reported as % in band; also set center/lower/upper to your comfort range",
         "# center = 23.5",
         "# lower = 23.0",

@@ -3,7 +3,8 @@
 The repository keeps EnergyPlus models in its top-level `idf/` folder and weather in `weather/`, where users
 know them. A wheel carries `idf/` as package data, `parallel_eplus/buildings/models/` (pyproject.toml maps the
 folder), found through `importlib.resources`. The weathers are not copied into the wheel: the EnergyPlus wheel we
-depend on ships the paper's five EPWs byte for byte (`pyenergyplus/data/weather/`), so they are found there.
+depend on ships the paper's five EPWs byte for byte (`pyenergyplus/data/weather/`), so they are found there, and
+its prototype buildings (`pyenergyplus/data/model/`), which built-in specs use as they are.
 """
 
 from __future__ import annotations
@@ -20,21 +21,24 @@ def _package_dir(name: str) -> Path:
     return Path(str(resources.files("parallel_eplus.buildings") / name))
 
 
-def _energyplus_weather_dir() -> Path | None:
+def _energyplus_data_dir(name: str) -> Path | None:
     try:
-        return Path(str(resources.files("pyenergyplus") / "data" / "weather"))
+        return Path(str(resources.files("pyenergyplus") / "data" / name))
     except ModuleNotFoundError:
         return None
 
 
 def model_dirs() -> list[Path]:
-    """Folders holding the built-in EnergyPlus models, the wheel's first."""
-    return [d for d in (_package_dir("models"), SOURCE_ROOT / "idf") if d.is_dir()]
+    """Folders holding the built-in EnergyPlus models: ours (the wheel's, then the checkout's `idf/`), then the
+    EnergyPlus wheel's prototype buildings, which specs use unmodified (the engine prepares each run's copy)."""
+    dirs = (_package_dir("models"), SOURCE_ROOT / "idf", _energyplus_data_dir("model"))
+    return [d for d in dirs if d is not None and d.is_dir()]
 
 
 def weather_dirs() -> list[Path]:
     """Folders holding the built-in weathers: the checkout's `weather/`, then the EnergyPlus wheel's."""
-    return [d for d in (SOURCE_ROOT / "weather", _energyplus_weather_dir()) if d is not None and d.is_dir()]
+    dirs = (SOURCE_ROOT / "weather", _energyplus_data_dir("weather"))
+    return [d for d in dirs if d is not None and d.is_dir()]
 
 
 def spec_dir() -> Path:

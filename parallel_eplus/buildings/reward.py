@@ -56,11 +56,16 @@ class RewardConfig:
         return asdict(self)
 
 
-def reward(zone_temps_c: tuple[float, ...], power_w: float, cfg: RewardConfig) -> tuple[float, dict[str, float]]:
-    """Reward and its components (they sum to it), as they appear in `info` and the episode records."""
+def reward(
+    zone_temps_c: tuple[float, ...], power_w: float, cfg: RewardConfig, applies: bool = True
+) -> tuple[float, dict[str, float]]:
+    """Reward and its components (they sum to it), as they appear in `info` and the episode records.
+
+    `power_w`: the building's energy signal (every fuel its spec meters). Where the comfort band does not apply
+    (`applies` False: an unoccupied office) the step pays for energy only."""
     comfort = 0.0
     band = 0.0
-    for t in zone_temps_c:
+    for t in zone_temps_c if applies else ():
         comfort += math.exp(-cfg.gaussian_weight * (t - cfg.center_c) ** 2)
         band += max(t - cfg.upper_c, 0.0) + max(cfg.lower_c - t, 0.0)
     parts = {

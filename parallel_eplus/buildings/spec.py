@@ -2,7 +2,6 @@
 
 `load_spec` returns plain frozen dataclasses; every problem in the file is collected and reported at once,
 each naming the spec key and its value, so a typo costs one run of the loader rather than a hung worker.
-Not wired into the env yet: see docs/buildings.md (to come) and issue 22.
 """
 
 from __future__ import annotations
@@ -16,6 +15,8 @@ from typing import Any
 from parallel_eplus.buildings import resources
 
 REWARD_KEYS = ("center", "lower", "upper", "gaussian_weight", "band_weight", "power_weight")
+WEEKDAYS = ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")
+OCCUPANCY_OBSERVATION = "occupancy"  # the observation `occupied = { schedule = ... }` adds
 
 
 class SpecError(ValueError):
@@ -45,6 +46,16 @@ class ActuatorSpec:
     key: str
 
 
+# Where the building's own controls' choice for an actuator can be read back (an output variable on the same key),
+# for `train --init-from-baseline`; other actuators need `readback = { variable = ..., key = ... }` in the spec.
+READBACKS = {
+    ("system node setpoint", "temperature setpoint"): "System Node Setpoint Temperature",
+    ("fan", "fan air mass flow rate"): "Fan Air Mass Flow Rate",
+    ("zone temperature control", "cooling setpoint"): "Zone Thermostat Cooling Setpoint Temperature",
+    ("zone temperature control", "heating setpoint"): "Zone Thermostat Heating Setpoint Temperature",
+}
+
+
 @dataclass(frozen=True)
 class ActionSpec:
     """One element of the action: scaled from [-1, 1] to [low, high] and written to every actuator listed."""
@@ -55,16 +66,47 @@ class ActionSpec:
     initial: float
     actuators: tuple[ActuatorSpec, ...]
     unit: str = ""
+    readback_named: tuple[str, str] | None = None  # (variable, key) the spec names
+
+    @property
+    def readback(self) -> tuple[str, str] | None:
+        """(variable, key): what the building's own controls set this action's first actuator to, as an output
+        variable; the spec's own, else inferred from the actuator's kind (`READBACKS`); None: unknown."""
+        if self.readback_named:
+            return self.readback_named
+        a = self.actuators[0] if self.actuators else None
+        variable = READBACKS.get((a.component.lower(), a.control.lower())) if a else None
+        return (variable, a.key) if variable else None
+
+
+@dataclass(frozen=True)
+class Occupancy:
+    """When the comfort band applies: where an observation (an EnergyPlus schedule's value, read each step) is
+    above `above`, or by the clock (hours [start, end) on `weekdays`, 0 = Monday). Elsewhere samples count for
+    energy only."""
+
+    observation: str | None = None
+    above: float = 0.0
+    hours: tuple[float, float] | None = None
+    weekdays: tuple[int, ...] = tuple(range(7))
 
 
 @dataclass(frozen=True)
 class RewardSpec:
-    """The paper's reward over any zones: which observations are temperatures and power, and the band."""
+    """The paper's reward over any zones: which observations are temperatures, power and energy, and the band."""
 
     temperatures: tuple[str, ...]
     power: str
     band: tuple[float, float]
     params: dict[str, float] = field(default_factory=dict)  # optional RewardConfig overrides
+    # Observations (W) summed for the reward's energy term and the energy figure: every fuel the model meters.
+    # Empty: `power` alone (electricity).
+    energy: tuple[str, ...] = ()
+    occupied: Occupancy | None = None  # None: the band applies at every step
+
+    @property
+    def energy_terms(self) -> tuple[str, ...]:
+        return self.energy or (self.power,)
 
 
 @dataclass(frozen=True)
@@ -184,10 +226,20 @@ def load_spec(path: str | Path) -> BuildingSpec:
         for j, a in enumerate(need(t, "actuators", where, list) or []):
             aw = f"{where}actuators[{j}]."
             acts.append(ActuatorSpec(need(a, "component", aw), need(a, "control", aw), need(a, "key", aw)))
-        actions.append(ActionSpec(n, low, high, initial, tuple(acts), t.get("unit", "")))
+        readback = t.get("readback")
+        if readback is not None and not (
+            isinstance(readback, dict) and isinstance(readback.get("variable"), str) and "key" in readback
+        ):
+            errors.append(f'{where}readback: {readback!r} is not {{ variable = "...", key = "..." }}')
+            readback = None
+        named = (readback["variable"], str(readback["key"])) if readback else None
+        actions.append(ActionSpec(n, low, high, initial, tuple(acts), t.get("unit", ""), named))
 
-    obs_names = [o.name for o in observations]
     r = data.get("reward")
+    occupied = None
+    if r is not None and "occupied" in r:
+        occupied = _occupancy(r["occupied"], observations, errors)
+    obs_names = [o.name for o in observations]
     if r is None:
         errors.append("reward: missing")
         reward = RewardSpec((), "", (0.0, 0.0))
@@ -202,12 +254,17 @@ def load_spec(path: str | Path) -> BuildingSpec:
         band = need(r, "band", "reward.", list) or [0.0, 0.0]
         if len(band) != 2 or band[0] >= band[1]:
             errors.append(f"reward.band: {band} is not [low, high] with low below high")
-        extra = {k: v for k, v in r.items() if k not in ("temperatures", "power", "band")}
+        energy = need(r, "energy", "reward.", list) if "energy" in r else []
+        for k, e in enumerate(energy or []):
+            if e not in obs_names:
+                errors.append(f'reward.energy[{k}]: "{e}" is not an observation name{_close(e, obs_names)}')
+        extra = {k: v for k, v in r.items() if k not in ("temperatures", "power", "band", "energy", "occupied")}
         for k in extra:
             if k not in REWARD_KEYS:
                 errors.append(f"reward.{k}: unknown reward parameter{_close(k, REWARD_KEYS)}")
         params = {k: float(v) for k, v in extra.items() if k in REWARD_KEYS}
-        reward = RewardSpec(tuple(temps), power, (float(band[0]), float(band[-1])), params)
+        band_c = (float(band[0]), float(band[-1]))
+        reward = RewardSpec(tuple(temps), power, band_c, params, tuple(energy or ()), occupied)
 
     if errors:
         raise SpecError(f"{path}: {len(errors)} problem(s):\n  " + "\n  ".join(errors))
@@ -225,6 +282,59 @@ def load_spec(path: str | Path) -> BuildingSpec:
         data.get("timesteps_per_hour"),
         baseline_idf,
     )
+
+
+def _occupancy(table: Any, observations: list[Observation], errors: list[str]) -> Occupancy | None:
+    """`reward.occupied`: { schedule = NAME } (its value, read each step, added as the `occupancy` observation
+    unless one reads it already), { observation = NAME }, or { hours = [start, end], weekdays = ["Mon", ...] }."""
+    where = "reward.occupied"
+    if not isinstance(table, dict):
+        errors.append(f'{where}: {table!r} is not a table such as {{ schedule = "OCC_SCH" }}')
+        return None
+    unknown = set(table) - {"schedule", "observation", "above", "hours", "weekdays", "high"}
+    if unknown:
+        errors.append(f"{where}: unknown key(s) {sorted(unknown)}; use schedule, observation, above, hours, weekdays")
+    kinds = [k for k in ("schedule", "observation", "hours") if k in table]
+    if len(kinds) != 1:
+        errors.append(f"{where}: give one of schedule, observation or hours (got {kinds or 'none'})")
+        return None
+    above = table.get("above", 0.0)
+    if not isinstance(above, (int, float)) or isinstance(above, bool):
+        errors.append(f"{where}.above: {above!r} is not a number")
+        above = 0.0
+    if "hours" in table:
+        hours, days = table["hours"], table.get("weekdays", list(WEEKDAYS))
+        if not (isinstance(hours, list) and len(hours) == 2 and all(isinstance(h, (int, float)) for h in hours)
+                and 0 <= hours[0] < hours[1] <= 24):  # fmt: skip
+            errors.append(f"{where}.hours: {hours!r} is not [start, end] with 0 <= start < end <= 24")
+            hours = [0, 24]
+        bad = [d for d in days if d not in WEEKDAYS] if isinstance(days, list) else [days]
+        if bad:
+            errors.append(f"{where}.weekdays: {bad} not among {list(WEEKDAYS)}")
+            days = list(WEEKDAYS)
+        return Occupancy(hours=(float(hours[0]), float(hours[1])), weekdays=tuple(WEEKDAYS.index(d) for d in days))
+    if "observation" in table:
+        name = table["observation"]
+        names = [o.name for o in observations]
+        if name not in names:
+            errors.append(f'{where}.observation: "{name}" is not an observation name{_close(str(name), names)}')
+        return Occupancy(observation=str(name), above=float(above))
+    schedule = table["schedule"]
+    if not isinstance(schedule, str) or not schedule:
+        errors.append(f"{where}.schedule: {schedule!r} is not a schedule name")
+        return None
+    for o in observations:  # an observation reading this schedule already
+        if o.variable == "Schedule Value" and (o.key or "").lower() == schedule.lower():
+            return Occupancy(observation=o.name, above=float(above))
+    if any(o.name == OCCUPANCY_OBSERVATION for o in observations):
+        errors.append(
+            f'{where}.schedule: an observation is named "{OCCUPANCY_OBSERVATION}" already; read the schedule there '
+            '(variable = "Schedule Value") and give occupied = { observation = ... }'
+        )
+        return None
+    high = float(table.get("high", 1.0))  # a fraction schedule; a head-count one gives its maximum
+    observations.append(Observation(OCCUPANCY_OBSERVATION, 0.0, high, "Schedule Value", schedule))
+    return Occupancy(observation=OCCUPANCY_OBSERVATION, above=float(above))
 
 
 def reward_config(spec: BuildingSpec):

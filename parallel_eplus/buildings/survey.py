@@ -1,8 +1,9 @@
 """What an EnergyPlus model offers an agent: EnergyPlus's own listing and one simulated day of values.
 
-The model runs through the EnergyPlus API until one day of its weather run period has passed (design days and
-warm-up are not counted), with the variables a spec usually observes requested for every key: EnergyPlus lists
-and reads only requested variables. `building init` (buildings/init.py) writes a starter spec from the result.
+The model runs through the EnergyPlus API until one day of its weather run period has passed (warm-up is not
+counted), as the engine runs it (engine/idf_prep.py: the weather year, not the design days), with the variables
+a spec usually observes requested for every key: EnergyPlus lists and reads only requested variables.
+`building init` (buildings/init.py) writes a starter spec from the result.
 """
 
 from __future__ import annotations
@@ -10,10 +11,11 @@ from __future__ import annotations
 import csv
 import io
 import math
-import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from parallel_eplus.engine.idf_prep import prepare_idf
 
 # Variables requested for every key before the run: EnergyPlus lists (and reads) only requested variables.
 REQUESTS = (
@@ -40,6 +42,10 @@ class Survey:
     seen: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)  # (variable, KEY) -> (min, max)
     timesteps_per_hour: int = 0
     days: float = 0.0
+
+    def meters(self) -> set[str]:
+        """The model's meters, upper-case."""
+        return {r[1].upper() for r in self.rows if r[0] == "OutputMeter" and len(r) > 1}
 
     def keys(self, kind: str, *names: str) -> list[str]:
         return list(dict.fromkeys(r[-2] for r in self.rows if r[0] == kind and tuple(r[1 : 1 + len(names)]) == names))
@@ -73,7 +79,7 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
             for r in result.rows:
                 if r[0] == "OutputVariable" and any(r[1] == v for v, _ in REQUESTS):
                     handles[(r[1], r[2])] = api.exchange.get_variable_handle(s, r[1], r[2])
-        if api.exchange.warmup_flag(s) or (weather_periods and api.exchange.kind_of_sim(s) != RUN_PERIOD_WEATHER):
+        if api.exchange.warmup_flag(s) or api.exchange.kind_of_sim(s) != RUN_PERIOD_WEATHER:
             return
         for k, h in handles.items():
             value = api.exchange.get_variable_value(s, h)
@@ -83,10 +89,11 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
         if steps[0] >= days * 24 * result.timesteps_per_hour:
             api.runtime.stop_simulation(s)
 
-    weather_periods = simulation_control(idf)[1]  # then the design days before the year are not the survey
     api.runtime.callback_end_zone_timestep_after_zone_reporting(state, on_step)
     with tempfile.TemporaryDirectory(prefix="eplus-init-") as out:
-        code = api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(idf)])
+        model = Path(out, "model.idf")
+        prepare_idf(idf, model, max(2, math.ceil(days) + 1))
+        code = api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(model)])
         err = Path(out, "eplusout.err")
         tail = err.read_text(errors="replace")[-1500:] if err.is_file() else ""
     api.state_manager.delete_state(state)
@@ -94,13 +101,6 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
         raise ValueError(f"{idf}: EnergyPlus stopped before its first timestep (exit code {code}):\n{tail}")
     result.days = steps[0] / (24 * result.timesteps_per_hour)
     return result
-
-
-def simulation_control(idf: Path) -> tuple[bool, bool]:
-    """(runs the sizing periods as environments, runs the weather-file run periods), as EnergyPlus defaults."""
-    m = re.search(r"^\s*SimulationControl\s*,([^;]*);", re.sub(r"!.*", "", idf.read_text(encoding="latin-1")), re.M)
-    fields = [f.strip().lower() for f in m.group(1).split(",")] + [""] * 5 if m else [""] * 5
-    return fields[3] == "yes", fields[4] != "no"
 
 
 def summary(s: Survey) -> list[str]:

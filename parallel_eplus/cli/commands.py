@@ -32,7 +32,16 @@ def _format_summary(summary: dict) -> str:
             f"{label:10s}  mean {z['temp_mean']:5.2f} C  std {z['temp_std']:4.2f}"
             f"  min {z['temp_min']:5.2f}  max {z['temp_max']:5.2f}  in band {z['in_band_pct']:5.1f} %"
         )
-    lines.append(f"samples in band       {summary['in_band_pct']:8.2f} %")
+    where = (
+        ""
+        if summary.get("comfort_steps_pct", 100.0) == 100.0
+        else (f" (where comfort applies: {summary['comfort_steps_pct']:.1f} % of steps)")
+    )
+    lines.append(f"samples in band       {summary['in_band_pct']:8.2f} %{where}")
+    if "energy_kwh" in summary:  # BOPTEST's figures (buildings/comfort.py)
+        lines.append(f"discomfort            {summary['discomfort_kh']:8.2f} K·h per zone")
+        lines.append(f"energy, every fuel    {summary['energy_kwh']:8.1f} kWh")
+        lines.append(f"peak electric power   {summary['peak_power_kw']:8.1f} kW")
     return "\n".join(lines)
 
 
@@ -73,7 +82,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
-    from parallel_eplus.training.config import TrainConfig, TRPOSettings
+    from parallel_eplus.training.config import ComfortConstraint, ImitationSettings, TrainConfig, TRPOSettings
     from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
@@ -106,8 +115,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         rbc_target_c=args.rbc_target,
         algorithm=args.algorithm,
         reward=RewardConfig.from_any(args.reward),
+        comfort=ComfortConstraint(target_pct=args.comfort_target, margin_c=args.comfort_margin),
+        init_from_baseline=args.init_from_baseline,
         trpo=TRPOSettings(log_std_init=args.log_std_init),
     )
+    if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
+        cfg.imitation = ImitationSettings(log_std=args.log_std_init)
     if args.resume and "--timesteps" not in sys.argv:
         cfg.timesteps = 0  # 0: keep the resumed run's own total
     if "--batch-size" not in sys.argv and cfg.workers > 0:  # the default, split evenly across the workers
@@ -180,7 +193,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         BASELINE_LABEL,
         RBC_LABEL,
         Controller,
-        policy_controller,
+        policy_controllers,
         run_sweep,
     )
 
@@ -197,7 +210,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(RBC_LABEL, "rbc"))
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    controllers += [policy_controller(p) for p in args.policy or []]
+    controllers += [c for p in args.policy or [] for c in policy_controllers(p)]
     if not controllers:
         raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
@@ -246,14 +259,17 @@ def cmd_building_init(args: argparse.Namespace) -> int:
 
 def cmd_building_check(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.check import check_spec
+    from parallel_eplus.buildings.resources import spec_file
     from parallel_eplus.buildings.spec import load_spec
 
-    spec = load_spec(args.spec)
+    spec = load_spec(spec_file(args.spec))  # a path, or a built-in spec's name
     result = check_spec(spec, args.weather, use_cache=not args.no_cache)
     if not result.ok:
         print(f"{spec.path}: {len(result.problems)} problem(s) against {spec.idf.name}:", file=sys.stderr)
         print("  " + "\n  ".join(result.problems), file=sys.stderr)
         return 1
+    for note in result.notes:
+        print(f"note: {note}")
     n_act = sum(len(a.actuators) for a in spec.actions)
     how = "cached" if result.cached else f"{result.seconds:.1f} s"
     print(f"{spec.name}: ok: {len(spec.observations)} observations, {len(spec.actions)} actions ({n_act} actuators) "

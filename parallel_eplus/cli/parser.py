@@ -61,7 +61,22 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--rbc-target", type=float, help="with --residual: the rule-based controller's zone target, C")
     tr.add_argument(
         "--log-std-init", type=float, default=0.0,
-        help="the new policy's log standard deviation (default 0, the paper's; --init-from keeps the saved one)",
+        help="the new policy's log standard deviation (default 0, the paper's; --init-from keeps the saved one; "
+        "with --init-from-baseline the cloned policy's, default -2)",
+    )  # fmt: skip
+    tr.add_argument(
+        "--comfort-target", type=float, metavar="PCT",
+        help="comfort as a constraint: minimise energy keeping this share (%%) of zone samples in band where the band "
+        "applies, by a Lagrange multiplier adapted each batch (default: the reward's fixed comfort weights)",
+    )  # fmt: skip
+    tr.add_argument(
+        "--comfort-margin", type=float, default=0.5, metavar="K",
+        help="with --comfort-target: the comfort cost rises over this far inside the band's edges (default 0.5)",
+    )  # fmt: skip
+    tr.add_argument(
+        "--init-from-baseline", action="store_true",
+        help="first fit the policy to the building's own controls on the training weathers (imitation), then learn; "
+        "the cloned policy is saved in runs/<name>/cloned/",
     )  # fmt: skip
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
@@ -164,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     bi.add_argument("--name", help="the building's name in the spec (default: from the file name)")
     bi.set_defaults(func=c.cmd_building_init)
     bc = bsub.add_parser("check", help="resolve every variable, meter and actuator of SPEC against its model")
-    bc.add_argument("spec", type=Path, metavar="SPEC.toml")
+    bc.add_argument("spec", metavar="SPEC.toml", help="a spec file or a built-in spec's name")
     bc.add_argument("--weather", help="short name or .epw for the check's run (default: the spec's first)")
     bc.add_argument("--no-cache", action="store_true", help="run EnergyPlus even if this spec passed before")
     bc.set_defaults(func=c.cmd_building_check)

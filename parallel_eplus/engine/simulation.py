@@ -35,9 +35,9 @@ from parallel_eplus.engine.episode import (
     err_tail,
     link_or_copy,
     prune_episodes,
-    write_episode_idf,
     write_records,
 )
+from parallel_eplus.engine.idf_prep import prepare_idf
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
@@ -62,7 +62,8 @@ class Simulation:
         self.sensor_names = self.building.sensor_names
         self.obs_low, self.obs_high = (np.array(b, dtype=np.float32) for b in self.building.bounds())
         self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
-        self._temps, self._power = self.building.temperatures, self.building.power
+        self.comfort = self.building.comfort  # zones, band, when it applies, energy (buildings/comfort.py)
+        self._temps = self.comfort.temperatures
         self.elements = self.model.actions
         self.idf = Path(config.idf) if config.idf else self.model.idf
         if not self.idf.is_file():
@@ -148,7 +149,8 @@ class Simulation:
         if self.episode_dir.exists():
             shutil.rmtree(self.episode_dir)
         self.episode_dir.mkdir(parents=True)
-        write_episode_idf(self.idf, self.episode_dir / MODEL_FILE, self.config.run_days, self.config.energyplus_csv)
+        cfg = self.config
+        prepare_idf(self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
         link_or_copy(epw, self.episode_dir / epw.name)
         args = [
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
@@ -196,9 +198,17 @@ class Simulation:
         """(observation, reward, terminated, info) for the action last sent, due `step_timeout_s` after it."""
         code, values = self._recv("an observation", self.config.step_timeout_s)
         obs, info = self._observation(values)
-        r, parts = reward(tuple(info[t] for t in self._temps), info[self._power], self.config.reward)
+        comfort = self.comfort
+        applies = comfort.always or comfort.applies(info["time"], info)
+        temps = tuple(info[t] for t in self._temps)
+        margin = self.config.comfort_margin_c
+        r, parts = reward(temps, comfort.energy_w(info), self.config.reward, applies and margin is None)
         info.update(parts)
-        row = [*values[pipe.TIME_FIELDS :].tolist(), *self._action, r, *parts.values()]
+        info["comfort_applies"] = applies
+        if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward
+            cost, out = comfort.cost(temps, margin) if applies else (0.0, 0)
+            info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
+        row = [*values[pipe.TIME_FIELDS :].tolist(), *self._action, r, *parts.values(), float(applies)]
         self.records.add(info["time"], row)
         terminated = code == pipe.END
         if terminated:
@@ -267,8 +277,7 @@ class Simulation:
         }
         if self.config.building:  # what `plot` reads the episode's signals from (none: the data center)
             extra["building"] = str(self.building.spec.path)
-        signals = {"temperatures": self._temps, "power": self._power, "band": self.building.band}
-        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, **signals)
+        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, self.comfort)
         self.records = None
         prune_episodes(self.output_dir, self.config.keep_episodes)
 

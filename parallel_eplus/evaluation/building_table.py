@@ -35,46 +35,75 @@ def comparable(df: pd.DataFrame) -> tuple[pd.DataFrame, str]:
     )
 
 
+def _change(value: float, base: float | None) -> str:
+    return "–" if base is None or not base else f"{100 * (value / base - 1):+.1f} %"
+
+
 def table_markdown(df: pd.DataFrame, baseline: str) -> str:
+    """Per weather and on average: energy (every fuel the spec meters) against the baseline, peak electric power,
+    thermal discomfort (K·h per zone) and the share of zone samples in band, where the band applies."""
     zones = [c.removesuffix("_in_band_pct") for c in df.columns if c.endswith("_in_band_pct") and c != "in_band_pct"]
     band = band_of(df)
     named = "in band" if band is None else "in {:g}–{:g} °C".format(*band)
-    base = df[df.controller == baseline].set_index("weather")["power_kw"]
-    head = "| Controller | Weather | power (kW) | vs baseline | " + " | ".join(f"{z} {named}" for z in zones)
-    lines = [head + f" | all {named} |", "|---" * (5 + len(zones)) + "|"]
+    kpis = "energy_kwh" in df.columns  # summaries from before the BOPTEST figures have power only
+    energy = "energy_kwh" if kpis else "power_kw"
+    base = df[df.controller == baseline].set_index("weather")[energy]
+    head = "| Controller | Weather | power (kW) | "
+    head += "energy (kWh) | vs baseline | peak (kW) | discomfort (K·h/zone) | " if kpis else "vs baseline | "
+    width = 5 + 3 * kpis + len(zones)
+    lines = [head + " | ".join(f"{z} {named}" for z in zones) + f" | all {named} |", "|---" * width + "|"]
     for _, r in df.iterrows():
-        change = (
-            "–"
-            if r.controller == baseline or r.weather not in base
-            else f"{100 * (r.power_kw / base[r.weather] - 1):+.1f} %"
+        change = "–" if r.controller == baseline else _change(r[energy], base.get(r.weather))
+        cells = [f"{r.power_kw:.2f}"]
+        cells += (
+            [f"{r.energy_kwh:,.0f}", change, f"{r.peak_power_kw:.1f}", f"{r.discomfort_kh:.1f}"] if kpis else [change]
         )
-        cells = [f"{r[f'{z}_in_band_pct']:.2f} %" for z in zones]
-        lines.append(
-            f"| {r.controller} | {r.weather} | {r.power_kw:.2f} | {change} | " + " | ".join(cells)
-            + f" | {r.in_band_pct:.2f} % |"
-        )  # fmt: skip
+        cells += [f"{r[f'{z}_in_band_pct']:.2f} %" for z in zones] + [f"{r.in_band_pct:.2f} %"]
+        lines.append(f"| {r.controller} | {r.weather} | " + " | ".join(cells) + " |")
     shared, note = comparable(df)
-    avg = shared.groupby("controller", sort=False)[["power_kw", "in_band_pct"]].mean()
-    lines += ["", *([note] if note else []), f"| Controller | mean power (kW) | vs baseline | all {named} |",
-              "|---|---|---|---|"]  # fmt: skip
+    columns = ["power_kw", "in_band_pct"] + (["energy_kwh", "peak_power_kw", "discomfort_kh"] if kpis else [])
+    avg = shared.groupby("controller", sort=False)[columns].mean()
+    lines += ["", *([note] if note else [])]
+    if kpis:
+        lines += [f"| Controller | mean power (kW) | energy per weather (kWh) | vs baseline | peak (kW) | "
+                  f"discomfort (K·h/zone) | all {named} |", "|---|---|---|---|---|---|---|"]  # fmt: skip
+    else:
+        lines += [f"| Controller | mean power (kW) | vs baseline | all {named} |", "|---|---|---|---|"]
     for c, r in avg.iterrows():
-        change = (
-            "–"
-            if c == baseline or baseline not in avg.index
-            else f"{100 * (r.power_kw / avg.power_kw[baseline] - 1):+.1f} %"
-        )
-        lines.append(f"| {c} | {r.power_kw:.2f} | {change} | {r.in_band_pct:.2f} % |")
+        change = "–" if c == baseline or baseline not in avg.index else _change(r[energy], avg[energy][baseline])
+        if kpis:
+            cells = [f"{r.power_kw:.2f}", f"{r.energy_kwh:,.0f}", change, f"{r.peak_power_kw:.1f}",
+                     f"{r.discomfort_kh:.1f}"]  # fmt: skip
+        else:
+            cells = [f"{r.power_kw:.2f}", change]
+        lines.append(f"| {c} | " + " | ".join(cells) + f" | {r.in_band_pct:.2f} % |")
+    if kpis and "comfort_steps_pct" in df.columns and (df["comfort_steps_pct"] < 100).any():
+        share = df["comfort_steps_pct"].mean()
+        lines += ["", f"Comfort figures count the samples where the band applies ({share:.1f} % of steps); "
+                  "energy and power count every step."]  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
-def write_results(df: pd.DataFrame, out_dir: Path, baseline: str) -> list[Path]:
+def write_results(
+    df: pd.DataFrame, out_dir: Path, baseline: str, full: pd.DataFrame | None = None, across: pd.DataFrame | None = None
+) -> list[Path]:
+    """`df`: one row per controller and weather (runs averaged); `full`: every run's rows; `across`: the seed
+    table (seeds.py) of controllers with several runs."""
+    from parallel_eplus.evaluation import seeds
+
+    full = df if full is None else full
     out_dir.mkdir(parents=True, exist_ok=True)
-    df.to_csv(out_dir / "results.csv", index=False)
-    (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df, baseline))
-    return [out_dir / "results.csv", out_dir / "results.md", *figures(df, out_dir)]
+    full.to_csv(out_dir / "results.csv", index=False)
+    extra = seeds.seeds_markdown(across) if across is not None else ""
+    (out_dir / "results.md").write_text("# Evaluation\n\n" + table_markdown(df, baseline) + extra)
+    files = [out_dir / "results.csv", out_dir / "results.md"]
+    if across is not None and not across.empty:
+        across.to_csv(out_dir / "seeds.csv", index=False)
+        files.append(out_dir / "seeds.csv")
+    return files + figures(df, out_dir, full)
 
 
-def figures(df: pd.DataFrame, out_dir: Path) -> list[Path]:
+def figures(df: pd.DataFrame, out_dir: Path, full: pd.DataFrame | None = None) -> list[Path]:
     """The building's own figures: its zones against its band, its power; no data-center references."""
     from parallel_eplus.evaluation import plots
 
@@ -83,5 +112,5 @@ def figures(df: pd.DataFrame, out_dir: Path) -> list[Path]:
         files.append(
             plots.temperature_comparison(df, out_dir / "temperatures.png", band_of(df) or plots.COMFORT_BAND_C)
         )
-    files.append(plots.power_comparison(df, out_dir / "power.png"))
+    files.append(plots.power_comparison(df, out_dir / "power.png", full))
     return files

@@ -19,7 +19,14 @@ from parallel_eplus.buildings.building import load_building  # noqa: E402
 from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
 from parallel_eplus.buildings.reward import RewardConfig  # noqa: E402
 from parallel_eplus.buildings.weather import WEATHER_FILES  # noqa: E402
-from parallel_eplus.engine.episode import REWARD_PARTS, STEPS_FILE, SUMMARY_FILE, read_steps, summarize  # noqa: E402
+from parallel_eplus.engine.episode import (  # noqa: E402
+    REWARD_PARTS,
+    STEP_FLAGS,
+    STEPS_FILE,
+    SUMMARY_FILE,
+    read_steps,
+    summarize,
+)
 
 # One colour per controller in every figure: the references fixed, other labels by a stable hash.
 REFERENCE_COLORS = {"Baseline": "tab:gray", "Rule-based": "tab:green"}
@@ -148,13 +155,25 @@ def weather_order(weathers) -> list[str]:
     return sorted(seen, key=lambda w: known.index(w) if w in known else len(known) + seen.index(w))
 
 
-def power_comparison(df: pd.DataFrame, path: Path) -> Path:
-    """Average total power per controller and weather."""
+def power_comparison(df: pd.DataFrame, path: Path, runs: pd.DataFrame | None = None) -> Path:
+    """Average total power per controller and weather; with every run's rows (`runs`), a controller with several
+    runs is drawn at their mean with its 95 % bootstrap interval (seeds.py)."""
+    from parallel_eplus.evaluation.seeds import interval
+
     table = df.pivot(index="weather", columns="controller", values="power_kw")
     table = table.loc[weather_order(df["weather"]), list(dict.fromkeys(df["controller"]))]
+    errors = np.zeros((len(table.columns), 2, len(table.index)))
+    if runs is not None and "run" in runs.columns:
+        for i, c in enumerate(table.columns):
+            for j, w in enumerate(table.index):
+                values = runs[(runs.controller == c) & (runs.weather == w)]["power_kw"].to_numpy()
+                if len(values) > 1:
+                    mean, low, high = interval([values])
+                    errors[i, :, j] = mean - low, high - mean
     fig, ax = _figure((9, 4))
     colors = controller_colors(table.columns)
-    table.plot.bar(ax=ax, rot=0, color=[colors[c] for c in table.columns], legend=False)
+    table.plot.bar(ax=ax, rot=0, color=[colors[c] for c in table.columns], legend=False,
+                   yerr=errors if errors.any() else None, capsize=3, error_kw={"lw": 1})  # fmt: skip
     ax.set_ylabel("average total power (kW)")
     ax.set_xlabel("test weather")
     ax.set_title("Average power per controller and weather", fontsize=10)
@@ -218,9 +237,10 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
     steps = read_steps(episode_dir)
     saved = json.loads((episode_dir / SUMMARY_FILE).read_text()) if (episode_dir / SUMMARY_FILE).is_file() else {}
     building = load_building(saved.get("building"))
-    summary = summarize(steps, building.temperatures, building.power, building.band)
+    summary = summarize(steps, building.comfort)
     sensors = set(building.sensor_names)
-    actions = [c for c in steps.columns[1:] if c not in sensors and c != "reward" and c not in REWARD_PARTS]
+    skip = {"reward", *REWARD_PARTS, *STEP_FLAGS}
+    actions = [c for c in steps.columns[1:] if c not in sensors and c not in skip]
     in_c = [c for c in actions if c.endswith("_c")]
     other = [c for c in actions if not c.endswith("_c")]
     temps = [c for c in ("outdoor_temp_c",) if c in steps.columns] + list(building.temperatures)

@@ -56,7 +56,8 @@ def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None) 
             sim.close()
         episode_dir = Path(info["episode_dir"])
         out = {n: (episode_dir / n).read_bytes() for n in RETURNED_FILES if (episode_dir / n).is_file()}
-        return {"controller": controller.label, **info["episode_summary"], "episode_dir": episode_dir.name}, out
+        row = {"controller": controller.label, "run": controller.run, **info["episode_summary"]}
+        return {**row, "episode_dir": episode_dir.name}, out
 
 
 def run_jobs(

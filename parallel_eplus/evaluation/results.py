@@ -22,7 +22,8 @@ RESULT_COLUMNS = [
     "controller", "weather", "reward_mean", "power_kw", "it_power_kw", "hvac_power_kw",
     "west_temp_mean", "west_temp_std", "west_temp_min", "west_temp_max",
     "east_temp_mean", "east_temp_std", "east_temp_min", "east_temp_max",
-    "west_in_band_pct", "east_in_band_pct", "in_band_pct", "steps", "episode_dir",
+    "west_in_band_pct", "east_in_band_pct", "in_band_pct",
+    "energy_kwh", "peak_power_kw", "discomfort_kh", "west_discomfort_kh", "east_discomfort_kh", "steps", "episode_dir",
 ]  # fmt: skip
 
 
@@ -70,6 +71,19 @@ def table_markdown(df: pd.DataFrame) -> str:
     for c in controllers:
         change = "–" if base is None or c == BASELINE_LABEL else f"{100 * (avg[c] / base - 1):+.1f} %"
         lines.append(f"| {c} | {avg[c]:.1f} | {change} | {share[c]:.2f} % |")
+    if "energy_kwh" in shared.columns:  # BOPTEST's figures (buildings/comfort.py), per weather's year, averaged
+        kpi = shared.groupby("controller", sort=False)[["energy_kwh", "peak_power_kw", "discomfort_kh"]].mean()
+        lines += [
+            "",
+            "BOPTEST's figures, averaged over the weathers: energy over the run, peak electric power (highest "
+            "15-minute mean), thermal discomfort outside the band:",
+            "",
+            "| Controller | energy (MWh) | peak (kW) | discomfort (K·h per zone) |",
+            "|---|---|---|---|",
+        ]
+        for c in controllers:
+            r = kpi.loc[c]
+            lines.append(f"| {c} | {r.energy_kwh / 1000:,.1f} | {r.peak_power_kw:.1f} | {r.discomfort_kh:.2f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -84,18 +98,27 @@ def failures_markdown(failures: list[dict]) -> str:
 
 
 def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | None = None) -> list[Path]:
-    """results.csv, results.md and the figures; returns the files written."""
-    from parallel_eplus.evaluation import building_table, plots
+    """results.csv (every run's rows), results.md and the figures; returns the files written.
 
+    Several runs of one controller (policies sharing a label) are averaged in the tables and figures, and
+    reported across runs, with intervals, in results.md's last section and seeds.csv (seeds.py)."""
+    from parallel_eplus.evaluation import building_table, plots, seeds
+
+    across = seeds.seed_table(df, BASELINE_LABEL)
+    full, df = df, seeds.collapse(df)
     if building_table.is_generic(df):  # another building: its power and zones, no paper figures
-        return building_table.write_results(df, out_dir, BASELINE_LABEL)
+        return building_table.write_results(df, out_dir, BASELINE_LABEL, full, across)
     out_dir.mkdir(parents=True, exist_ok=True)
-    io.write_text(out_dir / "results.csv", df[[c for c in RESULT_COLUMNS if c in df.columns]].to_csv(index=False))
-    io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df))
+    columns = [c for c in ("controller", "run", *RESULT_COLUMNS[1:]) if c in full.columns]
+    io.write_text(out_dir / "results.csv", full[columns].to_csv(index=False))
+    io.write_text(out_dir / "results.md", "# Evaluation\n\n" + table_markdown(df) + seeds.seeds_markdown(across))
     files = [out_dir / "results.csv", out_dir / "results.md"]
+    if not across.empty:
+        io.write_text(out_dir / "seeds.csv", across.to_csv(index=False))
+        files.append(out_dir / "seeds.csv")
     shown = plots.with_references(df, plots.find_references(out_dir))  # a lone policy beside the references
     files.append(plots.temperature_comparison(shown, out_dir / "temperatures.png"))
-    files.append(plots.power_comparison(shown, out_dir / "power.png"))
+    files.append(plots.power_comparison(shown, out_dir / "power.png", full))
     if histogram is None:
         controller = df["controller"].iloc[-1]
         weathers = list(df[df.controller == controller]["weather"])

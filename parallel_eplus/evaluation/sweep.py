@@ -46,6 +46,7 @@ class Controller:
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
     residual_space: str = "action"  # what the correction applies to (SimulationConfig)
     building: str | None = None  # the spec a policy was trained on (its config.json); None: the data center
+    run: str = ""  # a policy's training run (its folder's name): policies sharing a label are one recipe's runs
 
     @property
     def model(self) -> str:
@@ -67,6 +68,19 @@ class Controller:
 
         act = load_policy(self.path)
         return lambda obs, info: act(obs[None, :])[0]
+
+
+def policy_controllers(spec: str) -> list[Controller]:
+    """`policy_controller` for a policy, a run folder, or a folder of runs (a sweep's, or any: every run under it
+    that has a model.zip, labelled by the folder's name unless LABEL is given: one recipe's seeds)."""
+    path_text, _, label = spec.partition("=")
+    path = Path(path_text)
+    if path.is_dir() and not (path / "model.zip").is_file():
+        runs = sorted(p.parent for p in path.glob("*/model.zip"))
+        if not runs:
+            raise FileNotFoundError(f"{path}: no model.zip in it or in a run folder below it")
+        return [policy_controller(f"{run}={label or path.name}") for run in runs]
+    return [policy_controller(spec)]
 
 
 def policy_controller(spec: str) -> Controller:
@@ -102,18 +116,19 @@ def policy_controller(spec: str) -> Controller:
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
-        residual_space=saved.get("residual_space", "action"), building=building,
+        residual_space=saved.get("residual_space", "action"), building=building, run=run_dir_of(path).name,
     )  # fmt: skip
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
-    seen: dict[str, int] = {}
+    """Policies sharing a label from different runs are one recipe's runs (seeds); any other repeat is renamed."""
+    seen: dict[str, list[Controller]] = {}
     for c in controllers:
-        if c.label in seen:
-            seen[c.label] += 1
-            c.label = f"{c.label} [{c.path.parent.name if c.path else seen[c.label]}]"
-        else:
-            seen[c.label] = 1
+        earlier = seen.get(c.label, [])
+        seeds = earlier and c.kind == "policy" and all(e.kind == "policy" and e.run != c.run for e in earlier)
+        if earlier and not seeds:
+            c.label = f"{c.label} [{c.path.parent.name if c.path else len(earlier) + 1}]"
+        seen.setdefault(c.label, []).append(c)
     return controllers
 
 
@@ -174,7 +189,7 @@ def run_sweep(
             deadline_s = 600.0 + run_days * steps_per_day * 0.05
             rows, failures = ray_sweep.run_jobs(jobs, workers, ray_address, bar, deadline_s, keep_going)
         else:
-            rows, failures = _run_local(jobs, workers, bar, keep_going)
+            rows, failures = run_local(jobs, workers, bar, keep_going)
     finally:
         bar.close()
     rows = [{**row, **band} for row in rows]  # a spec's band, beside its "% in band"
@@ -209,11 +224,11 @@ def _job_config(
         time_features=controller.time_features, schedule_features=controller.schedule_features,
         residual_scale=controller.residual_scale, residual_space=controller.residual_space,
         rbc_target_c=controller.rbc_target_c,
-        output_dir=str(out_dir / "episodes" / slug(controller.label) / weather_label(weather)),
+        output_dir=str(out_dir / "episodes" / slug(controller.label) / (controller.run or "") / weather_label(weather)),
     )  # fmt: skip
 
 
-def _run_local(
+def run_local(
     jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar, keep_going: bool = False
 ) -> tuple[list[dict], list[dict]]:
     """The jobs as EnergyPlus processes of this machine, up to `workers` at once: (rows, failures)."""
@@ -268,9 +283,8 @@ def _run_local(
             for job in finished:
                 active.remove(job)
                 summary = job["info"]["episode_summary"]
-                rows.append(
-                    {"controller": job["controller"].label, **summary, "episode_dir": job["info"]["episode_dir"]}
-                )
+                c = job["controller"]
+                rows.append({"controller": c.label, "run": c.run, **summary, "episode_dir": job["info"]["episode_dir"]})
                 job["sim"].close()
                 bar.set_postfix(done=len(rows), last=f"{job['controller'].label} {summary['weather']}")
     finally:

@@ -79,7 +79,10 @@ class EpisodeMetrics(BaseCallback):
         "power_kw": "power_kw",
         "it_power_kw": "it_power_kw",
         "hvac_power_kw": "hvac_power_kw",
-    }  # and every reward temperature's mean and std, and the share in band (`_tags`)
+        "energy_kwh": "energy_kwh",  # BOPTEST's figures (buildings/comfort.py)
+        "peak_power_kw": "peak_power_kw",
+        "discomfort_kh": "discomfort_kh",
+    }  # and every reward temperature's mean and std, and the share in band where it applies (`_tags`)
 
     def __init__(self, episodes_csv: Path, progress: tqdm | None, steps_per_year: int = STEPS_PER_YEAR):
         """`steps_per_year`: the building's control steps in a year (the data center's 15-minute steps)."""

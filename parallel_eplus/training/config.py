@@ -68,6 +68,37 @@ class SACSettings:
 
 
 @dataclass
+class ComfortConstraint:
+    """`--comfort-target` and how the multiplier follows it (defaults chosen for rewards of ~1 per step)."""
+
+    target_pct: float | None = None  # None: the reward's fixed comfort weights (the paper's reproduction)
+    margin_c: float = 0.5  # the cost rises over this far inside the band's edges
+    multiplier_init: float = 5.0  # energy costs ~1 per step in every built-in spec (power_weight × energy)
+    kp: float = 1.0  # per percentage point short of the target, this batch
+    ki: float = 0.5  # per percentage point short, summed over batches
+    multiplier_max: float = 200.0
+
+    def check(self) -> None:
+        if self.target_pct is not None and not 0.0 < self.target_pct <= 100.0:
+            raise ValueError(f"--comfort-target is a share of samples in band, in percent: got {self.target_pct}")
+        if self.margin_c <= 0 or self.multiplier_init < 0 or self.kp < 0 or self.ki < 0:
+            raise ValueError("the comfort constraint's margin must be > 0 and its gains and start >= 0")
+
+
+@dataclass
+class ImitationSettings:
+    """How the policy is fitted to the recorded controls."""
+
+    epochs: int = 40
+    learning_rate: float = 1e-3
+    batch_size: int = 256
+    # The cloned Gaussian's log standard deviation (on-policy): exploration around the built-in behaviour.
+    # -2.0 is 0.135 of each action's half range (the data center's setpoint: ±2 K; its fans: ±0.35 kg/s).
+    log_std: float = -2.0
+    run_days: int | None = None  # days recorded per training weather; None: the run's episode length
+
+
+@dataclass
 class TrainConfig:
     """Everything a training run needs; saved as runs/<name>/config.json."""
 
@@ -100,6 +131,9 @@ class TrainConfig:
     residual_space: str = "action"  # what it corrects: each action, or each zone's flow demand (SimulationConfig)
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
+    comfort: ComfortConstraint = field(default_factory=ComfortConstraint)  # --comfort-target (training/lagrangian.py)
+    init_from_baseline: bool = False  # imitate the building's own controls first (training/imitation.py)
+    imitation: ImitationSettings = field(default_factory=ImitationSettings)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
     ppo: PPOSettings = field(default_factory=PPOSettings)
     sac: SACSettings = field(default_factory=SACSettings)
@@ -141,6 +175,11 @@ class TrainConfig:
             raise ValueError(f"unknown --residual-space {self.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
         if self.residual_space != "action" and not self.residual_scale:
             raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE (kg/s of demand per unit)")
+        self.comfort.check()
+        if self.init_from_baseline and self.init_from is not None:
+            raise ValueError("--init-from-baseline and --init-from both give the first policy: pass one of them")
+        if self.init_from_baseline and self.residual_scale:
+            raise ValueError("--init-from-baseline imitates the building's own controls; --residual corrects ours")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
         if self.run_name is None:
@@ -164,6 +203,11 @@ class TrainConfig:
         return Path(self.runs_dir) / str(self.run_name)
 
     @property
+    def constrained(self) -> bool:
+        """Comfort as a constraint (`--comfort-target`) rather than the reward's fixed weights."""
+        return self.comfort.target_pct is not None
+
+    @property
     def n_steps(self) -> int:
         """Steps per worker per batch."""
         return math.ceil(self.batch_size / self.workers)
@@ -179,6 +223,8 @@ class TrainConfig:
         raw["reward"] = RewardConfig(**raw["reward"])
         raw["trpo"] = TRPOSettings(**{**raw["trpo"], "net_arch": tuple(raw["trpo"]["net_arch"])})
         raw["ppo"] = PPOSettings(**raw.get("ppo", {}))  # runs from before PPO have none
+        raw["comfort"] = ComfortConstraint(**raw.get("comfort", {}))  # runs from before it have none
+        raw["imitation"] = ImitationSettings(**raw.get("imitation", {}))
         sac = raw.get("sac", {})
         raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
         return cls(**raw)

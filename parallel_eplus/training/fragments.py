@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from parallel_eplus.training.numpy_policy import NumpyPolicy
-from parallel_eplus.training.pipeline import SINK_ARRAYS, run_pipeline
+from parallel_eplus.training.pipeline import SIDE_ARRAYS, SINK_ARRAYS, run_pipeline
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,7 @@ class BatchOrder:
     n_steps: int
     gamma: float
     bounds: tuple[np.ndarray, np.ndarray]  # the action space's low and high (actions are clipped to them)
+    side: bool = False  # also each step's comfort cost and counts (pipeline.SIDE_ARRAYS): comfort is a constraint
 
 
 @dataclass
@@ -75,15 +76,21 @@ class Fragment:
     moments: tuple[np.ndarray, np.ndarray, int] | None = None  # mean, var, count of the raw observations seen
     rngs: list[np.random.Generator] = field(default_factory=list)  # each worker's stream, advanced
     collect_s: float = 0.0
+    costs: np.ndarray | None = None  # with BatchOrder.side: pipeline.SIDE_ARRAYS
+    comfort_out: np.ndarray | None = None
+    comfort_zones: np.ndarray | None = None
 
     @classmethod
-    def empty(cls, n_steps: int, n_workers: int, obs_shape: tuple[int, ...], n_actions: int) -> Fragment:
+    def empty(
+        cls, n_steps: int, n_workers: int, obs_shape: tuple[int, ...], n_actions: int, side: bool = False
+    ) -> Fragment:
         shape = (n_steps, n_workers)
         f32 = np.float32
+        extra = {name: np.zeros(shape, f32) for name, _ in SIDE_ARRAYS} if side else {}
         return cls(
             observations=np.zeros((*shape, *obs_shape), f32), actions=np.zeros((*shape, n_actions), f32),
             rewards=np.zeros(shape, f32), episode_starts=np.zeros(shape, f32), values=np.zeros(shape, f32),
-            log_probs=np.zeros(shape, f32), dones=np.zeros(shape, bool),
+            log_probs=np.zeros(shape, f32), dones=np.zeros(shape, bool), **extra,
         )  # fmt: skip
 
 
@@ -107,7 +114,7 @@ def collect_fragment(
     raw = np.array(raw, dtype=np.float32)
     obs = norm(raw) if norm is not None else raw.copy()
     starts = np.array(starts, dtype=bool)
-    fragment = Fragment.empty(order.n_steps, n, raw.shape[1:], order.bounds[0].shape[0])
+    fragment = Fragment.empty(order.n_steps, n, raw.shape[1:], order.bounds[0].shape[0], order.side)
     seen = np.zeros((order.n_steps * n, *raw.shape[1:]), np.float64)
     count = 0
 
@@ -147,4 +154,7 @@ def merge(buffer, fragments: list[Fragment], slices: list[slice]) -> None:
     for fragment, sl in zip(fragments, slices, strict=True):
         for name in SINK_ARRAYS:
             getattr(buffer, name)[:, sl] = getattr(fragment, name)
+        for name, _ in SIDE_ARRAYS:  # comfort as a constraint: both have them
+            if getattr(buffer, name, None) is not None and getattr(fragment, name) is not None:
+                getattr(buffer, name)[:, sl] = getattr(fragment, name)
     buffer.pos, buffer.full = buffer.buffer_size, True

@@ -17,6 +17,9 @@ from parallel_eplus.training.numpy_policy import NumpyPolicy
 
 # What the loop writes per transition: the rollout buffer's own array names.
 SINK_ARRAYS = ("observations", "actions", "rewards", "episode_starts", "values", "log_probs")
+# Arrays a sink may also have, filled from each step's info (array, info key): the comfort constraint's cost and
+# counts (training/lagrangian.py), reported by the env when comfort is a constraint.
+SIDE_ARRAYS = (("costs", "comfort_cost"), ("comfort_out", "comfort_out"), ("comfort_zones", "comfort_zones"))
 
 
 def run_pipeline(
@@ -46,6 +49,7 @@ def run_pipeline(
     step = [0] * n
     step_infos: list[list[dict]] = [[{} for _ in range(n)] for _ in range(n_steps)]
     step_dones = np.zeros((n_steps, n), dtype=bool)
+    side = [(getattr(sink, name), key) for name, key in SIDE_ARRAYS if getattr(sink, name, None) is not None]
 
     def act(i: int) -> None:
         t = step[i]
@@ -74,6 +78,8 @@ def run_pipeline(
                     reward += gamma * policy.value(info["terminal_observation"][None])[0]
             t = step[i]
             sink.rewards[t, i] = reward
+            for array, key in side:
+                array[t, i] = info.get(key, 0.0)
             step_infos[t][i], step_dones[t, i] = info, done
             obs[i], starts[i] = new_obs, done
             step[i] = t + 1

@@ -64,6 +64,12 @@ class NumpyRollouts:
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_rngs", "lockstep"]
 
+    def _charge_comfort(self, buffer: RolloutBuffer) -> None:
+        """Comfort as a constraint (`model.comfort`): update the multiplier from the batch, charge its rewards."""
+        lagrangian = getattr(self, "comfort", None)
+        if lagrangian is not None:
+            buffer.charge(lagrangian, self.logger)
+
     def collect_rollouts(
         self, env: VecEnv, callback: BaseCallback, rollout_buffer: RolloutBuffer, n_rollout_steps: int
     ) -> bool:
@@ -96,9 +102,12 @@ class NumpyRollouts:
                 self._last_obs, actions, rewards, self._last_episode_starts,
                 th.from_numpy(values), th.from_numpy(log_probs),
             )  # fmt: skip
+            if hasattr(rollout_buffer, "record_infos"):  # comfort as a constraint: the step's cost and counts
+                rollout_buffer.record_infos(rollout_buffer.pos - 1, infos)
             self._last_obs = new_obs
             self._last_episode_starts = dones
         values = th.from_numpy(policy.value(new_obs))
+        self._charge_comfort(rollout_buffer)
         rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)
         callback.update_locals(locals())
         callback.on_rollout_end()
@@ -164,6 +173,7 @@ class NumpyRollouts:
         if norm is not None:
             norm.old_obs = raw
         values = th.from_numpy(policy.value(obs))
+        self._charge_comfort(buffer)
         buffer.compute_returns_and_advantage(last_values=values, dones=starts)
         callback.update_locals({"new_obs": obs, "dones": starts, "values": values})
         callback.on_rollout_end()
@@ -181,7 +191,8 @@ class NumpyRollouts:
         buffer.reset()
         callback.on_rollout_start()
         order = fragments.BatchOrder(policy, fragments.ObsNormalizer.of(norm), n_steps, self.gamma,
-                                     (self.action_space.low, self.action_space.high))  # fmt: skip
+                                     (self.action_space.low, self.action_space.high),
+                                     getattr(buffer, "costs", None) is not None)  # fmt: skip
         parts = cluster.collect(order, self._rngs)
         t0 = time.perf_counter()
         fragments.merge(buffer, parts, cluster.slices)
@@ -195,6 +206,7 @@ class NumpyRollouts:
         if norm is not None:
             norm.old_obs = cat([p.last_raw for p in parts])
         values = th.from_numpy(cat([p.last_values for p in parts]))
+        self._charge_comfort(buffer)
         buffer.compute_returns_and_advantage(last_values=values, dones=starts)
         n = env.num_envs
         dones = cat([p.dones for p in parts], axis=1)

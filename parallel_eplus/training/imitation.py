@@ -1,0 +1,179 @@
+"""`train --init-from-baseline`: start learning from the building's own controls, not from scratch.
+
+Imitation before reinforcement learning (as Gnu-RL, Chen et al. 2019, does with its MPC policy): the model
+runs with its own controls on the training weathers; what those controls chose for each of the spec's actions
+is read back every timestep through an output variable (the node setpoint, fan flow or thermostat setpoint that
+EnergyPlus computed: `ActionSpec.readback`, inferred from the actuator or named in the spec); the policy's mean is
+fitted to those choices by supervised learning on the same observations the policy sees, the observation
+statistics start from them, and reinforcement learning starts there. The first policy then behaves like the
+built-in controls, and learning improves on them instead of rediscovering them.
+
+Timing: observation k (the state after timestep k) is paired with what the controls set during timestep k+1,
+as an action chosen on observation k acts during timestep k+1 in the env (engine/bridge.py).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch as th
+from stable_baselines3.common.vec_env import VecNormalize
+from tqdm import tqdm
+
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.training.config import ImitationSettings
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Demonstrations:
+    """The built-in controls' choices: observations as the policy sees them (before normalization), actions
+    normalized to [-1, 1] (and in physical units), and the weather of each row."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    physical: np.ndarray
+    low: np.ndarray  # each action's bounds (physical units)
+    high: np.ndarray
+    names: tuple[str, ...] = ()
+    weathers: list[str] = field(default_factory=list)
+
+    def to_physical(self, actions: np.ndarray) -> np.ndarray:
+        return self.low + (np.clip(actions, -1, 1) + 1) / 2 * (self.high - self.low)
+
+    def __len__(self) -> int:
+        return len(self.observations)
+
+
+def readbacks(building: str | None) -> list[tuple[str, str]]:
+    """(variable, key) per action of the building; an action without one is an error naming what to add."""
+    spec = load_building(building).spec
+    found = []
+    for i, a in enumerate(spec.actions):
+        if a.readback is None:
+            raise ValueError(
+                f"{spec.path}: actions[{i}] ({a.name}): --init-from-baseline needs to read back what the building's "
+                'own controls set; name the output variable: readback = { variable = "...", key = "..." }'
+            )
+        found.append(a.readback)
+    return found
+
+
+def _read_back(csv: Path, wanted: list[tuple[str, str]]) -> np.ndarray:
+    """The read-back columns of an episode's eplusout.csv, in the order of `wanted` (matched case-insensitively)."""
+    table = pd.read_csv(csv)
+    columns = {c.split(" [")[0].split(" (")[0].strip().upper(): c for c in table.columns}
+    picked = []
+    for variable, key in wanted:
+        name = f"{key}:{variable}".upper()
+        if name not in columns:
+            raise ValueError(f"{csv}: no column for {key} / {variable} (EnergyPlus reported: {list(columns)[:8]}...)")
+        picked.append(table[columns[name]].to_numpy(float))
+    return np.stack(picked, axis=1)
+
+
+def record_baseline(
+    building: str | None,
+    weathers: list[str],
+    run_days: int,
+    workers: int,
+    out_dir: Path,
+    features: tuple[bool, bool] = (False, False),
+    progress: bool = True,
+) -> Demonstrations:
+    """Run the building's own controls on each weather (`workers` at a time) and pair every observation with what
+    those controls set next. `features`: the policy's (time, schedule) observation features."""
+    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_local, slug
+
+    wanted = readbacks(building)
+    spec = load_building(building)
+    recorded: dict[str, list[np.ndarray]] = {}
+    empty = np.zeros(0, dtype=np.float32)
+
+    class Recorder(Controller):
+        def make(self, building=None):
+            def act(obs: np.ndarray, info: dict) -> np.ndarray:
+                recorded.setdefault(weather_label(info["weather"]), []).append(np.array(obs, np.float32))
+                return empty
+
+            return act
+
+    controller = Recorder(BASELINE_LABEL, "baseline")
+    outputs = tuple((key, variable) for variable, key in wanted)
+    jobs = [
+        (controller, SimulationConfig(
+            weather=w, model="baseline", building=building, run_days=run_days, time_features=features[0],
+            schedule_features=features[1], extra_outputs=outputs, energyplus_csv=False,
+            output_dir=str(out_dir / slug(weather_label(w))),
+        ))
+        for w in weathers
+    ]  # fmt: skip
+    total = len(jobs) * run_days * spec.steps_per_day
+    with tqdm(total=total, unit="step", desc="record built-in controls", disable=not progress) as bar:
+        rows, _ = run_local(jobs, workers, bar)
+    observations, physical, labels = [], [], []
+    for row in rows:
+        weather = row["weather"]
+        obs = np.stack(recorded[weather])
+        chosen = _read_back(Path(row["episode_dir"]) / "eplusout.csv", wanted)
+        if len(chosen) != len(obs):
+            raise ValueError(f"{weather}: {len(obs)} observations but {len(chosen)} read-back rows in eplusout.csv")
+        observations.append(obs)
+        physical.append(chosen)
+        labels += [weather] * len(obs)
+    physical_all = np.concatenate(physical)
+    low = np.array([a.low for a in spec.actions])
+    high = np.array([a.high for a in spec.actions])
+    actions = np.clip(2 * (physical_all - low) / (high - low) - 1, -1, 1).astype(np.float32)
+    names = tuple(a.name for a in spec.actions)
+    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels)
+
+
+def _actor_mean(policy, obs: th.Tensor) -> th.Tensor:
+    """The deterministic action before clipping: an on-policy Gaussian's mean; SAC's squashed mean."""
+    if hasattr(policy, "actor"):  # SAC
+        mean, _, _ = policy.actor.get_action_dist_params(obs)
+        return th.tanh(mean)
+    features = policy.extract_features(obs, policy.pi_features_extractor)
+    return policy.action_net(policy.mlp_extractor.forward_actor(features))
+
+
+def clone(model, env: VecNormalize, demos: Demonstrations, settings: ImitationSettings, seed: int = 0) -> dict:
+    """Fit `model`'s policy to the demonstrations (observation statistics first); returns the fit's report."""
+    env.obs_rms.mean = demos.observations.mean(axis=0).astype(np.float64)
+    env.obs_rms.var = demos.observations.var(axis=0).astype(np.float64)
+    env.obs_rms.count = float(len(demos))
+    x = th.as_tensor(env.normalize_obs(demos.observations), dtype=th.float32)
+    # Actions at a bound are clipped there by the env anyway; for SAC's tanh keep the targets reachable.
+    limit = 0.995 if hasattr(model.policy, "actor") else 1.0
+    y = th.as_tensor(np.clip(demos.actions, -limit, limit))
+    policy = model.policy
+    actor = policy.actor if hasattr(policy, "actor") else policy
+    params = [p for name, p in actor.named_parameters() if "value" not in name and name != "log_std"]
+    optimizer = th.optim.Adam(params, lr=settings.learning_rate)
+    generator = th.Generator().manual_seed(seed)
+    policy.set_training_mode(True)
+    for _ in range(settings.epochs):
+        order = th.randperm(len(x), generator=generator)
+        for start in range(0, len(x), settings.batch_size):
+            batch = order[start : start + settings.batch_size]
+            loss = th.nn.functional.mse_loss(_actor_mean(policy, x[batch]), y[batch])
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+    policy.set_training_mode(False)
+    if hasattr(policy, "log_std"):
+        with th.no_grad():
+            policy.log_std.fill_(settings.log_std)
+    with th.no_grad():
+        fitted = demos.to_physical(_actor_mean(policy, x).numpy())
+    target = demos.to_physical(demos.actions)  # the recorded choice within the action's bounds
+    rmse = np.sqrt(((fitted - target) ** 2).mean(axis=0))
+    return {"samples": len(demos), "rmse": dict(zip(demos.names, rmse.round(4).tolist(), strict=True))}

@@ -1,0 +1,100 @@
+"""Comfort as a constraint (`--comfort-target`): the multiplier follows what each batch measured, on real runs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from parallel_eplus.training.config import ComfortConstraint
+from parallel_eplus.training.lagrangian import Lagrangian
+from parallel_eplus.training.rollout import ALGORITHMS
+from parallel_eplus.training.train import train
+
+from .test_train import scalars, small_config
+
+
+def test_the_multiplier_follows_what_each_batch_measured():
+    """PI on percentage points short of the target: up while a batch misses it, down once batches beat it."""
+    lag = Lagrangian.start(ComfortConstraint(target_pct=99.0, multiplier_init=5.0, kp=1.0, ki=0.5))
+    assert lag.multiplier == 5.0 and lag.integral == 10.0
+    lag.update(out=40, zones=1000)  # 96 % in band: 3 points short
+    assert lag.measured_pct == pytest.approx(96.0)
+    assert lag.multiplier == pytest.approx(1.0 * 3 + 0.5 * (10 + 3))
+    up = lag.multiplier
+    lag.update(out=40, zones=1000)  # still short: the integral keeps it rising
+    assert lag.multiplier > up
+    for _ in range(30):  # 100 % in band, one point above the target, batch after batch
+        lag.update(out=0, zones=1000)
+    assert lag.multiplier == 0.0 and lag.integral == 0.0  # never negative
+    held = Lagrangian.start(ComfortConstraint(target_pct=99.0))
+    held.update(out=0, zones=0)  # nothing measured (an unoccupied stretch): no change
+    assert held.multiplier == 5.0 and held.updates == 0 and math.isnan(held.measured_pct)
+    with pytest.raises(ValueError, match="percent"):
+        ComfortConstraint(target_pct=150.0).check()
+
+
+@pytest.mark.slow
+def test_a_missed_target_raises_the_multiplier_and_resume_restores_it(tmp_path, no_leaks):
+    """An untrained policy (the paper's initial spread) keeps far fewer than 99.5 % of samples in 22-25 C: each
+    batch raises the multiplier. The env pays for energy only; the multiplier is in TensorBoard and checkpoints."""
+    cfg = small_config(tmp_path, "lag", comfort=ComfortConstraint(target_pct=99.5))
+    final = train(cfg, progress=False)
+    model = ALGORITHMS["trpo"].load(final, device="cpu")
+    lag = model.comfort
+    assert lag.updates == 2 and lag.measured_pct < 99.5
+    tags = scalars(tmp_path / "tb" / "lag")
+    multipliers = [e.value for e in tags["comfort/multiplier"]]
+    assert len(multipliers) == 2 and 5.0 < multipliers[0] < multipliers[1] == pytest.approx(lag.multiplier)
+    assert [e.value for e in tags["comfort/in_band_pct"]][-1] == pytest.approx(lag.measured_pct)
+    steps = pd.read_parquet(next((tmp_path / "runs" / "lag" / "episodes").rglob("steps.parquet")))
+    assert (steps["reward_comfort"] == 0).all() and (steps["reward_band"] == 0).all()
+    np.testing.assert_allclose(steps["reward"], steps["reward_power"])
+    # --resume continues the multiplier where the checkpoint left it
+    checkpoint = tmp_path / "runs" / "lag" / "checkpoints" / "model_1536_steps.zip"  # the second batch's
+    saved = ALGORITHMS["trpo"].load(checkpoint, device="cpu").comfort
+    train(small_config(tmp_path, "lag", timesteps=2304), resume=checkpoint)
+    resumed = ALGORITHMS["trpo"].load(tmp_path / "runs" / "lag" / "model.zip", device="cpu").comfort
+    assert resumed.updates == saved.updates + 1  # one batch after the checkpoint, on from its saved state
+
+
+@pytest.mark.slow
+def test_a_target_beaten_lowers_the_multiplier_with_ppo(tmp_path, no_leaks):
+    cfg = small_config(tmp_path, "lag-low", algorithm="ppo", timesteps=768,
+                       comfort=ComfortConstraint(target_pct=1.0, multiplier_init=5.0))  # fmt: skip
+    train(cfg, progress=False)
+    lag = ALGORITHMS["ppo"].load(tmp_path / "runs" / "lag-low" / "model.zip", device="cpu").comfort
+    assert lag.updates == 1 and lag.measured_pct > 1.0 and lag.multiplier < 5.0
+
+
+@pytest.mark.slow
+def test_sac_pays_the_multiplier_from_its_replay_buffer(tmp_path, no_leaks):
+    from parallel_eplus.training.config import SACSettings
+
+    cfg = small_config(tmp_path, "lag-sac", algorithm="sac", timesteps=768, batch_size=384,
+                       sac=SACSettings(learning_starts=192, buffer_size=2000),
+                       comfort=ComfortConstraint(target_pct=99.5))  # fmt: skip
+    train(cfg, progress=False)
+    model = ALGORITHMS["sac"].load(tmp_path / "runs" / "lag-sac" / "model.zip", device="cpu")
+    model.load_replay_buffer(tmp_path / "runs" / "lag-sac" / "model_replay_buffer.pkl")
+    buffer = model.replay_buffer
+    assert model.comfort.updates == 2 and model.comfort.multiplier > 5.0
+    assert buffer.costs[: buffer.pos].max() > 0  # each transition's cost, stored beside its reward
+    buffer.multiplier = model.comfort.multiplier
+    np.random.seed(0)
+    charged = buffer.sample(64).rewards
+    buffer.multiplier = 0.0
+    np.random.seed(0)
+    plain = buffer.sample(64).rewards
+    assert (charged <= plain).all() and (charged < plain).any()
+    assert "comfort/multiplier" in scalars(tmp_path / "tb" / "lag-sac")
+
+
+@pytest.mark.slow
+def test_ray_actors_return_the_costs_their_workers_reported(tmp_path, no_leaks):
+    cfg = small_config(tmp_path, "lag-ray", backend="ray", timesteps=768, comfort=ComfortConstraint(target_pct=99.5))
+    train(cfg, progress=False)
+    lag = ALGORITHMS["trpo"].load(tmp_path / "runs" / "lag-ray" / "model.zip", device="cpu").comfort
+    assert lag.updates == 1 and 0.0 <= lag.measured_pct < 99.5 and lag.multiplier > 5.0
