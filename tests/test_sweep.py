@@ -70,6 +70,8 @@ batch-size = 192
 reward = "{reward}"
 [train.trpo]
 target_kl = 0.02
+[train.comfort]
+target_pct = 99.0
 [grid]
 algorithm = ["trpo", "ppo"]
 "ppo.learning_rate" = [3e-4, 1e-3]
@@ -78,11 +80,13 @@ algorithm = ["trpo", "ppo"]
     )
     assert spec.base["weathers"] == ["CA", "FL"] and spec.base["batch_size"] == 192
     assert spec.base["reward.power_weight"] == 2e-5 and spec.base["trpo.target_kl"] == 0.02
+    assert spec.base["comfort.target_pct"] == 99.0
     assert spec.varied == ["algorithm", "ppo.learning_rate", "seed"]
     settings = {**spec.base, "algorithm": "ppo", "ppo.learning_rate": 1e-3, "seed": 1}
     cfg = trial_config(settings, str(tmp_path / "runs" / "grid"), str(tmp_path / "tb" / "grid"), "t")
     assert (cfg.algorithm, cfg.ppo.learning_rate, cfg.seed, cfg.reward.power_weight) == ("ppo", 1e-3, 1, 2e-5)
-    assert cfg.trpo.target_kl == 0.02 and cfg.run_dir == tmp_path / "runs" / "grid" / "t" and cfg.backend == "local"
+    assert cfg.trpo.target_kl == 0.02 and cfg.comfort.target_pct == 99.0
+    assert cfg.run_dir == tmp_path / "runs" / "grid" / "t" and cfg.backend == "local"
     assert trial_name(settings, spec.varied) == "algorithm-ppo_learning_rate-0.001_seed-1"
     assert trial_name({"seed": 2}, ["seed"]) == "seed-2"
 

@@ -57,11 +57,16 @@ class SweepSpec:
         return json.dumps(asdict(self), indent=2, sort_keys=True)
 
 
+def _nested() -> set[str]:
+    """TrainConfig's fields that are settings of their own (reward, trpo, ppo, sac, comfort, ...)."""
+    return {name for name, value in asdict(TrainConfig(workers=1)).items() if isinstance(value, dict)}
+
+
 def _flatten(table: dict, prefix: str = "") -> dict[str, Any]:
     out = {}
     for key, value in table.items():
         key = prefix + key.replace("-", "_")
-        if isinstance(value, dict) and key.split(".")[-1] in ("reward", "trpo", "ppo", "sac"):
+        if isinstance(value, dict) and not prefix and key in _nested():
             out |= _flatten(value, key + ".")
         else:
             out[key] = value
