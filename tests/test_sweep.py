@@ -208,3 +208,27 @@ batch_size = {{ choice = [96, 192] }}
         assert p.name.split("_batch_size-")[1].startswith(f"{saved['batch_size']}_target_kl-")
         assert 0.003 <= saved["trpo"]["target_kl"] <= 0.03
     assert "best by power_kw (min): " in out
+
+
+@pytest.mark.slow
+def test_a_signal_to_one_trial_stops_it_with_a_checkpoint_and_the_others_go_on(tmp_path):
+    """What a run registry's `runs stop` does to a trial: SIGTERM to the process that runs it."""
+    pipes_before = our_pipe_dirs()
+    spec = write_spec(tmp_path, 'name = "one"\n' + BASE + "[grid]\ntimesteps = [20000, 192]\n")
+    cmd = [sys.executable, "-m", "parallel_eplus.cli", "sweep", str(spec)]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
+    checkpoints = tmp_path / "runs" / "one" / "timesteps-20000" / "checkpoints"
+    deadline = time.monotonic() + 180
+    while not list(checkpoints.glob("model_*_steps.zip")) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.5)
+    owners = {d.split("-")[2] for d in our_pipe_dirs() - pipes_before}  # parallel-eplus-<pid>-...: the trial's
+    assert len(owners) == 1 and proc.poll() is None, (owners, proc.poll())
+    os.kill(int(owners.pop()), signal.SIGTERM)
+    out, _ = proc.communicate(timeout=300)
+    assert proc.returncode == 130, out  # a trial stopped: the sweep says how to continue it
+    states = {ln.split()[0]: ln.split()[1] for ln in out.splitlines() if ln.startswith("timesteps-")}
+    assert states == {"timesteps-20000": "stopped", "timesteps-192": "finished"}, out
+    cut_at = max(int(p.stem.split("_")[1]) for p in checkpoints.glob("model_*_steps.zip"))
+    assert f"interrupted at step {cut_at}; checkpoint saved" in out
+    assert our_processes() == [] and our_pipe_dirs() - pipes_before == set()

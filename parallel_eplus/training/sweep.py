@@ -167,9 +167,9 @@ def _outcome(result, root: Path) -> TrialOutcome:
         text = str(result.error).strip().splitlines()
         cause = next((ln for ln in text if ln.startswith("RuntimeError: ")), text[-1] if text else "")
         outcome.state, outcome.error = "failed", cause.removeprefix("RuntimeError: ")
-    elif metrics.get("done"):
+    elif metrics.get("done") and not metrics.get("stopped"):
         outcome.state = "finished"
-    elif metrics.get("training_iteration"):
+    elif metrics.get("training_iteration"):  # stopped by the sweep's stop, or its own process's signal
         outcome.state = "stopped"
         saves = saves_newest_first(outcome.run_dir)  # the stop's checkpoint, after the last reported batch
         if saves and saves[0].name != MODEL_FILE:

@@ -14,6 +14,7 @@ import logging
 import math
 import os
 import queue
+import signal
 import threading
 import time
 import zipfile
@@ -97,6 +98,9 @@ class TrialRun(tune.Trainable):
     def setup(self, config, base=None, runs_dir="runs", tensorboard_dir="tensorboard_logs"):
         os.environ[TRIAL_ENV] = self.trial_name  # read by `parallel-eplus runs` through the run's status
         logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")  # as train's are
+        if threading.current_thread() is threading.main_thread():  # a signal to this trial stops it alone
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, self._on_signal)
         self._results: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self._run_dir = Path(runs_dir) / self.trial_name
@@ -105,6 +109,12 @@ class TrialRun(tune.Trainable):
             name=f"train {self.trial_name}", daemon=True,
         )  # fmt: skip
         self._thread.start()
+
+    def _on_signal(self, signum, frame) -> None:
+        """SIGINT or SIGTERM to the trial's process (`kill`, a run registry's stop) stops this trial as Ctrl-C
+        stops `train`: a checkpoint, its workers gone; the sweep goes on with the others."""
+        log.warning("trial %s: signal %d; stopping with a checkpoint", self.trial_name, signum)
+        self._stop.set()
 
     def _train(self, settings: dict, runs_dir: str, tensorboard_dir: str) -> None:
         from parallel_eplus.training.train import train
@@ -133,7 +143,7 @@ class TrialRun(tune.Trainable):
         kind, payload = self._results.get()
         if kind == "error":
             raise payload
-        return {**payload, "done": kind != "result"}
+        return {**payload, "done": kind != "result", "stopped": kind == "stopped"}
 
     def save_checkpoint(self, checkpoint_dir: str) -> dict:
         """Tune's own checkpoint only points at the run: its checkpoints are the run folder's."""
