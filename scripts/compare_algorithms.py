@@ -28,14 +28,16 @@ def main() -> None:
     p.add_argument("--run-days", type=int, default=365, help="training episode length")
     p.add_argument("--eval-days", type=int, default=365, help="evaluation episode length")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--seeds", default="0", help="comma-separated: each algorithm trains once per seed (default 0)")
     p.add_argument("--references", type=Path, default=Path("results/paper/results.csv"),
                    help="results.csv holding the Baseline and Rule-based rows")  # fmt: skip
     args = p.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
     base = TrainConfig(workers=args.workers, weathers=["CA", "CO", "FL"], run_days=args.run_days,
                        batch_size=args.batch_size, tensorboard_dir=str(args.out / "tensorboard"))  # fmt: skip
+    seeds = [int(s) for s in args.seeds.split(",")]
     progress = run_comparison(args.out, args.algorithms.split(","), args.timesteps, args.eval_every, base,
-                              args.eval_days)  # fmt: skip
+                              args.eval_days, seeds)  # fmt: skip
     refs = references(args.references)
     figure = compare_figure(progress, refs, args.out / "compare.png")
     table = compare_table(progress, refs)

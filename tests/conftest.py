@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -12,6 +14,27 @@ import pytest
 # is never mistaken for a leak.
 os.environ["PARALLEL_EPLUS_TEST_SESSION"] = str(os.getpid())
 MARKER = f"PARALLEL_EPLUS_TEST_SESSION={os.getpid()}"
+
+# A temp folder of the session's own, for it and every process it starts: whatever our code leaves in "the
+# temp folder" is found there at the end (`pytest_sessionfinish`), whatever else shares /tmp. Ray and pytest's
+# own tmp_path stay where they were (Ray's socket paths have a length limit).
+_SYSTEM_TMP = os.environ.get("TMPDIR", "/tmp")
+os.environ.setdefault("RAY_TMPDIR", _SYSTEM_TMP)
+os.environ.setdefault("PYTEST_DEBUG_TEMPROOT", _SYSTEM_TMP)
+SESSION_TMP = tempfile.mkdtemp(prefix=f"pe-tests-{os.getpid()}-", dir=_SYSTEM_TMP)
+os.environ["TMPDIR"] = tempfile.tempdir = SESSION_TMP
+LEFT_IN_TMP = ("SB3-", "parallel-eplus-")  # SB3's default logger folders; our pipes and temporary episodes
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Nothing of ours may stay in the temp folder: fail the session, naming what was left, then tidy up."""
+    left = sorted(n for n in os.listdir(SESSION_TMP) if n.startswith(LEFT_IN_TMP))
+    if left:
+        reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+        if reporter is not None:
+            reporter.write_line(f"\nFAILED: the tests left in the temp folder: {', '.join(left)}", red=True)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+    shutil.rmtree(SESSION_TMP, ignore_errors=True)
 
 
 def _started_by_us(pid: str) -> bool:
@@ -51,9 +74,12 @@ def _owned_by_another_run(path: str) -> bool:
     return int(pid) != os.getpid() and not _started_by_us(pid)
 
 
-def our_pipe_dirs(tmp: str = "/tmp") -> set[str]:
+def our_pipe_dirs(tmp: str | None = None) -> set[str]:
     """Pipe directories under `tmp` (a `parallel-eplus-*` folder with an `act` FIFO), less those of
     another run on the machine: named as another process's, or held open by one."""
+    tmp = tmp or tempfile.gettempdir()
+    if not os.path.isdir(tmp):  # the session's own, removed at its end (an interrupted session tears down late)
+        return set()
     names = {
         d for d in os.listdir(tmp) if d.startswith("parallel-eplus-") and os.path.exists(os.path.join(tmp, d, "act"))
     }

@@ -17,23 +17,27 @@ from .test_train import scalars, small_config
 
 
 def test_the_multiplier_follows_what_each_batch_measured():
-    """PI on percentage points short of the target: up while a batch misses it, down once batches beat it."""
-    lag = Lagrangian.start(ComfortConstraint(target_pct=99.0, multiplier_init=5.0, kp=1.0, ki=0.5))
-    assert lag.multiplier == 5.0 and lag.integral == 10.0
-    lag.update(out=40, zones=1000)  # 96 % in band: 3 points short
+    """In log space, by the ratio of samples out of band to those the target allows: up while batches miss the
+    target, down as fast when they beat it by as much, within its bounds."""
+    lag = Lagrangian.start(ComfortConstraint(target_pct=99.0, multiplier_init=10.0, rate=0.3, floor_pct=0.05))
+    lag.update(out=40, zones=1000)  # 96 % in band: 4 % out where 1 % is allowed
     assert lag.measured_pct == pytest.approx(96.0)
-    assert lag.multiplier == pytest.approx(1.0 * 3 + 0.5 * (10 + 3))
+    assert lag.multiplier == pytest.approx(10.0 * (4.05 / 1.05) ** 0.3)
     up = lag.multiplier
-    lag.update(out=40, zones=1000)  # still short: the integral keeps it rising
+    lag.update(out=40, zones=1000)  # still short: it keeps rising
     assert lag.multiplier > up
-    for _ in range(30):  # 100 % in band, one point above the target, batch after batch
+    twice, half = Lagrangian.start(lag.settings), Lagrangian.start(lag.settings)
+    twice.update(out=20.5, zones=1000)  # 2.05 % out: with the floor, twice the allowance (1 % + 0.05)
+    half.update(out=4.75, zones=1000)  # 0.475 % out: half of it
+    assert math.log(twice.multiplier / 10.0) == pytest.approx(-math.log(half.multiplier / 10.0))
+    for _ in range(30):  # 100 % in band, batch after batch
         lag.update(out=0, zones=1000)
-    assert lag.multiplier == 0.0 and lag.integral == 0.0  # never negative
+    assert lag.multiplier == lag.settings.multiplier_min
     held = Lagrangian.start(ComfortConstraint(target_pct=99.0))
     held.update(out=0, zones=0)  # nothing measured (an unoccupied stretch): no change
-    assert held.multiplier == 5.0 and held.updates == 0 and math.isnan(held.measured_pct)
+    assert held.multiplier == held.settings.multiplier_init and held.updates == 0 and math.isnan(held.measured_pct)
     with pytest.raises(ValueError, match="percent"):
-        ComfortConstraint(target_pct=150.0).check()
+        ComfortConstraint(target_pct=100.0).check()
 
 
 @pytest.mark.slow
@@ -47,7 +51,7 @@ def test_a_missed_target_raises_the_multiplier_and_resume_restores_it(tmp_path, 
     assert lag.updates == 2 and lag.measured_pct < 99.5
     tags = scalars(tmp_path / "tb" / "lag")
     multipliers = [e.value for e in tags["comfort/multiplier"]]
-    assert len(multipliers) == 2 and 5.0 < multipliers[0] < multipliers[1] == pytest.approx(lag.multiplier)
+    assert len(multipliers) == 2 and 10.0 < multipliers[0] < multipliers[1] == pytest.approx(lag.multiplier)
     assert [e.value for e in tags["comfort/in_band_pct"]][-1] == pytest.approx(lag.measured_pct)
     steps = pd.read_parquet(next((tmp_path / "runs" / "lag" / "episodes").rglob("steps.parquet")))
     assert (steps["reward_comfort"] == 0).all() and (steps["reward_band"] == 0).all()
@@ -62,11 +66,10 @@ def test_a_missed_target_raises_the_multiplier_and_resume_restores_it(tmp_path, 
 
 @pytest.mark.slow
 def test_a_target_beaten_lowers_the_multiplier_with_ppo(tmp_path, no_leaks):
-    cfg = small_config(tmp_path, "lag-low", algorithm="ppo", timesteps=768,
-                       comfort=ComfortConstraint(target_pct=1.0, multiplier_init=5.0))  # fmt: skip
+    cfg = small_config(tmp_path, "lag-low", algorithm="ppo", timesteps=768, comfort=ComfortConstraint(target_pct=1.0))
     train(cfg, progress=False)
     lag = ALGORITHMS["ppo"].load(tmp_path / "runs" / "lag-low" / "model.zip", device="cpu").comfort
-    assert lag.updates == 1 and lag.measured_pct > 1.0 and lag.multiplier < 5.0
+    assert lag.updates == 1 and lag.measured_pct > 1.0 and lag.multiplier < 10.0
 
 
 @pytest.mark.slow
@@ -80,7 +83,7 @@ def test_sac_pays_the_multiplier_from_its_replay_buffer(tmp_path, no_leaks):
     model = ALGORITHMS["sac"].load(tmp_path / "runs" / "lag-sac" / "model.zip", device="cpu")
     model.load_replay_buffer(tmp_path / "runs" / "lag-sac" / "model_replay_buffer.pkl")
     buffer = model.replay_buffer
-    assert model.comfort.updates == 2 and model.comfort.multiplier > 5.0
+    assert model.comfort.updates == 2 and model.comfort.multiplier > 10.0
     assert buffer.costs[: buffer.pos].max() > 0  # each transition's cost, stored beside its reward
     buffer.multiplier = model.comfort.multiplier
     np.random.seed(0)
@@ -97,4 +100,4 @@ def test_ray_actors_return_the_costs_their_workers_reported(tmp_path, no_leaks):
     cfg = small_config(tmp_path, "lag-ray", backend="ray", timesteps=768, comfort=ComfortConstraint(target_pct=99.5))
     train(cfg, progress=False)
     lag = ALGORITHMS["trpo"].load(tmp_path / "runs" / "lag-ray" / "model.zip", device="cpu").comfort
-    assert lag.updates == 1 and 0.0 <= lag.measured_pct < 99.5 and lag.multiplier > 5.0
+    assert lag.updates == 1 and 0.0 <= lag.measured_pct < 99.5 and lag.multiplier > 10.0

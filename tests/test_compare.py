@@ -44,3 +44,15 @@ def test_figure_keeps_its_legend_outside_the_data_and_the_references_in_their_co
         assert len({shown[a] for a in ("TRPO", "PPO", "SAC")}) == 3
     finally:
         plt.close(fig)
+
+
+def test_several_seeds_are_reported_as_their_mean_with_an_interval(tmp_path):
+    refs = references(RESULTS)
+    rows = [("trpo", seed, s, s, s / 100, 90 + seed, 100 - s / 1e4, 0.1) for seed in (0, 1, 2) for s in (1000, 2000)]
+    progress = pd.DataFrame(
+        rows, columns=["algorithm", "seed", "target", "steps", "wall_s", "in_band_pct", "power_kw", "reward_mean"]
+    )
+    table = compare_table(progress, refs)
+    row = next(line for line in table.splitlines() if line.startswith("| TRPO (3 seeds) |"))
+    assert "| 91.00 [90.00, 92.00] |" in row  # in band: seeds at 90, 91, 92
+    assert compare_figure(progress, refs, tmp_path / "c.png").stat().st_size > 10_000

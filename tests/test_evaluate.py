@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -167,3 +169,4 @@ def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alo
     assert sorted(online["weather"]) == ["CA", "IL"] and (online["steps"] == 96).all()
     assert online["reward_mean"].notna().all()
     assert (final.read_bytes(), (final.parent / "vecnormalize.npz").read_bytes()) == before
+    assert not list(Path(tempfile.gettempdir()).glob("SB3-*"))  # the learning copies wrote no SB3 log folder

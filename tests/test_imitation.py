@@ -92,12 +92,23 @@ def test_the_cloned_policy_tracks_what_the_built_in_controls_chose(tmp_path, no_
 
     env.obs_rms.mean, env.obs_rms.var = demos.observations.mean(0), demos.observations.var(0)
     before = error(model)
-    report = clone(model, env, demos, ImitationSettings(epochs=60))
+    report = clone(model, env, demos, ImitationSettings(epochs=60), regulated=[1, 2], band=(22.0, 25.0))
     after = error(model)
     assert (after < before / 3).all(), (before, after)
     assert after[0] < 1.0 and after[2] < 0.3  # °C, kg/s: mean absolute error over the recorded steps
     assert report["samples"] == len(demos) and set(report["rmse"]) == set(demos.names)
     assert np.allclose(model.policy.log_std.detach().numpy(), ImitationSettings().log_std)
+    # The zones the controls hold barely move in the record; re-drawn in the fit, they barely move the clone.
+    shifted = demos.observations.copy()
+    shifted[:, 1:3] -= 3.0
+    with th.no_grad():
+
+        def chosen(o):
+            x = th.as_tensor(env.normalize_obs(o), dtype=th.float32)
+            return demos.to_physical(model.policy.action_net(model.policy.mlp_extractor.forward_actor(x)).numpy())
+
+        moved = np.abs(chosen(shifted) - chosen(demos.observations)).mean(axis=0)
+    assert moved[0] < 1.0, moved  # °C of setpoint for 3 K of zone temperature
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import VecNormalize
 
@@ -87,6 +88,7 @@ def _one_rollout(out_dir, lockstep: bool, backend: str = "local", stats: list | 
             policy_kwargs={"net_arch": [32, 32], "activation_fn": th.nn.Tanh},
         )  # fmt: skip
         model.lockstep = lockstep
+        model.set_logger(Logger(None, []))  # no SB3-<time> folder in the temp folder
         assert (_pipelinable(env)[0] is not None) and model.n_envs == 2
         model.learn(256)  # one rollout, then one update (which leaves the buffer's contents alone)
         if stats is not None:
@@ -160,6 +162,7 @@ def test_a_rollout_stopped_midway_starts_the_workers_afresh_at_the_next_learn(tm
     env = VecNormalize(SB3VecEnv(EnergyPlusVectorEnv(sim, [["CA"], ["CO"]])), norm_reward=False)
     try:
         model = FastTRPO("MlpPolicy", env, n_steps=64, batch_size=64, seed=0, device="cpu")
+        model.set_logger(Logger(None, []))
         model.learn(128, callback=_StopAfter(10))
         assert model.num_timesteps == 20 and model._last_obs is None
         model.learn(128, reset_num_timesteps=False)

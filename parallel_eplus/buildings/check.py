@@ -148,9 +148,10 @@ def require_checked(spec: BuildingSpec | str | Path, weather: str | Path | None 
 
 def check_building(path: str | Path, weather: str | Path | None = None, use_cache: bool = True) -> BuildingSpec:
     """Load a spec (a path or a built-in name) and check it against its model; the spec, or SpecError."""
+    from parallel_eplus.buildings.building import load_building
     from parallel_eplus.buildings.resources import spec_file
 
-    spec = load_spec(spec_file(path))
+    spec = load_building(spec_file(path)).spec  # loaded once per process: what the engine reads too
     result = check_spec(spec, weather, use_cache=use_cache)
     if not result.ok:
         lines = "\n  ".join(result.problems)

@@ -82,7 +82,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
-    from parallel_eplus.training.config import ComfortConstraint, ImitationSettings, TrainConfig, TRPOSettings
+    from parallel_eplus.training.config import (
+        ComfortConstraint,
+        ImitationSettings,
+        SACSettings,
+        TrainConfig,
+        TRPOSettings,
+    )
     from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
@@ -117,7 +123,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         reward=RewardConfig.from_any(args.reward),
         comfort=ComfortConstraint(target_pct=args.comfort_target, margin_c=args.comfort_margin),
         init_from_baseline=args.init_from_baseline,
-        trpo=TRPOSettings(log_std_init=args.log_std_init),
+        trpo=TRPOSettings(log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda),
+        sac=SACSettings(gamma=args.gamma),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)
@@ -297,6 +304,31 @@ def cmd_bench(args: argparse.Namespace) -> int:
     results = run(cfg, args.out)
     print(format_table(results))
     print(f"written: {args.out}")
+    return 0
+
+
+def cmd_runs(args: argparse.Namespace) -> int:
+    from parallel_eplus.training import registry, registry_view
+
+    if args.runs_command is None:
+        runs = registry.list_runs(args.dir)
+        print(registry_view.table(runs) if runs else f"no runs in {args.dir}")
+        return 0
+    info = registry.read_run(registry.resolve_run(args.name, args.dir), args.dir)
+    if args.runs_command == "show":
+        print(registry_view.details(info))
+        return 0
+    print(f"stopping {info.name} ({info.process}) ...", flush=True)
+    try:
+        info, left = registry.stop_run(info, args.timeout)
+    except TimeoutError as e:
+        print(f"{e}: it may still be saving; run `parallel-eplus runs` again to see", file=sys.stderr)
+        return 1
+    print(f"{info.name}: {info.state} at step {info.steps}; checkpoint: {info.checkpoint or 'none'}")
+    if left:
+        print("left behind: " + "; ".join(left) + " (parallel-eplus clean --kill removes them)")
+        return 1
+    print(f"no EnergyPlus process or pipe left; continue it with: parallel-eplus train --resume {info.path}")
     return 0
 
 

@@ -78,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="first fit the policy to the building's own controls on the training weathers (imitation), then learn; "
         "the cloned policy is saved in runs/<name>/cloned/",
     )  # fmt: skip
+    tr.add_argument(
+        "--gamma", type=float, default=0.99,
+        help="discount factor (default 0.99, the paper's): shorter horizons learn faster where actions act quickly",
+    )  # fmt: skip
+    tr.add_argument("--gae-lambda", type=float, default=0.98, help="TRPO/PPO GAE lambda (default 0.98, the paper's)")
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")
@@ -189,6 +194,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pl.add_argument("path", type=Path)
     pl.set_defaults(func=c.cmd_plot)
+
+    ru = sub.add_parser("runs", help="list the runs under a folder: state, progress, latest results; show or stop one")
+    ru.add_argument("--dir", type=Path, default=Path("runs"), help="the runs folder (default runs)")
+    rsub = ru.add_subparsers(dest="runs_command")
+    rs = rsub.add_parser("show", help="one run's progress, latest episode per weather and settings")
+    rt = rsub.add_parser("stop", help="stop a running training as Ctrl-C does: a checkpoint, then nothing left")
+    rt.add_argument("--timeout", type=float, default=300.0, help="seconds to wait for it to exit (default 300)")
+    for p in (rs, rt):
+        p.add_argument("name", help="as `runs` lists it, or a run folder")
+        p.add_argument("--dir", type=Path, default=argparse.SUPPRESS, help="the runs folder (default runs)")
+    ru.set_defaults(func=c.cmd_runs)
 
     cl = sub.add_parser(
         "clean", help="remove pipe directories left by killed runs; list (or --kill) their leftover EnergyPlus"

@@ -22,7 +22,7 @@ class SimulationConfig:
     building: str | None = None
     run_days: int = 365
     output_dir: str | None = None  # None: a temporary directory removed on close
-    keep_episodes: int | None = None  # newest full episode directories kept; None keeps all
+    keep_episodes: int | None = None  # this env's newest full episode directories kept; None keeps all
     # EnergyPlus's own eplusout.csv in each episode (where the model asks for one): training turns it off,
     # its cost being memory and time (engine/idf_prep.py), its content ours in steps.parquet.
     energyplus_csv: bool = True

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import os
+import re
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
@@ -108,13 +109,48 @@ def record_failure(episode_dir: Path | None, error: BaseException) -> None:
         (Path(episode_dir) / FAILURE_FILE).write_text(f"{error}\n")
 
 
-def prune_episodes(output_dir: Path, keep: int | None) -> None:
-    """Keep the newest `keep` episode directories whole, and every failed one; older ones keep only their summary."""
+def prune_episodes(dirs: list[Path], keep: int | None) -> list[Path]:
+    """Of one env's own episode directories (oldest first), keep the newest `keep` whole, and every failed one;
+    older ones keep only their summary. Returns those still whole, to pass next time.
+
+    Only the caller's own: another env writing to the same folder keeps its episodes (one may be running)."""
     if keep is None:
-        return
-    dirs = sorted(p for p in output_dir.glob("episode-*") if p.is_dir() and not (p / FAILURE_FILE).is_file())
-    full = [d for d in dirs if any(f.name != SUMMARY_FILE for f in d.iterdir())]
-    for d in full[: max(len(full) - keep, 0)]:
+        return []
+    whole = [d for d in dirs if d.is_dir() and not (d / FAILURE_FILE).is_file()]
+    cut = whole[: max(len(whole) - keep, 0)]
+    for d in cut:
         for f in d.iterdir():
             if f.name != SUMMARY_FILE:
                 shutil.rmtree(f) if f.is_dir() else f.unlink()
+    return whole[len(cut) :]
+
+
+_EPISODE_DIR = re.compile(r"episode-(\d{6,})-")
+
+
+def last_episode_number(output_dir: Path) -> int:
+    """The highest number among the `episode-NNNNNN-*` directories in `output_dir` (0 if none)."""
+    try:
+        names = os.listdir(output_dir)
+    except FileNotFoundError:
+        return 0
+    return max((int(m.group(1)) for n in names if (m := _EPISODE_DIR.match(n))), default=0)
+
+
+def claim_episode_dir(output_dir: Path, label: str, number: int = 1) -> tuple[Path, int]:
+    """Make and own `episode-NNNNNN-LABEL` in `output_dir`: (its path, its number).
+
+    The number is at least `number` and above every episode number in the folder, so numbers sort in the order
+    the episodes began and a resumed run continues them. Whoever's `mkdir` succeeds owns the directory: envs,
+    vector envs and whole runs sharing one folder (RLlib hands every env runner the same `output_dir`) never
+    write into each other's episodes, and nothing already there is replaced.
+    """
+    output_dir.mkdir(parents=True, exist_ok=True)
+    while True:
+        number = max(number, last_episode_number(output_dir) + 1)
+        path = output_dir / f"episode-{number:06d}-{label}"
+        try:
+            path.mkdir()
+            return path, number
+        except FileExistsError:  # another env took it between the scan and the mkdir
+            number += 1

@@ -32,6 +32,7 @@ from parallel_eplus.engine.config import SimulationConfig, policy_action_names
 from parallel_eplus.engine.episode import (
     MODEL_FILE,
     StepRecorder,
+    claim_episode_dir,
     err_tail,
     link_or_copy,
     prune_episodes,
@@ -95,6 +96,8 @@ class Simulation:
         self._info: dict = {}
         self.episode = 0
         self.episode_dir: Path | None = None
+        self._number = 0  # the last episode directory's number (its folder may be shared)
+        self._whole: list[Path] = []  # this Simulation's own episode directories still whole, oldest first
         self.weather = self.weathers[0]
         self.weather_index = 0
         self.records: StepRecorder | None = None
@@ -145,10 +148,7 @@ class Simulation:
         self.weather = self.weathers[i]
         epw = self.weather_paths[i]
         label = weather_label(self.weather)
-        self.episode_dir = self.output_dir / f"episode-{self.episode:06d}-{label}"
-        if self.episode_dir.exists():
-            shutil.rmtree(self.episode_dir)
-        self.episode_dir.mkdir(parents=True)
+        self.episode_dir, self._number = claim_episode_dir(self.output_dir, label, self._number + 1)
         cfg = self.config
         prepare_idf(self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
         link_or_copy(epw, self.episode_dir / epw.name)
@@ -279,7 +279,7 @@ class Simulation:
             extra["building"] = str(self.building.spec.path)
         self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, self.comfort)
         self.records = None
-        prune_episodes(self.output_dir, self.config.keep_episodes)
+        self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)
 
     def _kill(self) -> None:
         self.process.kill()

@@ -71,7 +71,8 @@ class EnergyPlusEnv(gym.Env):
 
     ## Arguments
     `weather`: a short name (CA, CO, FL, IL, VA), an EPW path, or a list cycled episode by episode;
-    `run_days`; `output_dir` and `keep_episodes` for episode records; `energyplus_csv=False` drops
+    `run_days`; `output_dir` and `keep_episodes` for episode records (envs sharing one `output_dir`, in one process
+    or several, each get their own `episode-NNNNNN-<weather>` directories); `energyplus_csv=False` drops
     EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `reward`; `idf` to override the
     model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the spec's);
     `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name

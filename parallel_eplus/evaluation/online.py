@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.weather import parse_weathers, weather_label
@@ -72,6 +73,7 @@ def run_online_episode(
         # n_steps is the rollout buffer's size: set before SB3 builds it.
         model = ALGORITHMS[saved.algorithm].load(controller.path, env=env, device="cpu", n_steps=cfg.n_steps)
         model.lockstep = True
+        model.set_logger(Logger(None, []))  # SB3's default logger would leave an empty SB3-<time> folder in /tmp
         stop = _FirstEpisode()
         model.learn(episode_steps + 2 * cfg.n_steps, callback=stop, reset_num_timesteps=True)
     finally:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from parallel_eplus import io
 from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import claim_episode_dir
 from parallel_eplus.envs.ray_session import connect
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.sweep import failure_row
@@ -98,8 +99,8 @@ def run_jobs(
                     raise
                 failures.append(failure_row(controller, cfg, e))
                 continue
-            local = Path(cfg.output_dir) / row["episode_dir"]  # where a local sweep would have written it
-            local.mkdir(parents=True, exist_ok=True)
+            # where a local sweep would have written it: its own folder, beside any earlier sweep's
+            local, _ = claim_episode_dir(Path(cfg.output_dir), row["episode_dir"].split("-", 2)[2])
             for name, data in files.items():
                 io.write_bytes(local / name, data)
             row["episode_dir"] = str(local)

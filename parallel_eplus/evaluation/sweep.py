@@ -116,7 +116,8 @@ def policy_controller(spec: str) -> Controller:
     return Controller(
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
-        residual_space=saved.get("residual_space", "action"), building=building, run=run_dir_of(path).name,
+        residual_space=saved.get("residual_space", "action"), building=building,
+        run=saved.get("run_name") or run_dir_of(path).name,
     )  # fmt: skip
 
 

@@ -69,33 +69,42 @@ class SACSettings:
 
 @dataclass
 class ComfortConstraint:
-    """`--comfort-target` and how the multiplier follows it (defaults chosen for rewards of ~1 per step)."""
+    """`--comfort-target` and how the multiplier follows it (training/lagrangian.py)."""
 
     target_pct: float | None = None  # None: the reward's fixed comfort weights (the paper's reproduction)
     margin_c: float = 0.5  # the cost rises over this far inside the band's edges
-    multiplier_init: float = 5.0  # energy costs ~1 per step in every built-in spec (power_weight × energy)
-    kp: float = 1.0  # per percentage point short of the target, this batch
-    ki: float = 0.5  # per percentage point short, summed over batches
-    multiplier_max: float = 200.0
+    multiplier_init: float = 10.0  # energy costs ~1 per step in every built-in spec (power_weight × energy)
+    rate: float = 0.3  # log-multiplier step per e-fold of measured over allowed samples out of band
+    floor_pct: float = 0.05  # added to both shares out of band: a batch with none out lowers it, finitely
+    multiplier_min: float = 0.1
+    multiplier_max: float = 100.0  # there, 1 % of samples out of band costs about what all the energy does
 
     def check(self) -> None:
-        if self.target_pct is not None and not 0.0 < self.target_pct <= 100.0:
-            raise ValueError(f"--comfort-target is a share of samples in band, in percent: got {self.target_pct}")
-        if self.margin_c <= 0 or self.multiplier_init < 0 or self.kp < 0 or self.ki < 0:
-            raise ValueError("the comfort constraint's margin must be > 0 and its gains and start >= 0")
+        if self.target_pct is not None and not 0.0 < self.target_pct < 100.0:
+            raise ValueError(
+                f"--comfort-target is a share of samples in band, in percent below 100: got {self.target_pct}"
+            )
+        if self.margin_c <= 0 or self.rate <= 0 or self.floor_pct <= 0:
+            raise ValueError("the comfort constraint's margin, rate and floor must be > 0")
+        if not 0 < self.multiplier_min <= self.multiplier_init <= self.multiplier_max:
+            raise ValueError("the comfort multiplier must start within [multiplier_min, multiplier_max], both > 0")
 
 
 @dataclass
 class ImitationSettings:
     """How the policy is fitted to the recorded controls."""
 
-    epochs: int = 40
+    epochs: int = 10  # over the record and its re-drawn copies: 40 passes over the record itself
     learning_rate: float = 1e-3
     batch_size: int = 256
     # The cloned Gaussian's log standard deviation (on-policy): exploration around the built-in behaviour.
     # -2.0 is 0.135 of each action's half range (the data center's setpoint: ±2 K; its fans: ±0.35 kg/s).
     log_std: float = -2.0
     run_days: int | None = None  # days recorded per training weather; None: the run's episode length
+    # Copies of the recorded steps with the spec's comfort temperatures re-drawn across the band ± `redraw_c`
+    # (training/imitation.py): the controls hold them still, so the clone must not learn to act on them.
+    redraw_copies: int = 3
+    redraw_c: float = 5.0
 
 
 @dataclass

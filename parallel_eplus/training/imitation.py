@@ -10,6 +10,15 @@ built-in controls, and learning improves on them instead of rediscovering them.
 
 Timing: observation k (the state after timestep k) is paired with what the controls set during timestep k+1,
 as an action chosen on observation k acts during timestep k+1 in the env (engine/bridge.py).
+
+The temperatures the controls regulate (the spec's comfort temperatures) barely move in their record: the
+data center's zones stay within 23-24.5 °C all year. A plain clone then learns whatever the temperature happens
+to correlate with, and in closed loop, where its own small errors move the zones a kelvin away, it acts on
+that spurious slope: cloned on a year of CA, CO and FL it drove both zones to 14 °C (0 % in band) although it
+matched the recorded actions to 0.4 K. So the fit also sees copies of the record in which those temperatures are
+re-drawn across the band ± `redraw_c` with the same actions (`redraw_copies`): the clone learns to ignore them
+and acts on what the controls respond to (load, weather, time), a feed-forward copy of the controls that is
+stable in closed loop (98 % in band on 14 days of CA). Reinforcement learning then learns the feedback.
 """
 
 from __future__ import annotations
@@ -117,7 +126,11 @@ def record_baseline(
     ]  # fmt: skip
     total = len(jobs) * run_days * spec.steps_per_day
     with tqdm(total=total, unit="step", desc="record built-in controls", disable=not progress) as bar:
-        rows, _ = run_local(jobs, workers, bar)
+        rows, failures = run_local(jobs, workers, bar, keep_going=True)
+    for f in failures:  # a model's own controls can fail on a weather (the CRAC's on CO): clone from the others
+        log.warning("the built-in controls did not finish %s (%s): cloning without it", f["weather"], f["error"])
+    if not rows:
+        raise ValueError("the built-in controls finished no weather: nothing to imitate")
     observations, physical, labels = [], [], []
     for row in rows:
         weather = row["weather"]
@@ -145,15 +158,35 @@ def _actor_mean(policy, obs: th.Tensor) -> th.Tensor:
     return policy.action_net(policy.mlp_extractor.forward_actor(features))
 
 
-def clone(model, env: VecNormalize, demos: Demonstrations, settings: ImitationSettings, seed: int = 0) -> dict:
-    """Fit `model`'s policy to the demonstrations (observation statistics first); returns the fit's report."""
+def redrawn(demos: Demonstrations, columns: list[int], band: tuple[float, float], settings: ImitationSettings,
+            seed: int = 0) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(observations, actions) to fit: the record, then `redraw_copies` copies of it whose `columns` (the
+    regulated temperatures) are drawn uniformly across the band ± `redraw_c`, each independently."""
+    rng = np.random.default_rng(seed)
+    obs, actions = [demos.observations], [demos.actions]
+    for _ in range(settings.redraw_copies if columns else 0):
+        copy = demos.observations.copy()
+        copy[:, columns] = rng.uniform(band[0] - settings.redraw_c, band[1] + settings.redraw_c,
+                                       (len(copy), len(columns)))  # fmt: skip
+        obs.append(copy)
+        actions.append(demos.actions)
+    return np.concatenate(obs), np.concatenate(actions)
+
+
+def clone(
+    model, env: VecNormalize, demos: Demonstrations, settings: ImitationSettings, seed: int = 0,
+    regulated: list[int] = (), band: tuple[float, float] = (0.0, 0.0),
+) -> dict:  # fmt: skip
+    """Fit `model`'s policy to the demonstrations (observation statistics first; `regulated`: the observation
+    columns of the temperatures the controls hold, re-drawn in copies: `redrawn`); returns the fit's report."""
     env.obs_rms.mean = demos.observations.mean(axis=0).astype(np.float64)
     env.obs_rms.var = demos.observations.var(axis=0).astype(np.float64)
     env.obs_rms.count = float(len(demos))
-    x = th.as_tensor(env.normalize_obs(demos.observations), dtype=th.float32)
+    observations, actions = redrawn(demos, list(regulated), band, settings, seed)
+    x = th.as_tensor(env.normalize_obs(observations), dtype=th.float32)
     # Actions at a bound are clipped there by the env anyway; for SAC's tanh keep the targets reachable.
     limit = 0.995 if hasattr(model.policy, "actor") else 1.0
-    y = th.as_tensor(np.clip(demos.actions, -limit, limit))
+    y = th.as_tensor(np.clip(actions, -limit, limit))
     policy = model.policy
     actor = policy.actor if hasattr(policy, "actor") else policy
     params = [p for name, p in actor.named_parameters() if "value" not in name and name != "log_std"]
@@ -172,7 +205,8 @@ def clone(model, env: VecNormalize, demos: Demonstrations, settings: ImitationSe
     if hasattr(policy, "log_std"):
         with th.no_grad():
             policy.log_std.fill_(settings.log_std)
-    with th.no_grad():
+    with th.no_grad():  # on the record itself
+        x = th.as_tensor(env.normalize_obs(demos.observations), dtype=th.float32)
         fitted = demos.to_physical(_actor_mean(policy, x).numpy())
     target = demos.to_physical(demos.actions)  # the recorded choice within the action's bounds
     rmse = np.sqrt(((fitted - target) ** 2).mean(axis=0))

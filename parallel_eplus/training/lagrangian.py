@@ -3,11 +3,18 @@
 The learner minimises energy subject to the share of zone samples in band (where the band applies) staying at or
 above the target. The env's reward then pays for energy only (`-power_weight × energy`); every step also reports
 a comfort cost, and the learner pays `multiplier × cost` on top. The multiplier is a Lagrange multiplier adapted
-from what each batch measured, by the PI rule of Stooke, Achiam and Abbeel (2020, "Responsive Safety in
-Reinforcement Learning by PID Lagrangian Methods"): the error is the target minus the batch's measured share
-(percentage points); the integral term is plain gradient ascent on the dual (PPO-Lagrangian, Ray et al. 2019,
-"Benchmarking Safe Exploration in Deep RL"), clamped at zero; the proportional term reacts within a batch
-instead of after the integral has wound up, which damps the oscillation plain dual ascent shows.
+from what each batch measured, as in PPO-Lagrangian (Ray, Achiam and Amodei 2019, "Benchmarking Safe
+Exploration in Deep RL"), but in log space: after each batch
+
+    multiplier *= ((out + floor) / (allowed + floor)) ** rate
+
+where `out` is the batch's share of zone samples out of band and `allowed` is 100 - target (percentage points).
+Dual ascent in the multiplier itself (and its PI refinement, Stooke et al. 2020) moves it by the target minus
+the measured share. Near 100 % that error is lopsided: with a 99.6 % target a batch can beat it by at most 0.4
+points but miss it by 99.6, so the bad batches of early learning wind the multiplier up and good batches unwind
+it hundreds of times more slowly: on the data center it sat at its cap for 25 batches after the target was met,
+leaving energy unpaid for. The ratio of measured to allowed violations is symmetric in log space: twice the
+allowance raises the multiplier as much as half of it lowers it.
 
 The cost is a surrogate that bounds the indicator from above, so keeping it low keeps the share in band high,
 and it has a slope near the band's edges where an indicator has none: per zone, 0 inside the band shrunk by
@@ -26,7 +33,7 @@ current multiplier when it samples (`CostReplayBuffer`), and `SACComfort` update
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
@@ -48,14 +55,12 @@ class Lagrangian:
 
     settings: ComfortConstraint
     multiplier: float = 0.0
-    integral: float = 0.0  # percentage points short, summed (>= 0)
     measured_pct: float = float("nan")  # the last batch's share in band, where it applies
     updates: int = 0
 
     @classmethod
     def start(cls, settings: ComfortConstraint) -> Lagrangian:
-        ki = settings.ki or 1.0
-        return cls(settings, settings.multiplier_init, settings.multiplier_init / ki)
+        return cls(settings, settings.multiplier_init)
 
     def update(self, out: float, zones: float) -> float:
         """The multiplier after a batch in which `out` of `zones` zone samples (where the band applied) left it."""
@@ -63,9 +68,8 @@ class Lagrangian:
         if zones <= 0:  # nothing to measure (an unoccupied stretch): hold
             return self.multiplier
         self.measured_pct = 100.0 * (1.0 - out / zones)
-        error = s.target_pct - self.measured_pct
-        self.integral = max(0.0, self.integral + error)
-        self.multiplier = float(np.clip(s.kp * error + s.ki * self.integral, 0.0, s.multiplier_max))
+        ratio = (100.0 - self.measured_pct + s.floor_pct) / (100.0 - s.target_pct + s.floor_pct)
+        self.multiplier = float(np.clip(self.multiplier * ratio**s.rate, s.multiplier_min, s.multiplier_max))
         self.updates += 1
         return self.multiplier
 
@@ -73,9 +77,6 @@ class Lagrangian:
         logger.record("comfort/multiplier", self.multiplier)
         logger.record("comfort/in_band_pct", self.measured_pct)
         logger.record("comfort/target_pct", self.settings.target_pct)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def comfort_of(model) -> Lagrangian | None:

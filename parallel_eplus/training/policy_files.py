@@ -10,8 +10,9 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus.buildings.model import observation_names
 from parallel_eplus.training.norm_stats import read_stats
+from parallel_eplus.training.run_files import MODEL_FILE, saves_newest_first
 
-MODEL_FILE = "model.zip"
+__all__ = ["MODEL_FILE", "saves_newest_first"]  # and the rest; these two live in run_files.py (no torch there)
 NORMALIZE_FILE = "vecnormalize.npz"  # data only (norm_stats.py)
 LEGACY_SUFFIX = ".pkl"  # SB3's pickled VecNormalize, as saved before 0.3: still read, with a warning
 
@@ -25,16 +26,6 @@ def _latest_checkpoint(path: Path) -> Path:
     if not saves:
         raise FileNotFoundError(f"no checkpoint or {MODEL_FILE} in {path}")
     return saves[0]
-
-
-def saves_newest_first(run_dir: Path) -> list[Path]:
-    """A run's checkpoints and final model, the newest first (by steps, the final model by its time)."""
-    checkpoints = sorted((run_dir / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
-    final = run_dir / MODEL_FILE
-    if final.is_file():  # after the last checkpoint when the run finished, before it when resumed past it
-        newer = [c for c in checkpoints if c.stat().st_mtime_ns > final.stat().st_mtime_ns]
-        checkpoints.insert(len(checkpoints) - len(newer), final)
-    return checkpoints[::-1]
 
 
 def stats_target(model_zip: Path) -> Path:

@@ -36,6 +36,7 @@ from parallel_eplus.training.policy_files import (
     run_dir_of,
 )
 from parallel_eplus.training.run_names import claim_run_name
+from parallel_eplus.training.run_status import RunStatus
 from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 log = logging.getLogger(__name__)
@@ -91,9 +92,15 @@ def train(
 
     A new run whose name is taken is refused, or with `overwrite` the old one is moved aside (run_names.py).
     `callbacks` run after ours (a sweep's trial reports each batch to Ray Tune with one: training/tune_trial.py).
+    runs/<name>/status.json says how far it got and how it ended (run_status.py; `parallel-eplus runs`).
     """
-    from parallel_eplus.training.rollout import ALGORITHMS
+    cfg, checkpoint = _prepare(cfg, resume, overwrite)
+    with RunStatus(cfg.run_dir, cfg.timesteps) as status:
+        return _learn(cfg, checkpoint, progress, timer, status)
 
+
+def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tuple[TrainConfig, Path | None]:
+    """The run's settings (a resumed run's own) and checkpoint; a new run claims its name. Writes config.json."""
     checkpoint = None
     if resume is not None and cfg.init_from is not None:
         raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
@@ -113,8 +120,16 @@ def train(
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     io.write_text(run_dir / "config.json", cfg.to_json())
-    th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
+    return cfg, checkpoint
 
+
+def _learn(
+    cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus
+) -> Path:
+    from parallel_eplus.training.rollout import ALGORITHMS
+
+    run_dir = cfg.run_dir
+    th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
     venv = make_vec_env(cfg)
     bar = None
     try:
@@ -137,6 +152,7 @@ def train(
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers
         end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
+        status.write(steps=model.num_timesteps, planned=end)
         bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
         chain = CallbackList([
@@ -144,6 +160,7 @@ def train(
             EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * load_building(cfg.building).steps_per_day),
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
             *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.algorithm == "sac" else []),
+            status,
             *callbacks,
         ])  # fmt: skip
         try:
@@ -192,7 +209,9 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
     work = cfg.run_dir / "baseline-record"
     demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, work,
                             (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
-    report = clone(model, env, demos, cfg.imitation, cfg.seed)
+    building = load_building(cfg.building)
+    regulated = [building.sensor_names.index(t) for t in building.temperatures]
+    report = clone(model, env, demos, cfg.imitation, cfg.seed, regulated, building.band)
     shutil.rmtree(work, ignore_errors=True)  # a year's EnergyPlus CSV per weather: the fit is what is kept
     report |= {"weathers": cfg.weathers, "days_per_weather": days}
     io.write_text(cfg.run_dir / "imitation.json", json.dumps(report, indent=2))

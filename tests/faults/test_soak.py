@@ -8,6 +8,7 @@ quoted in docs/reliability.md.
 from __future__ import annotations
 
 import os
+import tempfile
 import time
 from pathlib import Path
 
@@ -26,7 +27,7 @@ VECTOR_EPISODES, SINGLE_EPISODES, SINGLE_ENVS = 50, 50, 16
 def _sample(episodes: int) -> dict:
     status = Path("/proc/self/status").read_text()
     rss_kb = int(next(ln for ln in status.splitlines() if ln.startswith("VmRSS:")).split()[1])
-    pipes = [d for d in os.listdir("/tmp") if d.startswith(f"parallel-eplus-{os.getpid()}-")]
+    pipes = [d for d in os.listdir(tempfile.gettempdir()) if d.startswith(f"parallel-eplus-{os.getpid()}-")]
     return {
         "episodes": episodes, "fds": len(os.listdir("/proc/self/fd")), "processes": len(our_processes()),
         "pipes": len(pipes), "rss_mb": rss_kb / 1024,

@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -83,7 +84,7 @@ def _strike_later(episodes_csv: Path, sig: int, hit: list, until=lambda: False, 
 
 
 def _pipe_dirs_of(pid: int) -> set[str]:
-    return {d for d in os.listdir("/tmp") if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
+    return {d for d in os.listdir(tempfile.gettempdir()) if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
 
 
 def _energyplus_children(pid: int) -> list[int]:
@@ -110,7 +111,7 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
     else:
         assert proc.returncode == -signal.SIGKILL
         assert left, "a SIGKILLed trainer runs no cleanup: its pipe directories stay until the next start"
-        assert all(pipe_sweep.owner_alive(Path("/tmp", d)) is False for d in left)
+        assert all(pipe_sweep.owner_alive(Path(tempfile.gettempdir(), d)) is False for d in left)
         listed = subprocess.run(_cli("clean", "--dry-run"), capture_output=True, text=True, check=True).stdout
         assert all(d in listed for d in left), listed
 

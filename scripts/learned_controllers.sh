@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# Controllers learned with no hand-written controller, on every shipped building, three seeds each (issue 29):
+# each run imitates the building's own controls (--init-from-baseline), then learns with comfort as a
+# constraint (--comfort-target); trained on CA, CO and FL, evaluated frozen on all five weathers.
+#
+#   bash scripts/learned_controllers.sh start [BUILDING...]   # in the background: every (building, seed) run, in turn
+#   bash scripts/learned_controllers.sh status                 # each run's steps, the newest log lines
+#   bash scripts/learned_controllers.sh stop                   # SIGINT: the running trainer checkpoints and exits
+#   bash scripts/learned_controllers.sh save                   # copy finished models into results/learned/ (commit)
+#   bash scripts/learned_controllers.sh evaluate BUILDING      # the seeds against the built-in controls, 5 weathers
+#
+# A run resumes from its newest checkpoint (every 100k steps; a new machine from the checkpoint `save` put in
+# results/learned/), so `start` is safe to repeat after a session ends. Runs use a copy of the package at a fixed
+# commit ($COMMIT, git archive), so later edits to the working tree cannot disturb them.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+REPO=$PWD
+COMMIT=${COMMIT:-$(git rev-parse --short HEAD)}
+WORK=${WORK:-$REPO/../learned}
+SEEDS=${SEEDS:-"0 1 2"}
+NICE=${NICE:-0}
+PY=$REPO/.venv/bin/python
+SAVED=$REPO/results/learned
+
+# The recipe per building (chosen from pilots: docs/comfort.md, results/learned/README.md).
+recipe() {
+    case $1 in
+    datacenter-2zone) echo "--timesteps 1000000 --batch-size 4096 --comfort-target 99.6 --time-features --schedule-features" ;;
+    datacenter-crac) echo "--timesteps 500000 --batch-size 4096 --comfort-target 99.9 --time-features" ;;
+    office-small) echo "--timesteps 500000 --batch-size 4096 --comfort-target 97.5" ;;
+    *) echo "unknown building $1" >&2; exit 2 ;;
+    esac
+}
+BUILDINGS=${BUILDINGS:-"datacenter-2zone datacenter-crac office-small"}
+
+latest() { ls "$1"/checkpoints/model_*_steps.zip 2>/dev/null | sort -t_ -k2 -n | tail -1; }
+
+run_one() {  # building seed: resume or start it, to the end
+    local b=$1 s=$2 name="$1-seed$2" code="$WORK/code-$COMMIT"
+    local dir="$WORK/runs/$name" args=(--building "$b" --weathers CA,CO,FL --workers 2 --seed "$s" --quiet)
+    if [ -f "$dir/model.zip" ]; then echo "$name: done"; return 0; fi
+    if [ ! -d "$dir" ] && [ -f "$SAVED/$b/runs/$name/checkpoint/model.zip" ]; then  # a chunk from another machine
+        mkdir -p "$dir/checkpoints"
+        cp -r "$SAVED/$b/runs/$name/checkpoint/." "$dir/checkpoints/"
+        cp "$SAVED/$b/runs/$name/config.json" "$SAVED/$b/runs/$name/episodes.csv" "$dir/" 2>/dev/null || true
+    fi
+    cd "$WORK"
+    local cmd=("$PY" -m parallel_eplus.cli train)
+    if [ -n "$(latest "$dir")" ]; then
+        cmd+=(--resume "$dir" --quiet)
+    else
+        # shellcheck disable=SC2046
+        cmd+=("${args[@]}" --run-name "$name" --init-from-baseline $(recipe "$b"))
+    fi
+    echo "$(date -Is) $name: ${cmd[*]:2}"
+    PYTHONPATH=$code nice -n "$NICE" "${cmd[@]}" || true
+    cd "$REPO"
+}
+
+case "${1:-status}" in
+start)
+    shift || true
+    [ $# -gt 0 ] && BUILDINGS="$*"
+    mkdir -p "$WORK"
+    code="$WORK/code-$COMMIT"
+    [ -d "$code" ] || { mkdir -p "$code" && git archive "$COMMIT" parallel_eplus idf | tar -x -C "$code"; }
+    export -f run_one recipe latest
+    export WORK COMMIT PY SAVED REPO NICE
+    # seeds outer: every building's first seed before any second one
+    nohup bash -c "for s in $SEEDS; do for b in $BUILDINGS; do run_one \$b \$s; done; done" >>"$WORK/learned.log" 2>&1 &
+    echo $! >"$WORK/learned.pid"
+    echo "started pid $(cat "$WORK/learned.pid") (code $COMMIT): $BUILDINGS x seeds $SEEDS; log $WORK/learned.log"
+    ;;
+status)
+    for d in "$WORK"/runs/*/; do
+        [ -d "$d" ] || continue
+        steps=$(tail -1 "$d/episodes.csv" 2>/dev/null | cut -d, -f1)
+        echo "$(basename "$d"): $( [ -f "$d/model.zip" ] && echo finished || echo "checkpoint $(basename "$(latest "$d")")"), last episode at step ${steps:-?}"
+    done
+    tail -c 3000 "$WORK/learned.log" 2>/dev/null | tr '\r' '\n' | grep -av '^$' | tail -3 || true
+    ;;
+stop)
+    pkill -INT -f "parallel_eplus.cli train.*-seed[0-9]" && echo "asked the trainer to checkpoint and stop"
+    kill "$(cat "$WORK/learned.pid")" 2>/dev/null || true
+    ;;
+save)
+    for d in "$WORK"/runs/*/; do
+        name=$(basename "$d"); b=${name%-seed*}; out="$SAVED/$b/runs/$name"
+        mkdir -p "$out"
+        cp "$d/config.json" "$d/episodes.csv" "$out/" 2>/dev/null || true
+        cp "$d/imitation.json" "$out/" 2>/dev/null || true
+        [ -d "$d/cloned" ] && mkdir -p "$out/cloned" && cp "$d/cloned/model.zip" "$d/cloned/vecnormalize.npz" "$d/cloned/config.json" "$out/cloned/"
+        if [ -f "$d/model.zip" ]; then
+            cp "$d/model.zip" "$d/vecnormalize.npz" "$out/" && rm -rf "$out/checkpoint"
+        elif ckpt=$(latest "$d") && [ -n "$ckpt" ]; then  # a chunk: the next machine resumes from it
+            steps=$(basename "$ckpt" | cut -d_ -f2)
+            rm -rf "$out/checkpoint" && mkdir -p "$out/checkpoint"
+            cp "$ckpt" "$d/checkpoints/model_vecnormalize_${steps}_steps.npz" "$out/checkpoint/"
+        fi
+        echo "saved $name"
+    done
+    ;;
+evaluate)
+    b=$2; policies=()
+    for run in "$SAVED/$b"/runs/*/; do
+        [ -f "$run/model.zip" ] && policies+=(--policy "$run/model.zip=Learned")
+    done
+    clone="$SAVED/$b/runs/$b-seed0/cloned/model.zip"  # how close imitation alone gets (one seed: it is a fit)
+    [ -f "$clone" ] && policies+=(--policy "$clone=Cloned (before RL)")
+    "$REPO/.venv/bin/parallel-eplus" evaluate --building "$b" --baseline "${policies[@]}" --weathers CA,CO,FL,IL,VA \
+        --workers 2 --out "$SAVED/$b" --quiet
+    ;;
+*) echo "usage: $0 start|status|stop|save|evaluate BUILDING" >&2; exit 2 ;;
+esac

@@ -1,0 +1,57 @@
+"""RLlib is a client like any other: its PPO trains on the env with two env runners sharing one output folder."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.engine.episode import SUMMARY_FILE
+
+ENV = "parallel_eplus:parallel_eplus/DataCenter-v0"  # as scripts/rllib_ppo.py and docs/rllib.md use it
+
+
+def _runner_state(runner) -> dict:
+    """What one env runner's env has done: episodes begun and the folder of the current one."""
+    import os
+
+    sim = runner.env.unwrapped.envs[0].unwrapped.sim
+    return {"pid": os.getpid(), "episodes": sim.episode, "current": str(sim.episode_dir)}
+
+
+@pytest.mark.slow
+def test_rllib_ppo_trains_with_two_env_runners_sharing_one_output_dir(tmp_path, no_leaks):
+    ray = pytest.importorskip("ray")
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    out = tmp_path / "episodes"
+    ray.init(address="local", num_cpus=2, include_dashboard=False)
+    try:
+        config = (
+            PPOConfig()
+            .environment(ENV, env_config={"weather": "CA", "run_days": 1, "output_dir": str(out), "keep_episodes": 1})
+            .env_runners(num_env_runners=2, num_cpus_per_env_runner=1)
+            .fault_tolerance(restart_failed_env_runners=False)  # a runner that fails fails the test
+            .training(train_batch_size_per_learner=2 * STEPS_PER_DAY, minibatch_size=64, num_epochs=1)
+        )
+        algo = config.build_algo()
+        try:
+            results = [algo.train() for _ in range(3)]
+            runners = algo.env_runner_group.foreach_env_runner(_runner_state, local_env_runner=False)
+            restarts = algo.env_runner_group.num_remote_worker_restarts()
+        finally:
+            algo.stop()
+    finally:
+        ray.shutdown()
+    assert results[-1]["num_env_steps_sampled_lifetime"] == 3 * 2 * STEPS_PER_DAY and restarts == 0
+    assert len({r["pid"] for r in runners}) == 2 and all(r["episodes"] >= 3 for r in runners), runners
+    folders = sorted(out.iterdir())
+    # Both runners began CA episode 1, 2, 3 on the same config: every one has a folder of its own.
+    assert len(folders) == sum(r["episodes"] for r in runners), (folders, runners)
+    assert all(f.name.startswith("episode-") and f.name.endswith("-CA") for f in folders)
+    finished = [json.loads((f / SUMMARY_FILE).read_text()) for f in folders if (f / SUMMARY_FILE).is_file()]
+    assert len([s for s in finished if s["complete"] and s["steps"] == STEPS_PER_DAY]) >= 6
+    # keep_episodes=1: each env keeps its own newest whole and prunes only its own older ones
+    whole = [str(f) for f in folders if (f / "steps.parquet").is_file()]
+    assert sorted(whole) == sorted(r["current"] for r in runners)
