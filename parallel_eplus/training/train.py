@@ -96,7 +96,7 @@ def train(
     """
     cfg, checkpoint = _prepare(cfg, resume, overwrite)
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
-        return _learn(cfg, checkpoint, progress, timer, status)
+        return _learn(cfg, checkpoint, progress, timer, status, callbacks)
 
 
 def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tuple[TrainConfig, Path | None]:
@@ -124,8 +124,9 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
 
 
 def _learn(
-    cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus
-) -> Path:
+    cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus,
+    callbacks: Sequence[BaseCallback] = (),
+) -> Path:  # fmt: skip
     from parallel_eplus.training.rollout import ALGORITHMS
 
     run_dir = cfg.run_dir
