@@ -26,11 +26,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus.training.callbacks import episodes_per_weather
 from parallel_eplus.training.policy_files import MODEL_FILE, saves_newest_first
+from parallel_eplus.training.run_status import TRIAL_VARIABLE
 from parallel_eplus.training.sweep_spec import trial_config
 
 log = logging.getLogger(__name__)
 
-TRIAL_ENV = "PARALLEL_EPLUS_TRIAL"  # the trial's name in its process, for whoever lists the running runs
 STOP_WAIT_S = 300.0  # how long a stopping trial waits for its checkpoint and workers to close
 
 
@@ -96,7 +96,7 @@ class TrialRun(tune.Trainable):
     `cleanup` stops it with a checkpoint. A trial whose run folder holds a checkpoint continues from it."""
 
     def setup(self, config, base=None, runs_dir="runs", tensorboard_dir="tensorboard_logs"):
-        os.environ[TRIAL_ENV] = self.trial_name  # read by `parallel-eplus runs` through the run's status
+        os.environ[TRIAL_VARIABLE] = self.trial_name  # the run's status.json names its trial (`parallel-eplus runs`)
         logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")  # as train's are
         if threading.current_thread() is threading.main_thread():  # a signal to this trial stops it alone
             for sig in (signal.SIGINT, signal.SIGTERM):
