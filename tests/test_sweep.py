@@ -211,8 +211,9 @@ batch_size = {{ choice = [96, 192] }}
 
 
 @pytest.mark.slow
-def test_a_signal_to_one_trial_stops_it_with_a_checkpoint_and_the_others_go_on(tmp_path):
-    """What a run registry's `runs stop` does to a trial: SIGTERM to the process that runs it."""
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])  # `runs stop`'s (Ray workers block it), kill's
+def test_a_signal_to_one_trial_stops_it_with_a_checkpoint_and_the_others_go_on(tmp_path, signum):
+    """What `parallel-eplus runs stop` does to a trial: a signal to the process that runs it."""
     pipes_before = our_pipe_dirs()
     spec = write_spec(tmp_path, 'name = "one"\n' + BASE + "[grid]\ntimesteps = [20000, 192]\n")
     cmd = [sys.executable, "-m", "parallel_eplus.cli", "sweep", str(spec)]
@@ -224,7 +225,7 @@ def test_a_signal_to_one_trial_stops_it_with_a_checkpoint_and_the_others_go_on(t
         time.sleep(0.5)
     owners = {d.split("-")[2] for d in our_pipe_dirs() - pipes_before}  # parallel-eplus-<pid>-...: the trial's
     assert len(owners) == 1 and proc.poll() is None, (owners, proc.poll())
-    os.kill(int(owners.pop()), signal.SIGTERM)
+    os.kill(int(owners.pop()), signum)
     out, _ = proc.communicate(timeout=300)
     assert proc.returncode == 130, out  # a trial stopped: the sweep says how to continue it
     states = {ln.split()[0]: ln.split()[1] for ln in out.splitlines() if ln.startswith("timesteps-")}

@@ -101,6 +101,7 @@ class TrialRun(tune.Trainable):
         if threading.current_thread() is threading.main_thread():  # a signal to this trial stops it alone
             for sig in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(sig, self._on_signal)
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # Ray's workers block it
         self._results: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self._run_dir = Path(runs_dir) / self.trial_name
