@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import signal
+import threading
 from pathlib import Path
 
 _SEVERE = re.compile(r"\*\*\s+(Severe|Fatal)\s+\*\*")  # EnergyPlus's "** Severe  **", "**  Fatal  **"
@@ -47,12 +48,16 @@ class Interrupts:
 
     SIGINT too, explicitly: a process started in the background by a shell (`cmd &`, nohup, CI
     runners) inherits SIGINT as ignored, and `kill -INT` would then do nothing at all.
+
+    Off the main thread (a Ray Tune trial runs its training in one) signals cannot be caught: there the
+    block changes nothing, and whoever runs the thread stops it (training/tune_trial.py).
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __enter__(self):
-        self._old = {s: signal.signal(s, self._raise) for s in self.SIGNALS}
+        main = threading.current_thread() is threading.main_thread()
+        self._old = {s: signal.signal(s, self._raise) for s in self.SIGNALS} if main else {}
         return self
 
     @staticmethod

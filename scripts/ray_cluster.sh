@@ -20,6 +20,7 @@
 #
 # Settings (environment): RAYCL_DIR (/tmp/raycl), RAYCL_NS (raywrk), RAYCL_PORT (6379),
 # RAYCL_WORKER_CPUS (2), RAYCL_OBJECT_STORE_BYTES (500000000), RAY_BIN (<repo>/.venv/bin/ray),
+# RAYCL_DASHBOARD_PORT (8265: the dashboard, which serves `ray job submit`; 0 turns it off), RAYCL_AGENT_PORT (52375),
 # RAYCL_KEEP_LOGS=1 keeps the state dir on `down`.
 set -euo pipefail
 
@@ -39,6 +40,8 @@ PREFIX=24
 PORT=${RAYCL_PORT:-6379}
 WORKER_CPUS=${RAYCL_WORKER_CPUS:-2}
 OBJ_MEM=${RAYCL_OBJECT_STORE_BYTES:-500000000}
+DASH_PORT=${RAYCL_DASHBOARD_PORT:-8265}
+AGENT_PORT=${RAYCL_AGENT_PORT:-52375}
 TOKEN=$STATE/auth_token
 TAG="raycl:$STATE"          # put into every node's environment; used to find leftovers on `down`
 ADDR=$HEAD_IP:$PORT
@@ -99,9 +102,13 @@ start_head() {
   if pid_alive "$STATE/head.pid"; then log "head already running (pid $(<"$STATE/head.pid"))"; return; fi
   if wait_port "$HEAD_IP" "$PORT" 1; then die "$ADDR is already in use by something else"; fi
   log "starting head on $ADDR"
+  local dash=(--include-dashboard=false)
+  # the job server hands each job to the head's agent: its own port, not the 52365 any local Ray on this host takes
+  [[ $DASH_PORT != 0 ]] && dash=(--include-dashboard=true --dashboard-host "$HEAD_IP" --dashboard-port "$DASH_PORT"
+    --dashboard-agent-listen-port "$AGENT_PORT")
   ray_env setsid -f sh -c 'echo $$ >"$0/head.pid"; exec "$@" >"$0/head.log" 2>&1 </dev/null' "$STATE" \
     "$RAY_BIN" start --head --block --port "$PORT" --node-ip-address "$HEAD_IP" --num-cpus 0 \
-    --include-dashboard=false --disable-usage-stats --temp-dir "$STATE/head" \
+    "${dash[@]}" --disable-usage-stats --temp-dir "$STATE/head" \
     --object-store-memory "$OBJ_MEM"
   wait_port "$HEAD_IP" "$PORT" 90 || { tail -20 "$STATE/head.log" >&2; die "head GCS did not come up"; }
   for _ in $(seq 60); do grep -q "Ray runtime started" "$STATE/head.log" && return; sleep 1; done
@@ -139,6 +146,7 @@ cmd_up() {
   log "cluster up: $n nodes"
   cat <<EOF
 RAY CLUSTER ADDRESS: $ADDR
+$([[ $DASH_PORT != 0 ]] && echo "RAY JOBS ADDRESS: http://$HEAD_IP:$DASH_PORT   (ray job submit --address ...)")
 # in the driver's shell (root network namespace):
 export RAY_AUTH_MODE=token
 export RAY_AUTH_TOKEN_PATH=$TOKEN
@@ -213,6 +221,7 @@ cmd_status() {
   echo "procs:   $(tagged_pids | sort -un | wc -l) processes belong to this cluster (session id / RAYCL_TAG)"
   if pid_alive "$STATE/head.pid"; then
     echo "address: $ADDR   driver env: RAY_AUTH_MODE=token RAY_AUTH_TOKEN_PATH=$TOKEN"
+    [[ $DASH_PORT != 0 ]] && echo "jobs:    http://$HEAD_IP:$DASH_PORT"
     ray_env "$RAY_BIN" status --address "$ADDR" 2>&1 | sed -n '/^Node status/,/^Pending:/p' | grep -v '^Pending:' || true
   fi
 }

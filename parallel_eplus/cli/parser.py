@@ -92,6 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")
     tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument(
+        "--seeds", metavar="S,S,...",
+        help="one run per seed as a sweep's Ray Tune trials, queued by cores: runs/<run-name>/seed-<S>/ (sweep --help)",
+    )  # fmt: skip
     tr.add_argument("--run-name", help="default: trpo-<weathers>-<time>")
     tr.add_argument("--resume", help="a checkpoint .zip or a run directory to continue")
     tr.add_argument(
@@ -120,6 +124,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=c.cmd_train)
+
+    sw = sub.add_parser("sweep", help="trainings over seeds and a grid or search of train settings, as Ray Tune trials")
+    sw.add_argument("spec", type=Path, metavar="SPEC.toml", help="the sweep (docs/training.md); re-run it to continue")
+    sw.add_argument("--ray-address", help="a Ray cluster to run the trials on (default: start Ray locally)")
+    sw.add_argument("--overwrite", action="store_true", help="move a sweep of the same name aside and start afresh")
+    sw.set_defaults(func=c.cmd_sweep)
 
     ev = sub.add_parser("evaluate", help="controllers x weathers sweep: the paper's table and figures")
     ev.add_argument("--policy", action="append", help="a trained model.zip (or run dir); PATH=LABEL sets the label")

@@ -17,17 +17,23 @@ from pathlib import Path
 
 log = logging.getLogger(__name__)
 
+JOB_ENV = "RAY_JOB_CONFIG_JSON_ENV_VAR"  # set by Ray's job supervisor for a submitted job's driver
+
 
 def connect(address: str | None, num_cpus: int) -> bool:
     """Join the cluster at `address`, or start a Ray of our own; returns whether we started it (and so end it).
 
     With no address: `address="local"`, a new Ray whatever an earlier cluster left in Ray's temp folder
-    (a stale `ray_current_cluster` file) or in `RAY_ADDRESS`.
+    (a stale `ray_current_cluster` file) or in `RAY_ADDRESS`; except in a Ray job (`ray job submit`), whose
+    driver joins the cluster that runs the job (its `RAY_ADDRESS`).
     """
     import ray
 
     if ray.is_initialized():
         return False
+    if not address and JOB_ENV in os.environ and os.environ.get("RAY_ADDRESS"):
+        address = os.environ["RAY_ADDRESS"]
+        log.info("Ray: running as a Ray job; joining its cluster at %s", address)
     if not address:
         ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, log_to_driver=True)
         return True

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
 import pandas as pd
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
 from tqdm import tqdm
 
 from parallel_eplus import io
@@ -21,8 +23,52 @@ def episodes_per_weather(episodes_csv: Path) -> dict[str, int]:
     return {str(k): int(v) for k, v in counts.items()}
 
 
+class WeatherRuns(TensorBoardOutputFormat):
+    """SB3's TensorBoard output, each weather's episode metrics in a run of their own.
+
+    `episode/<weather>/<tag>` goes to `<folder>/weather-<weather>/` as `episode/<tag>`, so TensorBoard draws
+    one chart per tag with a line per weather (and per trial of a sweep: `<trial>/weather-CA`); everything
+    else stays in `<folder>`. Written and flushed on the logger's dump, as SB3 writes its own.
+    """
+
+    EPISODE = re.compile(r"episode/([^/]+)/(.+)")
+
+    def __init__(self, folder: str):
+        super().__init__(folder)
+        self.folder = Path(folder)
+        self.weathers: dict[str, TensorBoardOutputFormat] = {}
+
+    def write(self, key_values: dict, key_excluded: dict, step: int = 0) -> None:
+        split: dict[str, dict] = {}
+        rest = {}
+        for key, value in key_values.items():
+            m = self.EPISODE.fullmatch(key)
+            if m:
+                split.setdefault(m[1], {})[f"episode/{m[2]}"] = (value, key_excluded.get(key))
+            else:
+                rest[key] = value
+        super().write(rest, {k: key_excluded.get(k) for k in rest}, step)
+        for weather, values in split.items():
+            if weather not in self.weathers:  # a weather given as a file: its name
+                name = re.sub(r"[^A-Za-z0-9._-]+", "-", Path(weather).stem if "/" in weather else weather)
+                self.weathers[weather] = TensorBoardOutputFormat(str(self.folder / f"weather-{name}"))
+            self.weathers[weather].write({k: v for k, (v, _) in values.items()},
+                                         {k: x for k, (_, x) in values.items()}, step)  # fmt: skip
+
+    def close(self) -> None:
+        super().close()
+        for writer in self.weathers.values():
+            writer.close()
+
+
+def tensorboard_logger(folder: Path) -> Logger:
+    """The run's SB3 logger: TensorBoard in `folder`, each weather's episode metrics in a sub-run (WeatherRuns)."""
+    return Logger(str(folder), [WeatherRuns(str(folder))])
+
+
 class EpisodeMetrics(BaseCallback):
-    """Per finished episode, tagged by weather: reward, power, zone temperatures, share in range.
+    """Per finished episode, tagged by weather: reward, power, zone temperatures, share in range
+    (`episode/<weather>/<tag>`, which WeatherRuns writes as one TensorBoard run per weather).
 
     Also appends every episode's summary to runs/<name>/episodes.csv, logs throughput and counts the
     episodes cut short by an EnergyPlus failure (restarted, within the restart budget).

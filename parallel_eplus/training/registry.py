@@ -170,12 +170,11 @@ def list_runs(folder: Path) -> list[RunInfo]:
 
 def stop_run(info: RunInfo, timeout_s: float = 300.0) -> tuple[RunInfo, list[str]]:
     """Stop a running training as Ctrl-C does (SIGINT: it saves a checkpoint and stops every EnergyPlus process),
-    wait for it to exit, and return the run as it ended with whatever of its processes or pipes is left."""
+    wait for it to exit, and return the run as it ended with whatever of its processes or pipes is left. A sweep's
+    trial stops alone the same way (training/tune_trial.py), and its process ends with it."""
     status = info.status or {}
     if info.state != "running":
         raise ValueError(f"run {info.name} is not running ({info.state})")
-    if status.get("trial"):
-        raise ValueError(f"run {info.name} is Ray Tune trial {status['trial']}: stop it through its sweep")
     if process_alive(status) is None:
         raise ValueError(f"run {info.name} runs on {status.get('host')}: stop it there (parallel-eplus runs stop)")
     pid = int(status["pid"])

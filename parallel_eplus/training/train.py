@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
 import torch as th
-from stable_baselines3.common.callbacks import CallbackList
-from stable_baselines3.common.logger import configure
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
@@ -22,7 +22,7 @@ from parallel_eplus.buildings.building import load_building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError, Interrupts
-from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather
+from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather, tensorboard_logger
 from parallel_eplus.training.checkpoints import AtomicCheckpoint, resume_point, save_checkpoint
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.lagrangian import ConstrainedRolloutBuffer, CostReplayBuffer, Lagrangian, SACComfort
@@ -86,15 +86,17 @@ def train(
     progress: bool = True,
     timer: UpdateTimer | None = None,
     overwrite: bool = False,
+    callbacks: Sequence[BaseCallback] = (),
 ) -> Path:
     """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first.
 
     A new run whose name is taken is refused, or with `overwrite` the old one is moved aside (run_names.py).
+    `callbacks` run after ours (a sweep's trial reports each batch to Ray Tune with one: training/tune_trial.py).
     runs/<name>/status.json says how far it got and how it ended (run_status.py; `parallel-eplus runs`).
     """
     cfg, checkpoint = _prepare(cfg, resume, overwrite)
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
-        return _learn(cfg, checkpoint, progress, timer, status)
+        return _learn(cfg, checkpoint, progress, timer, status, callbacks)
 
 
 def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tuple[TrainConfig, Path | None]:
@@ -122,8 +124,9 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
 
 
 def _learn(
-    cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus
-) -> Path:
+    cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus,
+    callbacks: Sequence[BaseCallback] = (),
+) -> Path:  # fmt: skip
     from parallel_eplus.training.rollout import ALGORITHMS
 
     run_dir = cfg.run_dir
@@ -145,7 +148,7 @@ def _learn(
             if cfg.init_from_baseline:
                 _clone_baseline(cfg, model, env, progress)
         model.lockstep = cfg.lockstep
-        model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
+        model.set_logger(tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name)))
         start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers
@@ -153,16 +156,17 @@ def _learn(
         status.write(steps=model.num_timesteps, planned=end)
         bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
-        callbacks = CallbackList([
+        chain = CallbackList([
             timer or UpdateTimer(),
             EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * load_building(cfg.building).steps_per_day),
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
             *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.algorithm == "sac" else []),
             status,
+            *callbacks,
         ])  # fmt: skip
         try:
             with Interrupts():
-                model.learn(remaining, callback=callbacks, reset_num_timesteps=False, log_interval=1)
+                model.learn(remaining, callback=chain, reset_num_timesteps=False, log_interval=1)
         except (KeyboardInterrupt, EnergyPlusError) as e:
             if isinstance(e, EnergyPlusError) and model.num_timesteps == start_steps:
                 raise  # nothing learned since the last save

@@ -56,20 +56,21 @@ def _tiny(tmp_path: Path, name: str, **overrides):
 def test_a_taken_run_name_is_refused_and_overwrite_moves_the_old_run_aside(tmp_path, no_leaks):
     first = train(_tiny(tmp_path, "probe"), progress=False)
     run, tb = first.parent, tmp_path / "tb" / "probe"
-    model, episodes, events = first.read_bytes(), (run / "episodes.csv").read_bytes(), sorted(tb.iterdir())
+    model, episodes = first.read_bytes(), (run / "episodes.csv").read_bytes()
+    events = sorted(p.relative_to(tb) for p in tb.rglob("events.out.tfevents.*"))  # the run's and each weather's
 
     with pytest.raises(RunExistsError, match=r"--resume .*runs/probe.*--overwrite"):
         train(_tiny(tmp_path, "probe", timesteps=96), progress=False)
     assert first.read_bytes() == model and (run / "episodes.csv").read_bytes() == episodes
-    assert sorted(tb.iterdir()) == events  # refused before anything was written
+    assert sorted(p.relative_to(tb) for p in tb.rglob("events.out.tfevents.*")) == events  # nothing written
 
     second = train(_tiny(tmp_path, "probe"), progress=False, overwrite=True)
     assert second == first
     [old_run] = (tmp_path / "runs").glob("probe.old-*")
     [old_tb] = (tmp_path / "tb").glob("probe.old-*")
     assert (old_run / "model.zip").read_bytes() == model and (old_run / "episodes.csv").read_bytes() == episodes
-    assert sorted(p.name for p in old_tb.iterdir()) == [p.name for p in events]
-    assert not {p.name for p in tb.iterdir()} & {p.name for p in events}  # the new run's curves start alone
+    assert sorted(p.relative_to(old_tb) for p in old_tb.rglob("events.out.tfevents.*")) == events
+    assert not {p.relative_to(tb) for p in tb.rglob("events.out.tfevents.*")} & set(events)  # new curves start alone
 
 
 @pytest.mark.slow

@@ -1,0 +1,160 @@
+"""One trial of a sweep: an ordinary training run inside a Ray Tune trial, reporting each batch to Tune.
+
+The trial's process is a Ray actor on one node; the run inside it is `train(cfg)` with the local backend,
+its EnergyPlus workers children of that process, its folder `runs/<sweep>/<trial>/` like any run's. The
+training runs in a thread of ours, not Tune's function-trainable thread, so that stopping the trial
+(Ctrl-C on the sweep, `ray job stop`, the end of the sweep) waits for it: `cleanup` asks the run to stop,
+the run saves a checkpoint and stops its EnergyPlus workers, and only then does the trial's process end.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import queue
+import signal
+import threading
+import time
+import zipfile
+from pathlib import Path
+
+import pandas as pd
+from ray import tune
+from stable_baselines3.common.callbacks import BaseCallback
+
+from parallel_eplus.training.callbacks import episodes_per_weather
+from parallel_eplus.training.policy_files import MODEL_FILE, saves_newest_first
+from parallel_eplus.training.run_status import TRIAL_VARIABLE
+from parallel_eplus.training.sweep_spec import trial_config
+
+log = logging.getLogger(__name__)
+
+STOP_WAIT_S = 300.0  # how long a stopping trial waits for its checkpoint and workers to close
+
+
+class TrialStopped(KeyboardInterrupt):
+    """The sweep stopped this trial: train() saves a checkpoint and closes the workers, as on Ctrl-C."""
+
+
+class TuneReport(BaseCallback):
+    """Each batch's end: steps done and the mean share in band, power and reward of the episodes that ended
+    in it (the latest known when none did), handed to `put`; raises TrialStopped once `stop` is set."""
+
+    def __init__(self, put, stop: threading.Event, min_interval_s: float = 2.0):
+        super().__init__()
+        self.put, self.stop, self.min_interval_s = put, stop, min_interval_s
+        self.latest = {"in_band_pct": math.nan, "power_kw": math.nan, "reward": math.nan}
+        self.episodes = 0
+        self._batch: list[dict] = []
+        self._last = 0.0
+
+    def _on_step(self) -> bool:
+        if self.stop.is_set():
+            raise TrialStopped("the sweep stopped this trial")
+        for info in self.locals["infos"]:
+            final = info.get("final_info")
+            if final and "episode_summary" in final:
+                self._batch.append(final["episode_summary"])
+        return True
+
+    def _on_rollout_end(self) -> None:  # on-policy: once a batch; SAC: every step, so at most every 2 s
+        if not self._batch and time.monotonic() - self._last < self.min_interval_s:
+            return
+        if self._batch:
+            for key, source in (("in_band_pct", "in_band_pct"), ("power_kw", "power_kw"), ("reward", "reward_mean")):
+                values = [s[source] for s in self._batch if source in s]
+                if values:
+                    self.latest[key] = float(sum(values) / len(values))
+            self.episodes += len(self._batch)
+            self._batch = []
+        self._last = time.monotonic()
+        self.put(("result", self.result()))
+
+    def result(self) -> dict:
+        return {"timesteps": int(self.num_timesteps), "episodes": self.episodes, **self.latest}
+
+
+def _finished(cfg) -> dict | None:
+    """A finished run's last result (its final model reached the planned steps), or None."""
+    saves = saves_newest_first(cfg.run_dir)
+    if not saves or saves[0].name != MODEL_FILE:
+        return None
+    with zipfile.ZipFile(saves[0]) as z:
+        steps = int(json.loads(z.read("data"))["num_timesteps"])
+    if steps < cfg.timesteps:
+        return None
+    episodes = pd.read_csv(cfg.run_dir / "episodes.csv")
+    last = episodes[episodes["timesteps"] > steps - cfg.batch_size]  # the last batch's episodes
+    means = {"in_band_pct": "in_band_pct", "power_kw": "power_kw", "reward": "reward_mean"}
+    return {"timesteps": steps, "episodes": len(episodes), **{k: float(last[c].mean()) for k, c in means.items()}}
+
+
+class TrialRun(tune.Trainable):
+    """A sweep's trial: `setup` starts the run in a thread, `step` hands Tune its next batch's result,
+    `cleanup` stops it with a checkpoint. A trial whose run folder holds a checkpoint continues from it."""
+
+    def setup(self, config, base=None, runs_dir="runs", tensorboard_dir="tensorboard_logs"):
+        os.environ[TRIAL_VARIABLE] = self.trial_name  # the run's status.json names its trial (`parallel-eplus runs`)
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")  # as train's are
+        if threading.current_thread() is threading.main_thread():  # a signal to this trial stops it alone
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, self._on_signal)
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # Ray's workers block it
+        self._results: queue.Queue = queue.Queue()
+        self._stop = threading.Event()
+        self._run_dir = Path(runs_dir) / self.trial_name
+        self._thread = threading.Thread(
+            target=self._train, args=({**(base or {}), **config}, runs_dir, tensorboard_dir),
+            name=f"train {self.trial_name}", daemon=True,
+        )  # fmt: skip
+        self._thread.start()
+
+    def _on_signal(self, signum, frame) -> None:
+        """SIGINT or SIGTERM to the trial's process (`kill`, a run registry's stop) stops this trial as Ctrl-C
+        stops `train`: a checkpoint, its workers gone; the sweep goes on with the others."""
+        log.warning("trial %s: signal %d; stopping with a checkpoint", self.trial_name, signum)
+        self._stop.set()
+
+    def _train(self, settings: dict, runs_dir: str, tensorboard_dir: str) -> None:
+        from parallel_eplus.training.train import train
+
+        report = TuneReport(self._results.put, self._stop)
+        try:
+            cfg = trial_config(settings, runs_dir, tensorboard_dir, self.trial_name)
+            done = _finished(cfg)
+            if done is not None:  # a sweep run again: this trial had finished
+                self._results.put(("done", done))
+                return
+            resume = cfg.run_dir if saves_newest_first(cfg.run_dir) else None
+            report.episodes = sum(episodes_per_weather(cfg.run_dir / "episodes.csv").values()) if resume else 0
+            # a folder without a checkpoint (a trial killed early) is moved aside, not trained into
+            train(cfg, resume=resume, progress=False, overwrite=resume is None, callbacks=[report])
+            self._results.put(("done", report.result()))
+        except TrialStopped:
+            self._results.put(("stopped", report.result()))
+        except BaseException as e:  # noqa: BLE001 - Tune reports it as this trial's error; the others go on
+            text = str(e).strip()
+            headline = getattr(e, "headline", None) or (text.splitlines()[0] if text else repr(e))
+            detail = f"\n{text}" if text and text != headline else ""
+            self._results.put(("error", RuntimeError(f"{type(e).__name__}: {headline}{detail}")))
+
+    def step(self) -> dict:
+        kind, payload = self._results.get()
+        if kind == "error":
+            raise payload
+        return {**payload, "done": kind != "result", "stopped": kind == "stopped"}
+
+    def save_checkpoint(self, checkpoint_dir: str) -> dict:
+        """Tune's own checkpoint only points at the run: its checkpoints are the run folder's."""
+        return {"run_dir": str(self._run_dir)}
+
+    def load_checkpoint(self, checkpoint: dict) -> None:
+        """Nothing to load: the run continues from its folder's last checkpoint (`setup`)."""
+
+    def cleanup(self) -> None:
+        self._stop.set()
+        self._thread.join(STOP_WAIT_S)
+        if self._thread.is_alive():
+            log.warning("trial %s did not stop within %.0f s", self.trial_name, STOP_WAIT_S)
