@@ -15,6 +15,7 @@ import time
 import pytest
 
 from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.envs.ray_vector_env import RayVectorEnv
 from parallel_eplus.errors import WorkerLostError
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
@@ -52,22 +53,30 @@ def _strike_when(ready, pattern: str, hit: list, until=lambda: False) -> threadi
     return stop
 
 
-def test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run_completes(tmp_path, no_leaks):
-    # 30-day episodes: a struck worker is mid-episode; the first batch's end (a checkpoint) is the cue
-    cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=30, timesteps=11520, batch_size=2304,
-                       checkpoint_every=2304, backend="ray", workers_per_actor=1)  # fmt: skip
-    checkpoints = cfg.run_dir.resolve() / "checkpoints"
+def test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run_completes(
+    tmp_path, no_leaks, monkeypatch
+):
+    # Struck as the learner orders the second batch: every actor is idle and every EnergyPlus worker waits
+    # for its next action at step 160 of a 192-step episode, so the strike lands mid-episode, never by timing.
+    cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=2, timesteps=1600, batch_size=320,
+                       checkpoint_every=320, backend="ray", workers_per_actor=1)  # fmt: skip
     hit: list[int] = []
-    stop = _strike_when(lambda: checkpoints.is_dir() and any(checkpoints.iterdir()), pipe_sweep.CALLBACK_MODULE, hit,
-                        until=lambda: bool(hit))  # fmt: skip
-    try:
-        final = train(cfg, progress=False)
-    finally:
-        stop.set()
+    collect, batches = RayVectorEnv.collect, []
+
+    def striking_collect(self, order, rngs):
+        batches.append(len(batches) + 1)
+        if len(batches) == 2:
+            victim = _ours(pipe_sweep.CALLBACK_MODULE)[0]
+            os.kill(victim, signal.SIGKILL)
+            hit.append(victim)
+        return collect(self, order, rngs)
+
+    monkeypatch.setattr(RayVectorEnv, "collect", striking_collect)
+    final = train(cfg, progress=False)
     assert hit, "no EnergyPlus process to hit"
     assert final.is_file()
     restarts = scalars(tmp_path / "tb" / "hit")["throughput/worker_restarts"]
-    assert restarts[-1].value >= 1  # the cut episode was restarted inside its actor, within the budget
+    assert restarts[-1].value == 1  # the cut episode was restarted inside its actor, within the budget
     assert [s.value for s in scalars(tmp_path / "tb" / "hit")["ray/round_trips"]] == [2.0] * 5
 
 
@@ -113,8 +122,10 @@ def test_ctrl_c_during_ray_training_saves_a_checkpoint_and_leaves_no_ray_energyp
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 130, out
     assert "checkpoint saved" in out
-    time.sleep(1.0)
-    assert _ours("ray::") == [] and _ours("raylet") == [] and _ours("gcs_server") == []
+    deadline = time.monotonic() + 30  # Ray's own processes exit on their own schedule after the trainer's
+    while _ours("ray::") or _ours("raylet") or _ours("gcs_server"):
+        assert time.monotonic() < deadline, (_ours("ray::"), _ours("raylet"), _ours("gcs_server"))
+        time.sleep(0.2)
 
 
 def test_a_failed_ray_episode_leaves_the_evaluation_standing(tmp_path, no_leaks, broken_weather):
