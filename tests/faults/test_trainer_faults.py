@@ -25,7 +25,14 @@ from ..conftest import our_processes
 from ..test_train import small_config
 from .strikes import process_state, strike_after_step, wait_for_state
 
-ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+def _private_env(tmp_path: Path) -> dict[str, str]:
+    """The trainer's and `clean`'s environment, with a temp folder of the test's own: any process on this shared
+    machine sweeps dead owners' pipe directories under /tmp as it makes its first pipe (pipe_sweep.py), which
+    would race with what the test checks it left behind."""
+    private = tmp_path / "tmp"
+    private.mkdir(exist_ok=True)
+    return {**os.environ, "PYTHONUNBUFFERED": "1", "TMPDIR": str(private)}
 
 
 def _cli(*args: str) -> list[str]:
@@ -53,8 +60,8 @@ def _wait_for(predicate, timeout: float, what: str, proc: subprocess.Popen | Non
     return time.monotonic() - t0
 
 
-def _pipe_dirs_of(pid: int) -> set[str]:
-    return {d for d in os.listdir("/tmp") if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
+def _pipe_dirs_of(pid: int, env: dict[str, str]) -> set[str]:
+    return {d for d in os.listdir(env["TMPDIR"]) if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
 
 
 def _energyplus_children(pid: int) -> list[int]:
@@ -66,7 +73,8 @@ def _energyplus_children(pid: int) -> list[int]:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
 def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_checkpoint(tmp_path, sig):
     run = tmp_path / "runs" / "cut"
-    proc = subprocess.Popen(_train_cmd("cut"), cwd=tmp_path, env=ENV, stdout=subprocess.PIPE,
+    env = _private_env(tmp_path)
+    proc = subprocess.Popen(_train_cmd("cut"), cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
     _wait_for(lambda: len(_checkpoints(run)) >= 2, 180, "two checkpoints", proc)
     proc.send_signal(sig)
@@ -74,25 +82,25 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
     gone = _wait_for(lambda: our_processes() == [], 15, "every EnergyPlus process gone")
     print(f"{sig.name}: EnergyPlus processes gone {gone:.1f} s after the trainer exited")
     last = _checkpoints(run)[-1]
-    left = _pipe_dirs_of(proc.pid)  # (other runs share the machine: only the trainer's own count)
+    left = _pipe_dirs_of(proc.pid, env)
     if sig == signal.SIGTERM:
         assert proc.returncode == 130 and "checkpoint saved" in out, out
         assert left == set()
     else:
         assert proc.returncode == -signal.SIGKILL
         assert left, "a SIGKILLed trainer runs no cleanup: its pipe directories stay until the next start"
-        assert all(pipe_sweep.owner_alive(Path("/tmp", d)) is False for d in left)
-        listed = subprocess.run(_cli("clean", "--dry-run"), capture_output=True, text=True, check=True).stdout
+        assert all(pipe_sweep.owner_alive(Path(env["TMPDIR"], d)) is False for d in left)
+        listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
         assert all(d in listed for d in left), listed
 
     steps = int(last.stem.split("_")[1])
     cmd = _train_cmd("cut", steps + 192)[:-3] + ["--resume", "runs/cut", "--quiet"]
-    resumed = subprocess.Popen(cmd, cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    resumed = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     _, err = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, err
     assert f"resuming cut from runs/cut/checkpoints/{last.name} at step {steps}" in err
-    assert _pipe_dirs_of(proc.pid) == set()  # the resumed run's first pipe swept the dead run's
-    assert _pipe_dirs_of(resumed.pid) == set()
+    assert _pipe_dirs_of(proc.pid, env) == set()  # the resumed run's first pipe swept the dead run's
+    assert _pipe_dirs_of(resumed.pid, env) == set()
     assert our_processes() == []
     assert pd.read_csv(run / "episodes.csv")["timesteps"].max() > steps
 
@@ -100,7 +108,8 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
 @pytest.mark.slow
 def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clean_lists(tmp_path):
     run = tmp_path / "runs" / "frozen"
-    proc = subprocess.Popen(_train_cmd("frozen"), cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL,
+    env = _private_env(tmp_path)
+    proc = subprocess.Popen(_train_cmd("frozen"), cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)  # fmt: skip
     try:
         _wait_for(lambda: (run / "episodes.csv").exists() and len(_energyplus_children(proc.pid)) == 2, 180,
@@ -118,14 +127,14 @@ def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clea
         proc.wait()
     _wait_for(lambda: [p.pid for p in pipe_sweep.leftover_processes() if p.pid in workers] == [stopped],
               15, "only the stopped worker left")  # fmt: skip
-    listed = subprocess.run(_cli("clean", "--dry-run"), capture_output=True, text=True, check=True).stdout
+    listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
     assert f"leftover EnergyPlus process {stopped}" in listed and "clean --kill" in listed
     # `clean --kill` would also stop other users' leftovers on this shared machine: stop ours by PID.
     os.kill(stopped, signal.SIGKILL)
     _wait_for(lambda: our_processes() == [], 10, "the stopped worker gone")
-    cleaned = subprocess.run(_cli("clean"), capture_output=True, text=True, check=True).stdout
+    cleaned = subprocess.run(_cli("clean"), env=env, capture_output=True, text=True, check=True).stdout
     assert "removed pipe directory" in cleaned
-    assert _pipe_dirs_of(proc.pid) == set()
+    assert _pipe_dirs_of(proc.pid, env) == set()
 
 
 @pytest.mark.slow
