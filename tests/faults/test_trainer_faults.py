@@ -76,7 +76,7 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
     env = _private_env(tmp_path)
     proc = subprocess.Popen(_train_cmd("cut"), cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
-    _wait_for(lambda: len(_checkpoints(run)) >= 2, 180, "two checkpoints", proc)
+    _wait_for(lambda: len(_checkpoints(run)) >= 2, 600, "two checkpoints", proc)
     proc.send_signal(sig)
     out, _ = proc.communicate(timeout=60)
     gone = _wait_for(lambda: our_processes() == [], 15, "every EnergyPlus process gone")
@@ -112,7 +112,7 @@ def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clea
     proc = subprocess.Popen(_train_cmd("frozen"), cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)  # fmt: skip
     try:
-        _wait_for(lambda: (run / "episodes.csv").exists() and len(_energyplus_children(proc.pid)) == 2, 180,
+        _wait_for(lambda: (run / "episodes.csv").exists() and len(_energyplus_children(proc.pid)) == 2, 600,
                   "a finished episode and two running workers", proc)  # fmt: skip
         # Freeze the trainer first: from here it starts no worker and reaps none, so the list below holds
         # (a worker that finishes meanwhile stays a zombie, skipped; the rest cannot end their episodes).
