@@ -62,7 +62,7 @@ class EnergyPlusProcess:
 
     def recv(self) -> tuple[int, np.ndarray]:
         """The frame awaited next, by the deadline: raises TimeoutError, ChildProcessError or ProtocolError."""
-        return self.pipes.recv(max(self.deadline - time.monotonic(), 0.0), self.spin_s)
+        return self.pipes.recv_by(self.deadline, self.spin_s)
 
     def finish(self, grace_s: float = 30.0) -> None:
         """After the last step: let EnergyPlus write its files and exit, then make sure it has."""

@@ -92,6 +92,7 @@ class Simulation:
         self.action_names = tuple(e.name for e in self.elements)
         self.base: RuleBasedController | None = None  # the controller a residual action corrects
         self._info: dict = {}
+        self._sensed: list[float] = []  # the last observation's sensor values, for its step record
         self.episode = 0
         self.episode_dir: Path | None = None
         self.weather = self.weathers[0]
@@ -157,7 +158,7 @@ class Simulation:
             "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
         ]  # fmt: skip
         self.process.spawn(args, self.episode_dir / "energyplus.log", self.config.start_timeout_s)
-        self.records = StepRecorder(self.action_names, self.steps_per_episode, self.sensor_names)
+        self.records = StepRecorder(self.action_names, self.sensor_names)
         self._action = self.initial_action.tolist()
         self.last_summary = None
         if self.config.residual_scale:  # a fresh integral state per episode
@@ -196,10 +197,9 @@ class Simulation:
         """(observation, reward, terminated, info) for the action last sent, due `step_timeout_s` after it."""
         code, values = self._recv("an observation", self.config.step_timeout_s)
         obs, info = self._observation(values)
-        r, parts = reward(tuple(info[t] for t in self._temps), info[self._power], self.config.reward)
+        r, parts = reward(tuple(map(info.__getitem__, self._temps)), info[self._power], self.config.reward)
         info.update(parts)
-        row = [*values[pipe.TIME_FIELDS :].tolist(), *self._action, r, *parts.values()]
-        self.records.add(info["time"], row)
+        self.records.add(info["time"], [*self._sensed, *self._action, r, *parts.values()])
         terminated = code == pipe.END
         if terminated:
             self._finish()
@@ -211,21 +211,25 @@ class Simulation:
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
         if len(values) != pipe.TIME_FIELDS + len(self.sensor_names):
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
-        raw = values[pipe.TIME_FIELDS :]
-        sensed = raw.tolist()  # per step, Python floats are cheaper than numpy scalars and small-array ops
-        info = dict(zip(self.sensor_names, sensed, strict=True))
-        info["time"] = pipe.frame_time(values)
+        # Per step, Python floats are cheaper than numpy scalars and small-array ops (docs/speed.md)
+        fields = values.tolist()
+        sensed = fields[pipe.TIME_FIELDS :]
+        info = dict(zip(self.sensor_names, sensed))  # as long: checked above
+        info["time"] = pipe.frame_time(fields)
         info["weather"] = self.weather
+        raw = values[pipe.TIME_FIELDS :]
         obs = raw.astype(np.float32)
-        if not all(lo <= v <= hi for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True)):
-            info["raw_observation"] = raw.copy()
-            obs = np.clip(obs, self.obs_low, self.obs_high)
+        for lo, v, hi in zip(self._lows, sensed, self._highs):
+            if not lo <= v <= hi:  # (NaN too)
+                info["raw_observation"] = raw.copy()
+                obs = np.clip(obs, self.obs_low, self.obs_high)
+                break
         if self.config.time_features or self._schedule:
             extra = time_features(info["time"]) if self.config.time_features else ()
             if self._schedule:
                 extra += schedule_features(info["time"], self._schedule)
             obs = np.concatenate([obs, np.array(extra, np.float32)])
-        self._info = info
+        self._info, self._sensed = info, sensed
         return obs, info
 
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
@@ -250,11 +254,15 @@ class Simulation:
         return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))
 
     def _finish(self) -> None:
-        """The run period is over: let EnergyPlus finish its files, then write the records."""
-        self.process.finish()
-        self._write_records(complete=True)
+        """The run period is over: write the records while EnergyPlus finishes its own files, then wait for
+        it to exit (older episodes are pruned after, so nothing is removed under a writing EnergyPlus)."""
+        try:
+            self._write_records(complete=True, prune=False)
+        finally:
+            self.process.finish()
+        prune_episodes(self.output_dir, self.config.keep_episodes)
 
-    def _write_records(self, complete: bool) -> None:
+    def _write_records(self, complete: bool, prune: bool = True) -> None:
         if self.records is None or self.episode_dir is None:
             return
         extra = {
@@ -270,7 +278,8 @@ class Simulation:
         signals = {"temperatures": self._temps, "power": self._power, "band": self.building.band}
         self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, **signals)
         self.records = None
-        prune_episodes(self.output_dir, self.config.keep_episodes)
+        if prune:
+            prune_episodes(self.output_dir, self.config.keep_episodes)
 
     def _kill(self) -> None:
         self.process.kill()
