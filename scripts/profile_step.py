@@ -85,11 +85,11 @@ def _env(days: int, workdir: Path) -> dict:
             f = line.split()[1:]
             counters = {f[i]: float(f[i + 1]) for i in range(0, len(f), 2)}
     d = np.diff(marks, axis=1) / 1e3  # µs per phase
+    medians, means = np.median(d, axis=0).round(2).tolist(), d.mean(axis=0).round(2).tolist()
     return {
         "wall_s": t_end - t_start, "first_obs_s": t_first - t_start, "stepping_s": t_last - t_first,
-        "finish_s": t_end - t_last, "phases_median_us": dict(zip(PHASES, np.median(d, axis=0).round(2).tolist())),
-        "phases_mean_us": dict(zip(PHASES, d.mean(axis=0).round(2).tolist())), "counters": counters,
-        "steps": len(marks),
+        "finish_s": t_end - t_last, "phases_median_us": dict(zip(PHASES, medians, strict=True)),
+        "phases_mean_us": dict(zip(PHASES, means, strict=True)), "counters": counters, "steps": len(marks),
     }  # fmt: skip
 
 
@@ -112,9 +112,7 @@ def main() -> None:
         print(f"  env {phase:12s} {med(r['env']['phases_median_us'][phase] for r in runs):8.2f} (median step)"
               f" {med(r['env']['phases_mean_us'][phase] for r in runs):8.2f} (mean)")  # fmt: skip
     waited = med(r["env"]["counters"].get("waited_s", float("nan")) / steps * 1e6 for r in runs)
-    turnaround = med(
-        sum(r["env"]["phases_mean_us"][p] for p in PHASES if p != "wait") for r in runs
-    )
+    turnaround = med(sum(r["env"]["phases_mean_us"][p] for p in PHASES if p != "wait") for r in runs)
     print(f"  EnergyPlus waited per step  {waited:8.2f}; the env's own turnaround {turnaround:8.2f};"
           f" hand-off (the rest) {waited - turnaround:8.2f}")  # fmt: skip
     physics = med(r["raw"]["stepping_s"] for r in runs) / steps * 1e6
@@ -123,8 +121,8 @@ def main() -> None:
     raw = med(r["raw"]["wall_s"] for r in runs)
     env = med(r["env"]["wall_s"] for r in runs)
     ratio = med(r["env"]["wall_s"] / r["raw"]["wall_s"] for r in runs)
-    print(f"  raw {raw:.2f} s, env {env:.2f} s (first observation"
-          f" {med(r['env']['first_obs_s'] for r in runs):.2f} s, finish {med(r['env']['finish_s'] for r in runs):.2f} s);"
+    first, finish = (med(r["env"][k] for r in runs) for k in ("first_obs_s", "finish_s"))
+    print(f"  raw {raw:.2f} s, env {env:.2f} s (first observation {first:.2f} s, finish {finish:.2f} s);"
           f" env/raw {ratio:.3f}; overhead {(env - raw) / steps * 1e6:.1f} µs a step")  # fmt: skip
     print(f"  load average {os.getloadavg()[0]:.2f}")
 

@@ -214,12 +214,12 @@ class Simulation:
         # Per step, Python floats are cheaper than numpy scalars and small-array ops (docs/speed.md)
         fields = values.tolist()
         sensed = fields[pipe.TIME_FIELDS :]
-        info = dict(zip(self.sensor_names, sensed))  # as long: checked above
+        info = dict(zip(self.sensor_names, sensed, strict=True))
         info["time"] = pipe.frame_time(fields)
         info["weather"] = self.weather
         raw = values[pipe.TIME_FIELDS :]
         obs = raw.astype(np.float32)
-        for lo, v, hi in zip(self._lows, sensed, self._highs):
+        for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True):
             if not lo <= v <= hi:  # (NaN too)
                 info["raw_observation"] = raw.copy()
                 obs = np.clip(obs, self.obs_low, self.obs_high)
