@@ -50,11 +50,8 @@ class Simulation:
     def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0", siblings: int = 1):
         """`siblings`: how many Simulations one process steps together (sets the default spin)."""
         self.config = config
-        auto = config.spin_s is None
         self.process = EnergyPlusProcess(
-            pipe.default_spin_s(siblings + 1) if auto else config.spin_s,
-            pipe.SPIN_S if auto else config.spin_s,
-            native.bridge_library() if config.native_bridge else None,
+            config.spin_s, native.bridge_library() if config.native_bridge else None, siblings=siblings
         )
         self.name = name
         self.building = load_building(config.building)  # None: the data center, whose variants `model` names
@@ -199,7 +196,7 @@ class Simulation:
         obs, info = self._observation(values)
         r, parts = reward(tuple(map(info.__getitem__, self._temps)), info[self._power], self.config.reward)
         info.update(parts)
-        self.records.add(info["time"], [*self._sensed, *self._action, r, *parts.values()])
+        self.records.add(info["time"], (*self._sensed, *self._action, r, *parts.values()))
         terminated = code == pipe.END
         if terminated:
             self._finish()
