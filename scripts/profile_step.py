@@ -70,7 +70,7 @@ def _env(days: int, workdir: Path) -> dict:
             r, parts = reward(tuple(map(info.__getitem__, sim._temps)), info[sim._power], cfg.reward)
             info.update(parts)
             m[6] = clock()
-            sim.records.add(info["time"], [*sim._sensed, *sim._action, r, *parts.values()])
+            sim.records.add(info["time"], (*sim._sensed, *sim._action, r, *parts.values()))
             m[7] = clock()
             if code == pipe.END:
                 t_last = time.perf_counter()

@@ -200,7 +200,7 @@ class Bridge:
             replay.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(replay), self.replayed,
         )  # fmt: skip
         if status != 0:
-            raise RuntimeError("the C bridge refused the model's sensors or actuators (too many, or unmapped)")
+            raise RuntimeError("the C bridge refused to arm: too many or unmapped sensors or actuators, or a bad pipe")
         self.native, self._armed = None, self.native
 
     def collect(self) -> None:

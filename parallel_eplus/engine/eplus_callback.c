@@ -10,6 +10,7 @@
  * reports them after the run (bridge_error).
  */
 #include <errno.h>
+#include <fcntl.h>
 #include <poll.h>
 #include <sched.h>
 #include <stdint.h>
@@ -219,6 +220,11 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
             return -1;
     b.obs_fd = obs_fd;
     b.act_fd = act_fd;
+    if (act_fd >= 0 && spin_s <= 0) { /* no spin: one blocking read per action, no failed read and poll first */
+        int flags = fcntl(act_fd, F_GETFL);
+        if (flags < 0 || fcntl(act_fd, F_SETFL, flags & ~O_NONBLOCK) < 0)
+            return -1;
+    }
     b.n_sensors = n_sensors;
     memcpy(b.sensors, sensors, sizeof(int) * (size_t)n_sensors);
     b.n_actuators = n_actuators;

@@ -147,7 +147,9 @@ class FrameReader:
                 if frame is not None:
                     del self.buf[: frame[2]]
                     return frame[0], frame[1]
-            if not self._poll.poll(0):  # (a frame is rarely there yet: asking costs less than a failed read)
+            if spin_s <= 0:  # no spin: block until readable (a select when the frame is already there)
+                wait(len(self.buf))
+            elif not self._poll.poll(0):  # (a frame is rarely there yet: asking costs less than a failed read)
                 if spin_until is None:
                     spin_until = time.perf_counter() + spin_s
                 self._await(wait, spin_until)
