@@ -94,7 +94,8 @@ def test_a_lost_actor_stops_the_run_naming_its_node_after_a_checkpoint_that_resu
     with pytest.raises(WorkerLostError) as err:
         train(cfg, progress=False)
     assert hit
-    assert "was lost" in str(err.value) and "on node" in str(err.value)
+    text = str(err.value)  # Ray reports the death, or on a machine too busy for that the progress check goes unanswered
+    assert ("was lost" in text or "did not answer a progress check" in text) and "on node" in text
     assert time.monotonic() - t0 < 600
     checkpoint = max(checkpoints.glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
     steps = int(checkpoint.stem.split("_")[1])
