@@ -20,7 +20,8 @@ def _bridges() -> list:
 
 @pytest.mark.slow
 def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
-    """The C bridge is the Python one's steady state moved to C: same actions, same physics, bit for bit."""
+    """The C bridge is the Python one's steady state moved to C: same actions, same physics, bit for bit, whether
+    its side spins for actions or blocks in one read per action (pipe.auto_spins picks by the machine's load)."""
     from parallel_eplus.engine import native
     from parallel_eplus.engine.config import SimulationConfig
     from parallel_eplus.engine.simulation import Simulation
@@ -29,8 +30,8 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
         pytest.skip("no C compiler")
     actions = np.clip(np.random.default_rng(3).normal(size=(STEPS_PER_DAY, 4)), -1, 1)
     runs = []
-    for use_c in (True, False):
-        sim = Simulation(SimulationConfig(run_days=1, native_bridge=use_c))
+    for use_c, spin_s in ((True, 0.002), (True, 0.0), (False, None)):
+        sim = Simulation(SimulationConfig(run_days=1, native_bridge=use_c, spin_s=spin_s))
         assert (sim.native_bridge is not None) == use_c
         try:
             obs, _ = sim.start()
@@ -44,6 +45,7 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
         finally:
             sim.close()
     np.testing.assert_array_equal(runs[0], runs[1])
+    np.testing.assert_array_equal(runs[0], runs[2])
 
 
 @pytest.mark.slow

@@ -67,7 +67,9 @@ def reward(
     band = 0.0
     for t in zone_temps_c if applies else ():
         comfort += math.exp(-cfg.gaussian_weight * (t - cfg.center_c) ** 2)
-        band += max(t - cfg.upper_c, 0.0) + max(cfg.lower_c - t, 0.0)
+        above, below = t - cfg.upper_c, cfg.lower_c - t
+        # max(x, 0.0) without the call (it runs every step): the same value, NaN and -0.0 included
+        band += (0.0 if above < 0.0 else above) + (0.0 if below < 0.0 else below)
     parts = {
         "reward_comfort": comfort,
         "reward_band": -cfg.band_weight * band,

@@ -19,13 +19,13 @@ def check_action(action, names: tuple[str, ...]) -> list[float]:
         a = np.asarray(action, dtype=np.float64).reshape(-1).tolist()
     if len(a) != len(names):
         raise ValueError(f"action must have {len(names)} elements, got shape {np.shape(action)}")
-    for i, v in enumerate(a):
-        if not math.isfinite(v):
-            raise ValueError(f"action element {i} ({names[i]}) is {v}; actions must be finite")
+    if not all(map(math.isfinite, a)):
+        i, v = next((i, v) for i, v in enumerate(a) if not math.isfinite(v))
+        raise ValueError(f"action element {i} ({names[i]}) is {v}; actions must be finite")
     return [-1.0 if v < -1.0 else 1.0 if v > 1.0 else float(v) for v in a]
 
 
 def scale_action(action, low: Sequence[float], high: Sequence[float], names: tuple[str, ...]) -> list[float]:
     """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
     a = check_action(action, names)
-    return [float(lo + (v + 1.0) * 0.5 * (hi - lo)) for v, lo, hi in zip(a, low, high, strict=True)]
+    return [lo + (v + 1.0) * 0.5 * (hi - lo) for v, lo, hi in zip(a, low, high, strict=True)]

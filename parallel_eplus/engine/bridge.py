@@ -81,6 +81,7 @@ class Bridge:
             raise SystemExit(f"--replay needs one row of {len(self.elements)} actions per step")
         self.replayed = 0  # rows of `replay` applied so far
         self.started_at = self.done_at = 0.0  # monotonic s: the run period's first exchange, the last step
+        self.counters: dict[str, float] = {}  # the C side's, once armed: time waited for actions, calls
         self.native: ctypes.CDLL | None = None  # the C bridge (set by `register`) until it is armed
         self._armed: ctypes.CDLL | None = None  # the C bridge once it steps EnergyPlus
 
@@ -199,7 +200,7 @@ class Bridge:
             replay.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(replay), self.replayed,
         )  # fmt: skip
         if status != 0:
-            raise RuntimeError("the C bridge refused the model's sensors or actuators (too many, or unmapped)")
+            raise RuntimeError("the C bridge refused to arm: too many or unmapped sensors or actuators, or a bad pipe")
         self.native, self._armed = None, self.native
 
     def collect(self) -> None:
@@ -208,6 +209,10 @@ class Bridge:
         if lib is None:
             return
         self.step, self.done, self.done_at = lib.bridge_step(), bool(lib.bridge_done()), lib.bridge_done_at()
+        self.counters = {
+            "waited_s": lib.bridge_wait_s(), "exchanges": lib.bridge_exchanges(),
+            "apply_calls": lib.bridge_apply_calls(), "observe_calls": lib.bridge_observe_calls(),
+        }  # fmt: skip
         message = lib.bridge_error()
         if message and self.error is None:
             self.error = RuntimeError(message.decode())

@@ -47,25 +47,30 @@ def err_tail(episode_dir: Path | None, lines: int = 12) -> str:
 
 
 class StepRecorder:
-    """Rows of (time, observation, action, reward, components), kept in preallocated arrays."""
+    """Rows of (time, observation, action, reward, components), one list per step until the episode ends.
 
-    def __init__(self, action_names: tuple[str, ...], capacity: int, sensor_names: tuple[str, ...] = SENSOR_NAMES):
+    Appending a row is the cheapest bookkeeping a step can do (writing it into a numpy array cost ~1 us a
+    step on the path between EnergyPlus's observation and its next action); the table is built once, at
+    the end, while EnergyPlus finishes its own files. Rows are tuples of floats, which Python's garbage
+    collector stops tracking, so a year of them adds nothing to its passes."""
+
+    def __init__(self, action_names: tuple[str, ...], sensor_names: tuple[str, ...] = SENSOR_NAMES):
         self.columns = (*sensor_names, *action_names, "reward", *REWARD_PARTS, *STEP_FLAGS)
-        self.values = np.empty((capacity, len(self.columns)))
-        self.times: list[dt.datetime] = [None] * capacity  # type: ignore[list-item]
-        self.n = 0
+        self.rows: list[Sequence[float]] = []
+        self.times: list[dt.datetime] = []
+
+    @property
+    def n(self) -> int:
+        return len(self.rows)
 
     def add(self, time: dt.datetime, row: Sequence[float]) -> None:
-        if self.n == len(self.times):  # episodes never exceed their run period, but stay safe
-            self.values = np.concatenate([self.values, np.empty_like(self.values)])
-            self.times.extend([None] * len(self.times))  # type: ignore[list-item]
-        self.values[self.n] = row
-        self.times[self.n] = time
-        self.n += 1
+        self.rows.append(row)
+        self.times.append(time)
 
     def frame(self) -> pd.DataFrame:
-        df = pd.DataFrame(self.values[: self.n], columns=list(self.columns))
-        df.insert(0, "time", pd.to_datetime(self.times[: self.n]))
+        values = np.array(self.rows, dtype=float).reshape(len(self.rows), len(self.columns))
+        df = pd.DataFrame(values, columns=list(self.columns))
+        df.insert(0, "time", pd.to_datetime(self.times))
         return df
 
 

@@ -10,6 +10,7 @@
  * reports them after the run (bridge_error).
  */
 #include <errno.h>
+#include <fcntl.h>
 #include <poll.h>
 #include <sched.h>
 #include <stdint.h>
@@ -53,6 +54,8 @@ static struct {
     const double *replay; /* raw runs only: one action row per step, applied as the env's would be */
     long replay_rows, replayed;
     double done_at;
+    double wait_s; /* from writing an observation to having its action: what this side waits for the env */
+    long exchanges, apply_calls, observe_calls;
     int minutes;
     double spin_s;
     unsigned char buf[4 + 8 * MAX_VALUES + 4096];
@@ -142,6 +145,7 @@ static int read_action(State state) {
 void *bridge_apply_action(State state) {
     if (!b.armed)
         return b.slow_apply(state);
+    b.apply_calls++;
     if (b.done || b.error[0] || !b.pending)
         return NULL;
     b.pending = 0;
@@ -153,6 +157,7 @@ void *bridge_apply_action(State state) {
 void *bridge_observe(State state) {
     if (!b.armed)
         return b.slow_observe(state);
+    b.observe_calls++;
     if (b.done || b.error[0])
         return NULL;
     double values[TIME_FIELDS + MAX_VALUES];
@@ -181,12 +186,16 @@ void *bridge_observe(State state) {
         }
         return NULL;
     }
+    double sent = now_s();
     if (write_frame(0, values, n) < 0) {
         fail(state, "cannot write an observation: the env is gone");
         return NULL;
     }
-    if (read_action(state) == 0)
+    if (read_action(state) == 0) {
         b.pending = 1;
+        b.wait_s += now_s() - sent;
+        b.exchanges++;
+    }
     return NULL;
 }
 
@@ -211,6 +220,11 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
             return -1;
     b.obs_fd = obs_fd;
     b.act_fd = act_fd;
+    if (act_fd >= 0 && spin_s <= 0) { /* no spin: one blocking read per action, no failed read and poll first */
+        int flags = fcntl(act_fd, F_GETFL);
+        if (flags < 0 || fcntl(act_fd, F_SETFL, flags & ~O_NONBLOCK) < 0)
+            return -1;
+    }
     b.n_sensors = n_sensors;
     memcpy(b.sensors, sensors, sizeof(int) * (size_t)n_sensors);
     b.n_actuators = n_actuators;
@@ -231,6 +245,10 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
 }
 
 long bridge_step(void) { return b.step; }
+double bridge_wait_s(void) { return b.wait_s; }
+long bridge_exchanges(void) { return b.exchanges; }
+long bridge_apply_calls(void) { return b.apply_calls; }
+long bridge_observe_calls(void) { return b.observe_calls; }
 int bridge_done(void) { return b.done; }
 double bridge_done_at(void) { return b.done_at; }
 int bridge_armed(void) { return b.armed; }

@@ -89,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
         return fail(-3.0)
     if bridge.raw:  # for benchmarks: the time its steps took, start-up excluded, as the vector env is timed
         print(f"stepping_s {bridge.done_at - bridge.started_at:.6f}")
+    if bridge.counters:  # where the stepping time went (docs/speed.md): the C side's waits for actions, its calls
+        stepping = bridge.done_at - bridge.started_at
+        print(f"bridge stepping_s {stepping:.6f}", *(f"{k} {v}" for k, v in bridge.counters.items()))
     return 0
 
 

@@ -36,16 +36,36 @@ MAX_VALUES = 4096  # far above any real frame; a larger count means a corrupt st
 SPIN_S = 0.002  # see FrameReader
 
 
-def default_spin_s(processes: int) -> float:
-    """The env side spins only when every process of a step has a core of its own.
+def others_running(ours: int) -> int:
+    """Runnable tasks on this machine beside `ours` processes of ours: the 1-minute load average less ours."""
+    try:
+        load = os.getloadavg()[0]
+    except OSError:  # pragma: no cover - no load average (not Linux)
+        return 0
+    return round(max(load - ours, 0.0))
 
-    The EnergyPlus side always spins (it yields while it does): measured with 2 workers on 2 cores,
-    EnergyPlus-side spinning gained 10 % while env-side spinning lost 40 % to stolen cycles.
+
+def default_spin_s(processes: int) -> float:
+    """The env side spins only when every process of a step has a core of its own, other runs' counted."""
+    return SPIN_S if processes + others_running(processes) <= (os.cpu_count() or 1) else 0.0
+
+
+def auto_spins(workers: int) -> tuple[float, float]:
+    """(the env side's spin, EnergyPlus's) for `workers` EnergyPlus processes stepped by one of ours, decided at
+    each episode's start: spin only where a core is free to spin on, other runs' load counted.
+
+    The EnergyPlus side spins when each EnergyPlus process has a core (it yields while it does): measured with
+    2 workers on 2 cores, EnergyPlus-side spinning gained 10 % while env-side spinning lost 40 % to stolen
+    cycles. On a machine already busy with other runs both sides block: a year under a load average of 12-20
+    on 2 cores ran at env/raw 1.37 blocking against 1.38-1.52 spinning, on 40 % less CPU (docs/speed.md).
     """
-    return SPIN_S if processes <= (os.cpu_count() or 1) else 0.0
+    cores = os.cpu_count() or 1
+    others = others_running(workers + 1)
+    return (SPIN_S if workers + 1 + others <= cores else 0.0), (SPIN_S if workers + others <= cores else 0.0)
 
 
 _INT = struct.Struct("<i")
+_F8 = np.dtype("<f8")
 
 
 @functools.lru_cache(maxsize=16)
@@ -55,7 +75,10 @@ def _data_struct(n: int) -> struct.Struct:
 
 def encode(values, code: int = DATA) -> bytes:
     """One frame as bytes: written with a single write, so it arrives whole (frames < PIPE_BUF)."""
-    values = values.ravel().tolist() if isinstance(values, np.ndarray) else list(values)
+    if isinstance(values, np.ndarray):
+        values = values.ravel().tolist()
+    elif not isinstance(values, (list, tuple)):
+        values = list(values)
     if code == DATA:
         return _data_struct(len(values)).pack(len(values), *values)
     if code not in CONTROL_CODES:
@@ -67,7 +90,8 @@ def encode(values, code: int = DATA) -> bytes:
 def parse(buf: bytes | bytearray) -> tuple[int, np.ndarray, int] | None:
     """The first whole frame in `buf` as (code, values, its length in bytes); None until all of it is there.
 
-    A bad header is a ProtocolError as soon as it has arrived.
+    A bad header is a ProtocolError as soon as it has arrived. From `bytes` (immutable) the values are a
+    read-only view, not a copy.
     """
     if len(buf) < 4:
         return None
@@ -86,7 +110,9 @@ def parse(buf: bytes | bytearray) -> tuple[int, np.ndarray, int] | None:
     end = header + 8 * count
     if len(buf) < end:
         return None
-    return code, np.frombuffer(bytes(buf[header:end]), dtype="<f8"), end
+    if isinstance(buf, bytes):
+        return code, np.frombuffer(buf, _F8, count, header), end
+    return code, np.frombuffer(bytes(buf[header:end]), _F8), end
 
 
 def decode(data: bytes) -> tuple[int, np.ndarray]:
@@ -110,28 +136,43 @@ class FrameReader:
     def __init__(self, fd: int):
         self.fd = fd
         self.buf = bytearray()
+        self._poll = select.poll()  # spinning asks poll(0), not a read that raises BlockingIOError (2x dearer)
+        self._poll.register(fd, select.POLLIN)
 
     def read(self, wait: Callable[[int], None], spin_s: float = SPIN_S) -> tuple[int, np.ndarray]:
         spin_until = None
         while True:
-            frame = parse(self.buf)
-            if frame is not None:
-                del self.buf[: frame[2]]
-                return frame[0], frame[1]
+            if self.buf:
+                frame = parse(self.buf)
+                if frame is not None:
+                    del self.buf[: frame[2]]
+                    return frame[0], frame[1]
+            if spin_s <= 0:  # no spin: block until readable (a select when the frame is already there)
+                wait(len(self.buf))
+            elif not self._poll.poll(0):  # (a frame is rarely there yet: asking costs less than a failed read)
+                if spin_until is None:
+                    spin_until = time.perf_counter() + spin_s
+                self._await(wait, spin_until)
             try:
                 chunk = os.read(self.fd, 65536)
-            except BlockingIOError:
-                now = time.perf_counter()
-                if spin_until is None:
-                    spin_until = now + spin_s
-                if now >= spin_until:  # with no spin, block at once: a yield could cost a whole time slice
-                    wait(len(self.buf))
-                else:
-                    os.sched_yield()  # let a runnable process on this core go first
+            except BlockingIOError:  # `wait` returned with nothing to read after all
                 continue
             if not chunk:
                 raise ProtocolError(f"pipe closed after {len(self.buf)} bytes of a frame")
+            if not self.buf:  # the usual case: the chunk is one whole frame, read without a copy
+                frame = parse(chunk)
+                if frame is not None and frame[2] == len(chunk):
+                    return frame[0], frame[1]
             self.buf += chunk
+
+    def _await(self, wait: Callable[[int], None], spin_until: float) -> None:
+        """Until the fd is readable: yield the core and poll again until `spin_until`; then block in `wait`."""
+        poll = self._poll.poll
+        while time.perf_counter() < spin_until:  # with no spin, block at once: a yield could cost a time slice
+            os.sched_yield()  # let a runnable process on this core go first
+            if poll(0):
+                return
+        wait(len(self.buf))
 
     def clear(self) -> None:
         self.buf.clear()
@@ -164,6 +205,7 @@ class PipePair:
         self._obs = FrameReader(self.obs_fd)
         self._pidfd: int | None = None
         self._alive: Callable[[], bool] = lambda: True
+        self._deadline = 0.0  # of the frame being read (time.monotonic)
 
     def watch(self, pid: int, alive: Callable[[], bool]) -> None:
         """Wake reads when the process on the other end exits."""
@@ -206,11 +248,16 @@ class PipePair:
 
     def recv(self, timeout: float, spin_s: float = SPIN_S) -> tuple[int, np.ndarray]:
         """Next frame from EnergyPlus. Raises TimeoutError or ChildProcessError, never returns zeros."""
-        deadline = time.monotonic() + timeout
-        # The obs FIFO is held open for writing by us too, so it never reads EOF; death comes via pidfd.
-        return self._obs.read(lambda got: self._wait_readable(deadline, got), spin_s)
+        return self.recv_by(time.monotonic() + timeout, spin_s)
 
-    def _wait_readable(self, deadline: float, got: int) -> None:
+    def recv_by(self, deadline: float, spin_s: float = SPIN_S) -> tuple[int, np.ndarray]:
+        """`recv`, due by `deadline` (time.monotonic)."""
+        self._deadline = deadline
+        # The obs FIFO is held open for writing by us too, so it never reads EOF; death comes via pidfd.
+        return self._obs.read(self._wait_readable, spin_s)
+
+    def _wait_readable(self, got: int) -> None:
+        deadline = self._deadline
         fds = [self.obs_fd] if self._pidfd is None else [self.obs_fd, self._pidfd]
         while True:
             remaining = deadline - time.monotonic()
@@ -256,13 +303,22 @@ class PipePair:
             self.close()
 
 
-_YEAR_STARTS: dict[float, dt.datetime] = {}
+_DAY_STARTS: dict[tuple[float, float], dt.datetime] = {}
+_TIMES_OF_DAY: dict[tuple[float, float], dt.timedelta] = {}
 
 
-def frame_time(values: np.ndarray) -> dt.datetime:
-    """When an observation frame was taken, from its first TIME_FIELDS values (year, day, hour, minute)."""
-    year, day_of_year, hour, minute = values[:TIME_FIELDS].tolist()  # floats: cheaper than numpy scalars
-    start = _YEAR_STARTS.get(year)
+def frame_time(values) -> dt.datetime:
+    """When an observation frame was taken, from its first TIME_FIELDS values (year, day, hour, minute).
+
+    Per step: a datetime plus a timedelta, both cached (building a timedelta from keywords cost more than
+    the rest of the observation's bookkeeping)."""
+    if isinstance(values, np.ndarray):
+        values = values[:TIME_FIELDS].tolist()  # floats: cheaper than numpy scalars
+    year, day_of_year, hour, minute = values[:TIME_FIELDS]
+    start = _DAY_STARTS.get((year, day_of_year))
     if start is None:
-        start = _YEAR_STARTS[year] = dt.datetime(int(year), 1, 1)
-    return start + dt.timedelta(days=day_of_year - 1, hours=hour, minutes=minute)
+        start = _DAY_STARTS[year, day_of_year] = dt.datetime(int(year), 1, 1) + dt.timedelta(days=day_of_year - 1)
+    offset = _TIMES_OF_DAY.get((hour, minute))
+    if offset is None:
+        offset = _TIMES_OF_DAY[hour, minute] = dt.timedelta(hours=hour, minutes=minute)
+    return start + offset

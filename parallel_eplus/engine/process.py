@@ -28,9 +28,13 @@ log = logging.getLogger(__name__)
 class EnergyPlusProcess:
     """The EnergyPlus side of one worker, episode after episode, over one pipe pair kept between episodes."""
 
-    def __init__(self, spin_s: float, child_spin_s: float, native_bridge: str | None):
-        self.spin_s = spin_s  # how long our reads spin before blocking
-        self.child_spin_s = child_spin_s  # the same for EnergyPlus's side
+    def __init__(self, spin_s: float | None, native_bridge: str | None, siblings: int = 1):
+        """`spin_s`: how long both sides' reads spin before blocking; None: `pipe.auto_spins` for `siblings`
+        EnergyPlus processes stepped by this process, decided again at each spawn."""
+        self.auto_spin = spin_s is None
+        self.siblings = siblings
+        self.spin_s = 0.0 if spin_s is None else spin_s  # how long our reads spin before blocking
+        self.child_spin_s = self.spin_s  # the same for EnergyPlus's side
         self.native_bridge = native_bridge
         self.pipes: pipe.PipePair | None = None
         self.proc: subprocess.Popen | None = None
@@ -41,6 +45,8 @@ class EnergyPlusProcess:
         if self.pipes is None:
             self.pipes = pipe.PipePair()
         self.pipes.drain()
+        if self.auto_spin:
+            self.spin_s, self.child_spin_s = pipe.auto_spins(self.siblings)
         cmd = [
             sys.executable, "-m", "parallel_eplus.engine.eplus_callback",
             "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path), *args,
@@ -62,7 +68,7 @@ class EnergyPlusProcess:
 
     def recv(self) -> tuple[int, np.ndarray]:
         """The frame awaited next, by the deadline: raises TimeoutError, ChildProcessError or ProtocolError."""
-        return self.pipes.recv(max(self.deadline - time.monotonic(), 0.0), self.spin_s)
+        return self.pipes.recv_by(self.deadline, self.spin_s)
 
     def finish(self, grace_s: float = 30.0) -> None:
         """After the last step: let EnergyPlus write its files and exit, then make sure it has."""

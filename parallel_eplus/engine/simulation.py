@@ -51,11 +51,8 @@ class Simulation:
     def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0", siblings: int = 1):
         """`siblings`: how many Simulations one process steps together (sets the default spin)."""
         self.config = config
-        auto = config.spin_s is None
         self.process = EnergyPlusProcess(
-            pipe.default_spin_s(siblings + 1) if auto else config.spin_s,
-            pipe.SPIN_S if auto else config.spin_s,
-            native.bridge_library() if config.native_bridge else None,
+            config.spin_s, native.bridge_library() if config.native_bridge else None, siblings=siblings
         )
         self.name = name
         self.building = load_building(config.building)  # None: the data center, whose variants `model` names
@@ -94,6 +91,7 @@ class Simulation:
         self.action_names = tuple(e.name for e in self.elements)
         self.base: RuleBasedController | None = None  # the controller a residual action corrects
         self._info: dict = {}
+        self._sensed: list[float] = []  # the last observation's sensor values, for its step record
         self.episode = 0
         self.episode_dir: Path | None = None
         self._number = 0  # the last episode directory's number (its folder may be shared)
@@ -159,7 +157,7 @@ class Simulation:
             "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
         ]  # fmt: skip
         self.process.spawn(args, self.episode_dir / "energyplus.log", self.config.start_timeout_s)
-        self.records = StepRecorder(self.action_names, self.steps_per_episode, self.sensor_names)
+        self.records = StepRecorder(self.action_names, self.sensor_names)
         self._action = self.initial_action.tolist()
         self.last_summary = None
         if self.config.residual_scale:  # a fresh integral state per episode
@@ -200,7 +198,7 @@ class Simulation:
         obs, info = self._observation(values)
         comfort = self.comfort
         applies = comfort.always or comfort.applies(info["time"], info)
-        temps = tuple(info[t] for t in self._temps)
+        temps = tuple(map(info.__getitem__, self._temps))
         margin = self.config.comfort_margin_c
         r, parts = reward(temps, comfort.energy_w(info), self.config.reward, applies and margin is None)
         info.update(parts)
@@ -208,8 +206,7 @@ class Simulation:
         if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward
             cost, out = comfort.cost(temps, margin) if applies else (0.0, 0)
             info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
-        row = [*values[pipe.TIME_FIELDS :].tolist(), *self._action, r, *parts.values(), float(applies)]
-        self.records.add(info["time"], row)
+        self.records.add(info["time"], (*self._sensed, *self._action, r, *parts.values(), float(applies)))
         terminated = code == pipe.END
         if terminated:
             self._finish()
@@ -221,21 +218,25 @@ class Simulation:
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
         if len(values) != pipe.TIME_FIELDS + len(self.sensor_names):
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
-        raw = values[pipe.TIME_FIELDS :]
-        sensed = raw.tolist()  # per step, Python floats are cheaper than numpy scalars and small-array ops
+        # Per step, Python floats are cheaper than numpy scalars and small-array ops (docs/speed.md)
+        fields = values.tolist()
+        sensed = fields[pipe.TIME_FIELDS :]
         info = dict(zip(self.sensor_names, sensed, strict=True))
-        info["time"] = pipe.frame_time(values)
+        info["time"] = pipe.frame_time(fields)
         info["weather"] = self.weather
+        raw = values[pipe.TIME_FIELDS :]
         obs = raw.astype(np.float32)
-        if not all(lo <= v <= hi for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True)):
-            info["raw_observation"] = raw.copy()
-            obs = np.clip(obs, self.obs_low, self.obs_high)
+        for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True):
+            if not lo <= v <= hi:  # (NaN too)
+                info["raw_observation"] = raw.copy()
+                obs = np.clip(obs, self.obs_low, self.obs_high)
+                break
         if self.config.time_features or self._schedule:
             extra = time_features(info["time"]) if self.config.time_features else ()
             if self._schedule:
                 extra += schedule_features(info["time"], self._schedule)
             obs = np.concatenate([obs, np.array(extra, np.float32)])
-        self._info = info
+        self._info, self._sensed = info, sensed
         return obs, info
 
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
@@ -260,11 +261,16 @@ class Simulation:
         return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))
 
     def _finish(self) -> None:
-        """The run period is over: let EnergyPlus finish its files, then write the records."""
-        self.process.finish()
-        self._write_records(complete=True)
+        """The run period is over: write the records while EnergyPlus finishes its own files, then wait for
+        it to exit (older episodes are pruned after, so nothing is removed under a writing EnergyPlus)."""
+        try:
+            self._write_records(complete=True, prune=False)
+        finally:
+            self.process.finish()
+        if self.episode_dir is not None:
+            self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)
 
-    def _write_records(self, complete: bool) -> None:
+    def _write_records(self, complete: bool, prune: bool = True) -> None:
         if self.records is None or self.episode_dir is None:
             return
         extra = {
@@ -279,7 +285,8 @@ class Simulation:
             extra["building"] = str(self.building.spec.path)
         self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, self.comfort)
         self.records = None
-        self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)
+        if prune:
+            self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)
 
     def _kill(self) -> None:
         self.process.kill()

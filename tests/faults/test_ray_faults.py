@@ -9,12 +9,12 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import threading
 import time
 
 import pytest
 
 from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.envs.ray_vector_env import RayVectorEnv
 from parallel_eplus.errors import WorkerLostError
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
@@ -31,61 +31,71 @@ def _ours(pattern: str) -> list[int]:
     return [int(p) for p in out.stdout.split() if _started_by_us(p)]
 
 
-def _strike_when(ready, pattern: str, hit: list, until=lambda: False) -> threading.Event:
-    """Once `ready()`, SIGKILL the first of this session's processes matching `pattern`; again until `until()`."""
-    stop = threading.Event()
-
-    def strike():
-        deadline = time.monotonic() + 180
-        while not ready() and time.monotonic() < deadline and not stop.is_set():
-            time.sleep(0.2)
-        while time.monotonic() < deadline and not until() and not stop.is_set():
-            victims = [p for p in _ours(pattern) if p not in hit]
-            if victims:
-                os.kill(victims[0], signal.SIGKILL)
-                hit.append(victims[0])
-                if not until():
-                    time.sleep(4.0)
-            time.sleep(0.5)
-
-    threading.Thread(target=strike, daemon=True).start()
-    return stop
+def _kill_first(pattern: str, hit: list[int]) -> None:
+    """SIGKILL the first of this session's processes matching `pattern`."""
+    victim = _ours(pattern)[0]
+    os.kill(victim, signal.SIGKILL)
+    hit.append(victim)
 
 
-def test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run_completes(tmp_path, no_leaks):
-    # 30-day episodes: a struck worker is mid-episode; the first batch's end (a checkpoint) is the cue
-    cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=30, timesteps=11520, batch_size=2304,
-                       checkpoint_every=2304, backend="ray", workers_per_actor=1)  # fmt: skip
-    checkpoints = cfg.run_dir.resolve() / "checkpoints"
+def _before_batch(monkeypatch, batch: int, strike) -> None:
+    """Run `strike()` in the learner as it orders batch `batch` (from 1), before the order goes out: every
+    actor is idle then, and each of its EnergyPlus workers waits for its next action (a moment the test
+    controls, not a delay)."""
+    collect, calls = RayVectorEnv.collect, []
+
+    def striking_collect(self, order, rngs):
+        calls.append(batch)
+        if len(calls) == batch:
+            strike()
+        return collect(self, order, rngs)
+
+    monkeypatch.setattr(RayVectorEnv, "collect", striking_collect)
+
+
+def _during_batch(monkeypatch, batch: int, strike) -> None:
+    """Run `strike()` once every actor has the order for batch `batch`, before its fragments are awaited."""
+    get_all, calls = RayVectorEnv._get_all, []
+
+    def striking_get_all(self, refs, stats=None):
+        if stats is not None:  # a batch's fragments (start-up and lockstep calls pass none)
+            calls.append(batch)
+            if len(calls) == batch:
+                strike()
+        return get_all(self, refs, stats)
+
+    monkeypatch.setattr(RayVectorEnv, "_get_all", striking_get_all)
+
+
+def test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run_completes(
+    tmp_path, no_leaks, monkeypatch
+):
+    # Struck as the learner orders the second batch: every actor is idle and every EnergyPlus worker waits
+    # for its next action at step 160 of a 192-step episode, so the strike lands mid-episode, never by timing.
+    cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=2, timesteps=1600, batch_size=320,
+                       checkpoint_every=320, backend="ray", workers_per_actor=1)  # fmt: skip
     hit: list[int] = []
-    stop = _strike_when(lambda: checkpoints.is_dir() and any(checkpoints.iterdir()), pipe_sweep.CALLBACK_MODULE, hit,
-                        until=lambda: bool(hit))  # fmt: skip
-    try:
-        final = train(cfg, progress=False)
-    finally:
-        stop.set()
+    _before_batch(monkeypatch, 2, lambda: _kill_first(pipe_sweep.CALLBACK_MODULE, hit))
+    final = train(cfg, progress=False)
     assert hit, "no EnergyPlus process to hit"
     assert final.is_file()
     restarts = scalars(tmp_path / "tb" / "hit")["throughput/worker_restarts"]
-    assert restarts[-1].value >= 1  # the cut episode was restarted inside its actor, within the budget
+    assert restarts[-1].value == 1  # the cut episode was restarted inside its actor, within the budget
     assert [s.value for s in scalars(tmp_path / "tb" / "hit")["ray/round_trips"]] == [2.0] * 5
 
 
-def test_a_lost_actor_stops_the_run_naming_its_node_after_a_checkpoint_that_resumes(tmp_path, no_leaks):
+def test_a_lost_actor_stops_the_run_naming_its_node_after_a_checkpoint_that_resumes(tmp_path, no_leaks, monkeypatch):
     cfg = small_config(tmp_path, "lost", weathers=["CA"], run_days=30, timesteps=100_000, batch_size=1152,
                        checkpoint_every=1152, backend="ray", workers_per_actor=1)  # fmt: skip
     checkpoints = cfg.run_dir.resolve() / "checkpoints"
     hit: list[int] = []
-    stop = _strike_when(lambda: checkpoints.is_dir() and any(checkpoints.iterdir()), "ray::WorkerGroup", hit,
-                        until=lambda: bool(hit))  # fmt: skip
+    _during_batch(monkeypatch, 2, lambda: _kill_first("ray::WorkerGroup", hit))  # lost with batch 2 under way
     t0 = time.monotonic()
     with pytest.raises(WorkerLostError) as err:
-        try:
-            train(cfg, progress=False)
-        finally:
-            stop.set()
+        train(cfg, progress=False)
     assert hit
-    assert "was lost" in str(err.value) and "on node" in str(err.value)
+    text = str(err.value)  # Ray reports the death, or on a machine too busy for that the progress check goes unanswered
+    assert ("was lost" in text or "did not answer a progress check" in text) and "on node" in text
     assert time.monotonic() - t0 < 600
     checkpoint = max(checkpoints.glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
     steps = int(checkpoint.stem.split("_")[1])
@@ -104,17 +114,19 @@ def test_ctrl_c_during_ray_training_saves_a_checkpoint_and_leaves_no_ray_energyp
     ]  # fmt: skip
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     checkpoints = tmp_path / "runs" / "cut" / "checkpoints"
-    deadline = time.monotonic() + 180
+    deadline = time.monotonic() + 600  # (a machine loaded by other runs can take minutes)
     while not (checkpoints.is_dir() and any(checkpoints.iterdir())) and proc.poll() is None:
-        assert time.monotonic() < deadline, "no checkpoint within 180 s"
+        assert time.monotonic() < deadline, "no checkpoint within 600 s"
         time.sleep(0.5)
-    time.sleep(2.0)  # mid-batch: the actors are collecting
+    time.sleep(2.0)  # most likely mid-batch; whatever the moment, the outcome below must hold
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 130, out
     assert "checkpoint saved" in out
-    time.sleep(1.0)
-    assert _ours("ray::") == [] and _ours("raylet") == [] and _ours("gcs_server") == []
+    deadline = time.monotonic() + 30  # Ray's own processes exit on their own schedule after the trainer's
+    while _ours("ray::") or _ours("raylet") or _ours("gcs_server"):
+        assert time.monotonic() < deadline, (_ours("ray::"), _ours("raylet"), _ours("gcs_server"))
+        time.sleep(0.2)
 
 
 def test_a_failed_ray_episode_leaves_the_evaluation_standing(tmp_path, no_leaks, broken_weather):

@@ -11,8 +11,6 @@ import os
 import signal
 import subprocess
 import sys
-import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -25,8 +23,16 @@ from parallel_eplus.training.train import train
 
 from ..conftest import our_processes
 from ..test_train import small_config
+from .strikes import process_state, strike_after_step, wait_for_state
 
-ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+def _private_env(tmp_path: Path) -> dict[str, str]:
+    """The trainer's and `clean`'s environment, with a temp folder of the test's own: any process on this shared
+    machine sweeps dead owners' pipe directories under /tmp as it makes its first pipe (pipe_sweep.py), which
+    would race with what the test checks it left behind."""
+    private = tmp_path / "tmp"
+    private.mkdir(exist_ok=True)
+    return {**os.environ, "PYTHONUNBUFFERED": "1", "TMPDIR": str(private)}
 
 
 def _cli(*args: str) -> list[str]:
@@ -54,37 +60,8 @@ def _wait_for(predicate, timeout: float, what: str, proc: subprocess.Popen | Non
     return time.monotonic() - t0
 
 
-def _age_s(pid: int) -> float:
-    ticks = int(pipe_sweep.start_time(pid) or 0) / os.sysconf("SC_CLK_TCK")
-    return float(Path("/proc/uptime").read_text().split()[0]) - ticks
-
-
-def _strike_later(episodes_csv: Path, sig: int, hit: list, until=lambda: False, pick: int = 0) -> threading.Event:
-    """Once the run has finished an episode, send `sig` to one of this process's EnergyPlus workers that is
-    past its start-up; again every few seconds until `until()` (a worker hit as its episode ended has
-    nothing left to lose)."""
-
-    stop = threading.Event()  # set it when the test ends: no stray strike at a later test's workers
-
-    def strike():
-        deadline = time.monotonic() + 120
-        while not episodes_csv.exists() and time.monotonic() < deadline and not stop.is_set():
-            time.sleep(0.1)
-        while time.monotonic() < deadline and not until() and not stop.is_set():
-            time.sleep(1.0)
-            victims = sorted((_age_s(p), p) for p in _energyplus_children(os.getpid()))
-            victims = [p for age, p in victims if age > 1.5 and p not in hit]  # past start-up; the youngest first
-            if victims:
-                os.kill(victims[pick], sig)
-                hit.append(victims[pick])
-                time.sleep(4.0)
-
-    threading.Thread(target=strike, daemon=True).start()
-    return stop
-
-
-def _pipe_dirs_of(pid: int) -> set[str]:
-    return {d for d in os.listdir(tempfile.gettempdir()) if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
+def _pipe_dirs_of(pid: int, env: dict[str, str]) -> set[str]:
+    return {d for d in os.listdir(env["TMPDIR"]) if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
 
 
 def _energyplus_children(pid: int) -> list[int]:
@@ -96,33 +73,34 @@ def _energyplus_children(pid: int) -> list[int]:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
 def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_checkpoint(tmp_path, sig):
     run = tmp_path / "runs" / "cut"
-    proc = subprocess.Popen(_train_cmd("cut"), cwd=tmp_path, env=ENV, stdout=subprocess.PIPE,
+    env = _private_env(tmp_path)
+    proc = subprocess.Popen(_train_cmd("cut"), cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
-    _wait_for(lambda: len(_checkpoints(run)) >= 2, 180, "two checkpoints", proc)
+    _wait_for(lambda: len(_checkpoints(run)) >= 2, 600, "two checkpoints", proc)
     proc.send_signal(sig)
     out, _ = proc.communicate(timeout=60)
-    gone = _wait_for(lambda: our_processes() == [], 15, "every EnergyPlus process gone")
+    gone = _wait_for(lambda: our_processes() == [], 60, "every EnergyPlus process gone")
     print(f"{sig.name}: EnergyPlus processes gone {gone:.1f} s after the trainer exited")
     last = _checkpoints(run)[-1]
-    left = _pipe_dirs_of(proc.pid)  # (other runs share the machine: only the trainer's own count)
+    left = _pipe_dirs_of(proc.pid, env)
     if sig == signal.SIGTERM:
         assert proc.returncode == 130 and "checkpoint saved" in out, out
         assert left == set()
     else:
         assert proc.returncode == -signal.SIGKILL
         assert left, "a SIGKILLed trainer runs no cleanup: its pipe directories stay until the next start"
-        assert all(pipe_sweep.owner_alive(Path(tempfile.gettempdir(), d)) is False for d in left)
-        listed = subprocess.run(_cli("clean", "--dry-run"), capture_output=True, text=True, check=True).stdout
+        assert all(pipe_sweep.owner_alive(Path(env["TMPDIR"], d)) is False for d in left)
+        listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
         assert all(d in listed for d in left), listed
 
     steps = int(last.stem.split("_")[1])
     cmd = _train_cmd("cut", steps + 192)[:-3] + ["--resume", "runs/cut", "--quiet"]
-    resumed = subprocess.Popen(cmd, cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    resumed = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     _, err = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, err
     assert f"resuming cut from runs/cut/checkpoints/{last.name} at step {steps}" in err
-    assert _pipe_dirs_of(proc.pid) == set()  # the resumed run's first pipe swept the dead run's
-    assert _pipe_dirs_of(resumed.pid) == set()
+    assert _pipe_dirs_of(proc.pid, env) == set()  # the resumed run's first pipe swept the dead run's
+    assert _pipe_dirs_of(resumed.pid, env) == set()
     assert our_processes() == []
     assert pd.read_csv(run / "episodes.csv")["timesteps"].max() > steps
 
@@ -130,70 +108,66 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
 @pytest.mark.slow
 def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clean_lists(tmp_path):
     run = tmp_path / "runs" / "frozen"
-    proc = subprocess.Popen(_train_cmd("frozen"), cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL,
+    env = _private_env(tmp_path)
+    proc = subprocess.Popen(_train_cmd("frozen"), cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)  # fmt: skip
     try:
-        _wait_for(lambda: (run / "episodes.csv").exists() and len(_energyplus_children(proc.pid)) == 2, 180,
+        _wait_for(lambda: (run / "episodes.csv").exists() and len(_energyplus_children(proc.pid)) == 2, 600,
                   "a finished episode and two running workers", proc)  # fmt: skip
-        [stopped, running] = _energyplus_children(proc.pid)
+        # Freeze the trainer first: from here it starts no worker and reaps none, so the list below holds
+        # (a worker that finishes meanwhile stays a zombie, skipped; the rest cannot end their episodes).
+        os.kill(proc.pid, signal.SIGSTOP)
+        wait_for_state(proc.pid, "T", 10)
+        workers = _energyplus_children(proc.pid)
+        stopped = next(p for p in workers if process_state(p) not in ("", "Z"))
         os.kill(stopped, signal.SIGSTOP)  # stopped: it cannot notice that its trainer is gone
+        wait_for_state(stopped, "T", 10)
     finally:
         proc.kill()
         proc.wait()
-    _wait_for(lambda: [p.pid for p in pipe_sweep.leftover_processes() if p.pid in (stopped, running)] == [stopped],
-              15, "only the stopped worker left")  # fmt: skip
-    listed = subprocess.run(_cli("clean", "--dry-run"), capture_output=True, text=True, check=True).stdout
+    _wait_for(lambda: [p.pid for p in pipe_sweep.leftover_processes() if p.pid in workers] == [stopped],
+              60, "only the stopped worker left")  # fmt: skip
+    listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
     assert f"leftover EnergyPlus process {stopped}" in listed and "clean --kill" in listed
     # `clean --kill` would also stop other users' leftovers on this shared machine: stop ours by PID.
     os.kill(stopped, signal.SIGKILL)
-    _wait_for(lambda: our_processes() == [], 10, "the stopped worker gone")
-    cleaned = subprocess.run(_cli("clean"), capture_output=True, text=True, check=True).stdout
+    _wait_for(lambda: our_processes() == [], 60, "the stopped worker gone")
+    cleaned = subprocess.run(_cli("clean"), env=env, capture_output=True, text=True, check=True).stdout
     assert "removed pipe directory" in cleaned
-    assert _pipe_dirs_of(proc.pid) == set()
+    assert _pipe_dirs_of(proc.pid, env) == set()
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP], ids=["SIGKILL", "SIGSTOP"])
-def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_completes(tmp_path, no_leaks, sig, caplog):
-    # 60-day episodes (5,760 steps, a few seconds each even on a quiet machine): long enough that a worker past
-    # its start-up is struck mid-episode, not as it finishes (a one-day episode can end before it is old enough)
-    cfg = small_config(
-        tmp_path,
-        "hit",
-        weathers=["CA"],
-        run_days=60,
-        timesteps=23040,
-        batch_size=1152,
-        step_timeout_s=2,
-        keep_episodes=1,
-    )
-    hit: list[int] = []
-    stop = _strike_later(cfg.run_dir.resolve() / "episodes.csv", sig, hit, until=lambda: "restarting" in caplog.text)
-    try:
-        final = train(cfg, progress=False)
-    finally:
-        stop.set()
-    assert hit, "no EnergyPlus process to hit"
+def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_completes(
+    tmp_path, no_leaks, sig, caplog, monkeypatch
+):
+    # worker 0 struck mid-way through its second one-day episode, after it reported step 10 (strikes.py)
+    cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=1, timesteps=768, batch_size=192, step_timeout_s=2,
+                       keep_episodes=1)  # fmt: skip
+    hit = strike_after_step(monkeypatch, sig, worker="0", episode=2, step=10)
+    final = train(cfg, progress=False)
+    assert hit, "no EnergyPlus process was struck"
     assert "restarting its episode" in caplog.text
-    assert final.is_file() and pd.read_csv(final.parent / "episodes.csv")["timesteps"].max() >= 23040 - 2 * 5760
+    assert final.is_file() and pd.read_csv(final.parent / "episodes.csv")["timesteps"].max() >= 768 - 2 * 96
     # The struck episode keeps its evidence whole, whatever --keep-episodes prunes: why, and EnergyPlus's own log
     [failure] = (final.parent / "episodes").glob("worker-*/episode-*/failure.txt")
+    assert failure.parent.name == "episode-000002-CA" and failure.parent.parent.name == "worker-0"
     assert "EnergyPlus" in failure.read_text() and (failure.parent / "eplusout.err").is_file()
 
 
 @pytest.mark.slow
-def test_the_restart_budget_exhausted_ends_the_run_naming_worker_weather_and_log_after_a_checkpoint(tmp_path, no_leaks):
+def test_the_restart_budget_exhausted_ends_the_run_naming_worker_weather_and_log_after_a_checkpoint(
+    tmp_path, no_leaks, monkeypatch
+):
     cfg = small_config(tmp_path, "budget", weathers=["FL"], run_days=1, timesteps=100_000, batch_size=192,
                        checkpoint_every=100_000, max_restarts=0)  # fmt: skip
-    hit: list[int] = []
-    stop = _strike_later(cfg.run_dir.resolve() / "episodes.csv", signal.SIGKILL, hit)
+    hit = strike_after_step(monkeypatch, signal.SIGKILL, worker="1", episode=2, step=10)
     with pytest.raises(EnergyPlusError) as err:
-        try:
-            train(cfg, progress=False)
-        finally:
-            stop.set()
+        train(cfg, progress=False)
+    assert hit, "no EnergyPlus process was struck"
     text = str(err.value)
-    assert "failed 1 times in a row on weather FL" in text and "worker " in text
+    assert "worker 1 failed 1 times in a row on weather FL" in text
     assert "[eplusout.err]" in text  # the tail of EnergyPlus's own error file
     [checkpoint] = _checkpoints(tmp_path / "runs" / "budget")  # saved when the run stopped
-    assert int(checkpoint.stem.split("_")[1]) > 0
+    assert int(checkpoint.stem.split("_")[1]) >= 192  # the first batch (96 steps a worker) was done
