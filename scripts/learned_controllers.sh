@@ -32,7 +32,7 @@ recipe() {
     # The CRAC's model fails in Golden's cold snap of December 18-19 (roof surfaces past 200 C, its own controls
     # too): its episodes end on December 17 (351 days), on every weather alike.
     datacenter-crac) echo "$COMMON --timesteps 500000 --comfort-target 99.9 --time-features --run-days 351" ;;
-    office-small) echo "$COMMON --timesteps 500000 --comfort-target 97.5" ;;
+    office-small) echo "$COMMON --timesteps 1000000 --comfort-target 97.5" ;;
     *) echo "unknown building $1" >&2; exit 2 ;;
     esac
 }
@@ -43,7 +43,11 @@ latest() { ls "$1"/checkpoints/model_*_steps.zip 2>/dev/null | sort -t_ -k2 -n |
 run_one() {  # building seed: resume or start it, to the end
     local b=$1 s=$2 name="$1-seed$2" code="$WORK/code-$COMMIT"
     local dir="$WORK/runs/$name" args=(--building "$b" --weathers CA,CO,FL --workers 2 --seed "$s" --quiet)
-    if [ -f "$dir/model.zip" ]; then echo "$name: done"; return 0; fi
+    local target
+    target=$(recipe "$b" | grep -o -- "--timesteps [0-9]*" | cut -d" " -f2)
+    if [ -f "$dir/model.zip" ] && [ "$("$PY" -c "import json,sys,zipfile; print(json.loads(zipfile.ZipFile(sys.argv[1]).read('data'))['num_timesteps'])" "$dir/model.zip")" -ge "$target" ]; then
+        echo "$name: done"; return 0
+    fi
     if [ ! -d "$dir" ] && [ -f "$SAVED/$b/runs/$name/checkpoint/model.zip" ]; then  # a chunk from another machine
         mkdir -p "$dir/checkpoints"
         cp -r "$SAVED/$b/runs/$name/checkpoint/." "$dir/checkpoints/"
@@ -52,7 +56,7 @@ run_one() {  # building seed: resume or start it, to the end
     cd "$WORK"
     local cmd=("$PY" -m parallel_eplus.cli train)
     if [ -n "$(latest "$dir")" ]; then
-        cmd+=(--resume "$dir" --quiet)
+        cmd+=(--resume "$dir" --quiet --timesteps "$target")  # a budget raised since continues the run
     else
         # shellcheck disable=SC2046
         cmd+=("${args[@]}" --run-name "$name" --init-from-baseline $(recipe "$b"))
