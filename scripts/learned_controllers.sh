@@ -60,6 +60,7 @@ run_one() {  # building seed: resume or start it, to the end
     else
         # shellcheck disable=SC2046
         cmd+=("${args[@]}" --run-name "$name" --init-from-baseline $(recipe "$b"))
+        [ -d "$dir" ] && cmd+=(--overwrite)  # stopped before its first checkpoint: start it again
     fi
     echo "$(date -Is) $name: ${cmd[*]:2}"
     PYTHONPATH=$code nice -n "$NICE" "${cmd[@]}" || true
