@@ -101,6 +101,7 @@ def train(
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
         saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
+        saved.overlap = cfg.overlap
         cfg = saved
     cfg = cfg.resolved()
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
@@ -130,6 +131,7 @@ def train(
             if cfg.init_from_baseline:
                 _clone_baseline(cfg, model, env, progress)
         model.lockstep = cfg.lockstep
+        model.overlap = cfg.overlap
         model.set_logger(configure(str(Path(cfg.tensorboard_dir) / str(cfg.run_name)), ["tensorboard"]))
         start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
