@@ -61,7 +61,7 @@ def test_overlapped_batches_hold_every_workers_steps_once_in_order_with_their_co
     run = tmp_path / "runs" / cfg.run_name
     episodes = pd.read_csv(run / "episodes.csv")
     assert len(episodes) == 12 and episodes["timesteps"].max() == BATCHES * 2 * N_STEPS
-    assert episodes.groupby("worker")["episode"].apply(sorted).to_dict() == {0: [1, 2, 3, 4, 5, 6], 1: [1, 2, 3, 4, 5, 6]}
+    assert episodes.groupby("worker")["episode"].apply(sorted).to_dict() == {w: [1, 2, 3, 4, 5, 6] for w in (0, 1)}
     tags = scalars(tmp_path / "tb" / cfg.run_name)
     assert tags["throughput/episodes"][-1].value == 12
     for tag in ("throughput/learner_idle_share", "throughput/workers_idle_share"):
@@ -80,7 +80,9 @@ def test_overlapped_batches_hold_every_workers_steps_once_in_order_with_their_co
         # The constraint's arrays sit on the same rows as the rewards.
         temps = steps[list(comfort.temperatures)].to_numpy()
         applies = steps["comfort_applies"].to_numpy() > 0
-        expected = np.array([comfort.cost(tuple(t), margin) if a else (0.0, 0) for t, a in zip(temps, applies)])
+        expected = np.array(
+            [comfort.cost(tuple(t), margin) if a else (0.0, 0) for t, a in zip(temps, applies, strict=True)]
+        )
         np.testing.assert_allclose(column["costs"], expected[:, 0], atol=1e-6)
         np.testing.assert_array_equal(column["comfort_out"], expected[:, 1])
         np.testing.assert_array_equal(column["comfort_zones"], np.where(applies, len(comfort.temperatures), 0))
