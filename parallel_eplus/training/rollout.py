@@ -149,7 +149,10 @@ class NumpyRollouts:
         """
         assert n_steps == buffer.buffer_size
         finished = False
-        collect = self._collect_fragments if env.collects_fragments or self.overlap else self._pipeline
+        # With `overlap`, a learn's first local batch runs here (its statistics updated observation by observation,
+        # as without overlap); it orders the next, which the workers collect as a fragment during the update.
+        ahead = self._ordered_from is not None
+        collect = self._collect_fragments if env.collects_fragments or ahead else self._pipeline
         try:
             finished = collect(policy, env, norm, callback, buffer, n_steps)
             return finished
@@ -200,6 +203,8 @@ class NumpyRollouts:
         self._last_obs, self._last_episode_starts = obs, starts
         if norm is not None:
             norm.old_obs = raw
+        if self.overlap and self.num_timesteps < self._total_timesteps:
+            self._order(self._collector(env, norm), policy, norm, n_steps, buffer)  # collected during this update
         values = th.from_numpy(policy.value(obs))
         self._charge_comfort(buffer)
         buffer.compute_returns_and_advantage(last_values=values, dones=starts)
