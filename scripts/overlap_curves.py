@@ -67,9 +67,9 @@ def main() -> None:
     for ax, (metric, label) in zip(axes, METRICS.items(), strict=True):
         for (mode, seed), df in sorted(runs.items()):
             for worker, part in df.groupby("worker"):
+                name = f"{'overlap' if mode == 'on' else 'sequential'}, seed {seed}"
                 ax.plot(part["timesteps"], part[metric], marker="o", ms=3, lw=1, color=COLOURS[mode],
-                        ls="-" if seed == seeds[0] else "--", alpha=0.8,
-                        label=f"{'overlap' if mode == 'on' else 'sequential'}, seed {seed}" if worker == 0 else None)  # fmt: skip
+                        ls="-" if seed == seeds[0] else "--", label=name if worker == 0 else None)  # fmt: skip
         ax.set_xlabel("env steps")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
@@ -92,10 +92,12 @@ def main() -> None:
             lines.append(f"| {seed} | {r['worker']} | {r['episode']} | {r['weather_off']} | "
                          f"{r['in_band_pct_off']:.1f} → {r['in_band_pct_on']:.1f} % | "
                          f"{r['power_kw_off']:.1f} → {r['power_kw_on']:.1f} |")  # fmt: skip
-    summary = [f"- {len(diffs['power_kw'])} episode pairs; overlap minus sequential, mean (min, max): in band "
-               f"{statistics.mean(diffs['in_band_pct']):+.1f} points ({min(diffs['in_band_pct']):+.1f}, "
-               f"{max(diffs['in_band_pct']):+.1f}); power {statistics.mean(diffs['power_kw']):+.1f} kW "
-               f"({min(diffs['power_kw']):+.1f}, {max(diffs['power_kw']):+.1f})"] if diffs["power_kw"] else []  # fmt: skip
+    summary = []
+    if diffs["power_kw"]:
+        band, power = diffs["in_band_pct"], diffs["power_kw"]
+        summary.append(f"- {len(power)} episode pairs; overlap minus sequential, mean (min, max): in band "
+                       f"{statistics.mean(band):+.1f} points ({min(band):+.1f}, {max(band):+.1f}); power "
+                       f"{statistics.mean(power):+.1f} kW ({min(power):+.1f}, {max(power):+.1f})")  # fmt: skip
     speed = ["", "| run | steps/s | update s (median) | learner idle | workers idle |", "|---|---|---|---|---|"]
     for mode, seed in sorted(runs):
         s = _speed(args.tb / f"{args.prefix}-{mode}-s{seed}")

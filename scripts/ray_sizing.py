@@ -47,7 +47,7 @@ def main() -> None:
     p.add_argument("--update-s", type=float, default=1.3, help="the TRPO update of one batch")
     p.add_argument("--merge-us", type=float, default=12.0, help="learner: merging and callbacks, per env step")
     p.add_argument("--serial-us", type=float, default=0.4,
-                   help="overlapped: what precedes the next order (merge, statistics, values), per env step")  # fmt: skip
+                   help="overlapped: what precedes the next order (merge, statistics, values), per step")  # fmt: skip
     p.add_argument("--straggler", type=float, default=1.15, help="slowest worker's fragment time over the mean")
     p.add_argument("--bytes-per-step", type=float, default=64.0, help="a transition in a fragment")
     p.add_argument("--bandwidth-bps", type=float, default=1e9)
@@ -66,8 +66,10 @@ def main() -> None:
     lrn = learner_s(a)
     ceiling = a.batch / (lrn + a.batch * a.serial_us / 1e6)
     crossover = a.straggler * a.batch * a.step_ms / 1e3 / lrn
-    print(f"\nlearner per batch L = {lrn:.2f} s; overlapped ceiling B / (L + serial) = {ceiling:,.0f} steps/s, "
-          f"reached at W = {crossover:.0f} (collection = L); sequential approaches B / L = {a.batch / lrn:,.0f}")  # fmt: skip
+    print(
+        f"\nlearner per batch L = {lrn:.2f} s; overlapped ceiling B / (L + serial) = {ceiling:,.0f} steps/s,"
+        f" reached at W = {crossover:.0f} (collection = L); sequential approaches B / L = {a.batch / lrn:,.0f}"
+    )
 
 
 if __name__ == "__main__":
