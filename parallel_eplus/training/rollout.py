@@ -268,13 +268,13 @@ class NumpyRollouts:
         if norm is not None:
             norm.old_obs = cat([p.last_raw for p in parts])
         n = env.num_envs
+        if self.overlap and self.num_timesteps + n * n_steps < self._total_timesteps:
+            self._order(collector, policy, norm, n_steps, buffer)  # the next batch, collected during this update
         last_values = cat([p.last_values for p in parts])
         if ahead:  # collected by the policy before the last update: the current critic values it
             flat = buffer.observations.reshape(n_steps * n, *buffer.observations.shape[2:])
             buffer.values[:] = policy.value(flat).reshape(n_steps, n)
             last_values = policy.value(obs).astype(np.float32)
-        if self.overlap and self.num_timesteps + n * n_steps < self._total_timesteps:
-            self._order(collector, policy, norm, n_steps, buffer)  # the next batch, collected during this update
         values = th.from_numpy(last_values)
         self._charge_comfort(buffer)
         buffer.compute_returns_and_advantage(last_values=values, dones=starts)
