@@ -46,7 +46,7 @@ def main() -> None:
     p.add_argument("--step-ms", type=float, default=2.2, help="one worker's step: EnergyPlus and the actor's policy")
     p.add_argument("--update-s", type=float, default=1.3, help="the TRPO update of one batch")
     p.add_argument("--merge-us", type=float, default=12.0, help="learner: merging and callbacks, per env step")
-    p.add_argument("--serial-us", type=float, default=0.4,
+    p.add_argument("--serial-us", type=float, default=0.1,
                    help="overlapped: what precedes the next order (merge, statistics, values), per step")  # fmt: skip
     p.add_argument("--straggler", type=float, default=1.15, help="slowest worker's fragment time over the mean")
     p.add_argument("--bytes-per-step", type=float, default=64.0, help="a transition in a fragment")
