@@ -43,16 +43,17 @@ def _watch_batches(monkeypatch) -> list[dict]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("backend", ["local", "ray"])
+@pytest.mark.parametrize(("backend", "algorithm"), [("local", "trpo"), ("ray", "trpo"), ("local", "ppo")])
 def test_overlapped_batches_hold_every_workers_steps_once_in_order_with_their_costs(
-    tmp_path, no_leaks, monkeypatch, backend
+    tmp_path, no_leaks, monkeypatch, backend, algorithm
 ):
     if backend == "ray":
         pytest.importorskip("ray")
     margin = 0.5
-    cfg = small_config(tmp_path, f"overlap-{backend}", run_days=1, batch_size=2 * N_STEPS,
+    cfg = small_config(tmp_path, f"overlap-{backend}-{algorithm}", run_days=1, batch_size=2 * N_STEPS,
                        timesteps=BATCHES * 2 * N_STEPS, keep_episodes=10, overlap=True, backend=backend,
-                       workers_per_actor=1, comfort=ComfortConstraint(target_pct=99.0, margin_c=margin))  # fmt: skip
+                       workers_per_actor=1, comfort=ComfortConstraint(target_pct=99.0, margin_c=margin),
+                       algorithm=algorithm)  # fmt: skip
     batches = _watch_batches(monkeypatch)
     train(cfg, progress=False)
     assert not [t for t in threading.enumerate() if t.name == "parallel-eplus-collect"]
