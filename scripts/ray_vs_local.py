@@ -77,16 +77,19 @@ def one_run(backend: str, address: str | None, args: argparse.Namespace, root: P
         batch_size=args.batch_size, seed=0, run_name=name, runs_dir=str(root / "runs"),
         tensorboard_dir=str(root / "tb"), checkpoint_every=10**9, keep_episodes=0, backend=backend,
         ray_address=address if backend == "ray" else None, workers_per_actor=args.workers_per_actor,
+        overlap=args.overlap,
     )  # fmt: skip
     timer = UpdateTimer()
     train(cfg, progress=False, timer=timer)
     row = {"backend": backend, "run": k, "steps": timer.learn_steps, "learn_s": timer.learn_s,
            "steps_per_s": timer.learn_steps / timer.learn_s, "update_s": statistics.median(timer.updates)}  # fmt: skip
+    tb = root / "tb" / name
+    idle = _scalars(tb, "throughput/learner_idle_share")[1:]  # a learn's first batch is never overlapped
+    workers_idle = _scalars(tb, "throughput/workers_idle_share")[1:]
+    row.update(idle_share=statistics.mean(idle) if idle else None,
+               workers_idle_share=statistics.mean(workers_idle) if workers_idle else None)  # fmt: skip
     if backend == "ray":
-        tb = root / "tb" / name
-        trips = _scalars(tb, "ray/round_trips")
-        idle = _scalars(tb, "ray/learner_idle_share")
-        row.update(round_trips_per_batch=trips, idle_share=statistics.mean(idle) if idle else None,
+        row.update(round_trips_per_batch=_scalars(tb, "ray/round_trips"),
                    wait_s=statistics.mean(_scalars(tb, "ray/wait_s")))  # fmt: skip
     return row
 
@@ -101,6 +104,7 @@ def main() -> None:
     p.add_argument("--timesteps", type=int, default=16384)
     p.add_argument("--batch-size", type=int, default=4096)
     p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--overlap", action="store_true", help="both backends with train --overlap")
     p.add_argument("--out", type=Path, help="folder for ray_vs_local.json and .md")
     p.add_argument("--same-priority", metavar="MARKER",
                    help="keep the cluster's processes (raylets whose command line holds MARKER, e.g. /tmp/raycl) "
@@ -128,18 +132,25 @@ def main() -> None:
     lines = [
         f"Ray ({args.address or 'local Ray'}) against local: {args.workers} workers, "
         f"{args.workers_per_actor} per actor, {args.run_days}-day episodes, {args.timesteps} steps, "
-        f"batch {args.batch_size}, seed 0",
+        f"batch {args.batch_size}, seed 0{', --overlap' if args.overlap else ''}",
         "",
-        "| run | local steps/s | Ray steps/s | Ray / local | round trips per batch | learner idle share |",
-        "|---|---|---|---|---|---|",
+        "| run | local steps/s | Ray steps/s | Ray / local | round trips per batch | learner idle (Ray) | "
+        "workers idle: local, Ray |",
+        "|---|---|---|---|---|---|---|",
     ]
+    local_rows = [r for r in rows if r["backend"] == "local"]
+
+    def share(row: dict, key: str) -> str:
+        return f"{row[key]:.2f}" if row.get(key) is not None else "–"
+
     for k, (lo, r, q) in enumerate(zip(local, ray, ratios, strict=True)):
-        rr = ray_rows[k]
+        rr, lr = ray_rows[k], local_rows[k]
         trips = sorted(set(rr["round_trips_per_batch"]))
-        idle = f"{rr['idle_share']:.2f}" if rr["idle_share"] is not None else "–"
-        lines.append(f"| {k + 1} | {lo:.0f} | {r:.0f} | {q:.2f} | {', '.join(f'{t:.0f}' for t in trips)} | {idle} |")
+        lines.append(f"| {k + 1} | {lo:.0f} | {r:.0f} | {q:.2f} | {', '.join(f'{t:.0f}' for t in trips)} | "
+                     f"{share(rr, 'idle_share')} | {share(lr, 'workers_idle_share')}, "
+                     f"{share(rr, 'workers_idle_share')} |")  # fmt: skip
     lines.append(f"| median | {summary['local_steps_per_s']:.0f} | {summary['ray_steps_per_s']:.0f} | "
-                 f"{summary['ray_over_local']:.2f} | | |")  # fmt: skip
+                 f"{summary['ray_over_local']:.2f} | | | |")  # fmt: skip
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

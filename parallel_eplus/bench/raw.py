@@ -67,7 +67,9 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
             *(["--native", lib] if lib else []),  # the env's own callbacks, minus the pipes
         ])  # fmt: skip
     t0 = time.perf_counter()
-    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True) for cmd in cmds]
+    # Each in a session of its own, as training starts its workers (engine/process.py): with the kernel's autogroups
+    # a session is what the scheduler shares the CPU between, so on a shared machine both get the same weight.
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True) for cmd in cmds]
     try:
         outputs = [proc.communicate()[0] for proc in procs]
     finally:  # Ctrl-C or a failed run: leave no EnergyPlus behind

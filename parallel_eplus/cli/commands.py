@@ -111,6 +111,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         ray_address=args.ray_address,
         workers_per_actor=args.workers_per_actor,
         lockstep=args.lockstep,
+        overlap=args.overlap,
         max_restarts=args.max_restarts,
         step_timeout_s=args.step_timeout,
         time_features=args.time_features,

@@ -117,6 +117,11 @@ def build_parser() -> argparse.ArgumentParser:
         "local worker gets its next action as soon as its observation arrives",
     )  # fmt: skip
     tr.add_argument(
+        "--overlap", action="store_true",
+        help="TRPO/PPO: the workers collect the next batch while the learner updates on this one (data one "
+        "policy old; docs/training.md). Local or --backend ray",
+    )  # fmt: skip
+    tr.add_argument(
         "--max-restarts", type=int, default=3,
         help="restarts in a row a worker's episode gets after EnergyPlus fails, before the run stops",
     )  # fmt: skip

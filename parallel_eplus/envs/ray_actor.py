@@ -3,7 +3,9 @@
 Per batch it receives one order (the policy, the observation statistics, its workers' random
 streams), collects its share of the batch with the pipelined loop and no call to the learner per
 step, and returns one trajectory fragment (training/fragments.py). The actor runs two threads, so
-the learner can ask how far a collection has come (its deadline check) and stop it while it runs.
+the learner can ask how far a collection has come (its deadline check) and stop it while it runs:
+one batch's collection (`stop(batch)`, when the learner drops a batch it ordered ahead: `train --overlap`),
+or every collection for good (`stop()`, closing).
 """
 
 from __future__ import annotations
@@ -36,7 +38,9 @@ def actor_class(max_concurrency: int = 2):
             self.env = SB3VecEnv(self.venv)  # episode returns and SB3's info keys, as the learner's callbacks expect
             self.starts = np.ones(self.venv.num_envs, dtype=bool)
             self._lock = threading.Lock()  # one collection, step or close at a time
-            self._stop = threading.Event()
+            self._closing = threading.Event()
+            self._batch: tuple[int | None, threading.Event] = (None, threading.Event())  # the collection under way
+            self._dropped: set[int] = set()  # batches the learner dropped, perhaps before they started here
             self.served = 0  # observations served so far: the learner's sign of life
 
         def start_all(self, indices):
@@ -49,10 +53,15 @@ def actor_class(max_concurrency: int = 2):
                     infos = self.venv.start_all(indices)
                 return self.venv.observations(), infos
 
-        def collect(self, order: BatchOrder, rngs: list[np.random.Generator]) -> Fragment:
+        def collect(self, order: BatchOrder, rngs: list[np.random.Generator], batch: int | None = None) -> Fragment:
+            """This actor's share of batch `batch` (the learner's count; `stop(batch)` ends it early)."""
             with self._lock:
+                stop = threading.Event()
+                if self._closing.is_set() or batch in self._dropped:
+                    stop.set()
+                self._batch = (batch, stop)
                 fragment = collect_fragment(self.env, order, self.venv.observations(), self.starts, rngs,
-                                            self._stop, self._served)  # fmt: skip
+                                            stop, self._served)  # fmt: skip
                 self.starts = fragment.last_starts.copy()
                 return fragment
 
@@ -66,11 +75,19 @@ def actor_class(max_concurrency: int = 2):
         def progress(self) -> int:
             return self.served
 
-        def stop(self) -> None:
-            self._stop.set()
+        def stop(self, batch: int | None = None) -> None:
+            """End batch `batch`'s collection at its next observation (or before it starts); every one: None."""
+            if batch is None:
+                self._closing.set()
+            else:
+                self._dropped.add(batch)
+            current, event = self._batch
+            if batch is None or current == batch:
+                event.set()
 
         def close(self) -> None:
-            self._stop.set()
+            self._closing.set()
+            self._batch[1].set()
             with self._lock:
                 self.venv.close()
 

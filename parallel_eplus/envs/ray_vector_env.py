@@ -1,7 +1,8 @@
 """Ray backend, the learner's side: groups of EnergyPlus workers in Ray actors, one group per actor.
 
-Training collects a batch with one call per actor (`collect`: the policy out, a trajectory fragment
-back; envs/ray_actor.py, training/fragments.py), so no Ray call is made per control step. The vector
+Training collects a batch with one call per actor (`send`: the policy out; `receive`: a trajectory
+fragment back; envs/ray_actor.py, training/fragments.py), so no Ray call is made per control step.
+With `train --overlap` the next batch is sent before the learner updates on the last one. The vector
 env API (`start_all`, `step_lists`) remains for what steps the workers one step at a time: SAC's
 off-policy loop and a `lockstep` run.
 
@@ -34,15 +35,9 @@ class BatchStats:
 
     round_trips: int = 0  # collect calls: one per actor
     progress_checks: int = 0  # deadline checks made while waiting (none when a batch is quick)
-    wait_s: float = 0.0  # learner idle: from sending the order to the last fragment in
+    wait_s: float = 0.0  # learner idle: from asking for the fragments to the last one in
     collect_s: list[float] = field(default_factory=list)  # per actor, measured on its node
     merge_s: float = 0.0  # learner: fragments into the buffer and the statistics, callbacks
-    cycle_s: float | None = None  # from this batch's order to the next one's (collection, merge, update)
-
-    @property
-    def idle_share(self) -> float | None:
-        """The share of the learner's cycle spent waiting for fragments (known once the next batch starts)."""
-        return None if not self.cycle_s else self.wait_s / self.cycle_s
 
 
 class RayVectorEnv:
@@ -75,7 +70,9 @@ class RayVectorEnv:
         self.actors: list = []
         self.nodes: list[str] = []
         self.stats: list[BatchStats] = []
-        self._t_order = 0.0
+        self._batch = 0  # batches ordered so far
+        self._in_flight: list | None = None  # the batch on order: one reference per actor
+        self._received = BatchStats()  # the last batch received
         for start in range(0, self.num_envs, workers_per_actor):
             part = shares[start : start + workers_per_actor]
             self.slices.append(slice(start, start + len(part)))
@@ -117,34 +114,59 @@ class RayVectorEnv:
     # -- a batch per call ------------------------------------------------------------------------
     def collect(self, order, rngs: list[np.random.Generator]) -> list:
         """Every actor's fragment of one batch: one broadcast (`order`) and one reply per actor."""
+        self.send(order, rngs)
+        return self.receive()
+
+    def send(self, order, rngs: list[np.random.Generator]) -> None:
+        """Order the next batch from every actor and return at once (`receive` gets it): with `train --overlap`
+        the actors collect it while the learner updates on the last one."""
         import ray
 
+        assert self._in_flight is None, "a batch is already on order"
         stats = BatchStats()
-        t0 = time.perf_counter()
-        if self.stats:
-            self.stats[-1].cycle_s = t0 - self._t_order
-        self._t_order = t0
+        self._batch += 1
         shared = ray.put(order)
-        refs = [a.collect.remote(shared, rngs[sl]) for a, sl in zip(self.actors, self.slices, strict=True)]
-        stats.round_trips = len(refs)
-        fragments = self._get_all(refs, stats)
+        calls = zip(self.actors, self.slices, strict=True)
+        self._in_flight = [a.collect.remote(shared, rngs[sl], self._batch) for a, sl in calls]
+        stats.round_trips = len(self._in_flight)
+        self.stats.append(stats)
+
+    @property
+    def in_flight(self) -> bool:
+        return self._in_flight is not None
+
+    def receive(self) -> list:
+        """The fragments of the batch on order, in actor order; waits (with deadlines) for the slowest."""
+        stats = self.stats[-1]
+        t0 = time.perf_counter()
+        fragments = self._get_all(self._in_flight, stats)  # on an error (a lost actor) it stays on order: `cancel`
+        self._in_flight, self._received = None, stats
         stats.wait_s = time.perf_counter() - t0
         stats.collect_s = [f.collect_s for f in fragments]
-        self.stats.append(stats)
         for f, sl in zip(fragments, self.slices, strict=True):
             self._obs[sl] = f.last_raw
         return fragments
 
+    def cancel(self) -> None:
+        """Drop the batch on order: each actor stops collecting it at its next observation. Its workers are then
+        mid-step, so the next collection must start them afresh (`start_all`)."""
+        import ray
+
+        refs, self._in_flight = self._in_flight, None
+        if refs is None:
+            return
+        for a in self.actors:
+            a.stop.remote(self._batch)
+        ray.wait(refs, num_returns=len(refs), timeout=self.answer_s)  # errors (stopped, lost) are the point
+
     def record_merge(self, seconds: float) -> dict[str, float]:
-        """Note the learner's merge time; returns the scalars TensorBoard shows under `ray/`."""
-        last = self.stats[-1]
+        """Note the learner's merge time of the batch last received; returns the scalars TensorBoard shows under
+        `ray/` (the next batch may be on order already)."""
+        last = self._received
         last.merge_s = seconds
-        scalars = {"ray/round_trips": last.round_trips, "ray/progress_checks": last.progress_checks,
-                   "ray/wait_s": last.wait_s, "ray/merge_s": seconds,
-                   "ray/actor_collect_s_max": max(last.collect_s, default=0.0)}  # fmt: skip
-        if len(self.stats) > 1 and self.stats[-2].idle_share is not None:
-            scalars["ray/learner_idle_share"] = self.stats[-2].idle_share
-        return scalars
+        return {"ray/round_trips": last.round_trips, "ray/progress_checks": last.progress_checks,
+                "ray/wait_s": last.wait_s, "ray/merge_s": seconds,
+                "ray/actor_collect_s_max": max(last.collect_s, default=0.0)}  # fmt: skip
 
     # -- waiting, with deadlines -------------------------------------------------------------------
     def _get_all(self, refs: list, stats: BatchStats | None = None) -> list:
@@ -210,6 +232,7 @@ class RayVectorEnv:
         """Stop every actor's collection, close its workers (EnergyPlus and pipes), then end the actors."""
         import ray
 
+        self._in_flight = None
         if self.actors:
             for a in self.actors:
                 a.stop.remote()  # a collection still running ends at its next observation

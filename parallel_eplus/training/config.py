@@ -135,6 +135,9 @@ class TrainConfig:
     # True: every worker waits for the slowest at each step (SB3's way; a seed fixes the run bit for bit).
     # False: each local worker gets its next action as soon as its observation arrives (rollout.py).
     lockstep: bool = False
+    # True (TRPO, PPO): the workers collect batch k+1 with the policy before the update on batch k, while the
+    # learner runs that update; each update then learns from data one policy old (training/overlap.py).
+    overlap: bool = False
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     schedule_features: bool = False  # opt-in IT-load schedule features (model.SCHEDULE_FEATURES)
     init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
@@ -194,6 +197,9 @@ class TrainConfig:
             raise ValueError("--init-from-baseline imitates the building's own controls; --residual corrects ours")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
+        if self.overlap and (self.algorithm == "sac" or self.lockstep):
+            raise ValueError("--overlap is for TRPO and PPO without --lockstep (SAC updates as it steps; lockstep "
+                             "steps every worker from the learner)")  # fmt: skip
         if self.run_name is None:
             self.run_name = f"{self.algorithm}-{'-'.join(self.weathers)}-{time.strftime('%Y%m%d-%H%M%S')}"
         # Absolute, so a resumed run writes to the same places from any working directory.

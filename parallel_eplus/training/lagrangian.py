@@ -41,7 +41,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from parallel_eplus.training.config import ComfortConstraint
-from parallel_eplus.training.pipeline import SIDE_ARRAYS
+from parallel_eplus.training.pipeline import SIDE_ARRAYS, step_value
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ class ConstrainedRolloutBuffer(RolloutBuffer):
     def record_infos(self, row: int, infos: list[dict]) -> None:
         """Row `row`'s costs and counts from the vector step's infos (the lockstep loop)."""
         for name, key in SIDE_ARRAYS:
-            getattr(self, name)[row] = [info.get(key, 0.0) for info in infos]
+            getattr(self, name)[row] = [step_value(info, key) for info in infos]
 
     def charge(self, lagrangian: Lagrangian, logger) -> None:
         """Update the multiplier from this batch, then make the batch's rewards pay it."""
@@ -117,7 +117,7 @@ class CostReplayBuffer(ReplayBuffer):
         self.costs = np.zeros((self.buffer_size, self.n_envs), dtype=np.float32)
 
     def add(self, obs, next_obs, action, reward, done, infos) -> None:
-        self.costs[self.pos] = [info.get(COST, 0.0) for info in infos]
+        self.costs[self.pos] = [step_value(info, COST) for info in infos]
         super().add(obs, next_obs, action, reward, done, infos)
 
     def _get_samples(self, batch_inds: np.ndarray, env=None) -> ReplayBufferSamples:
@@ -152,8 +152,8 @@ class SACComfort(BaseCallback):
 
     def _on_step(self) -> bool:
         for info in self.locals["infos"]:
-            self._out += info.get(OUT, 0.0)
-            self._zones += info.get(ZONES, 0.0)
+            self._out += step_value(info, OUT)
+            self._zones += step_value(info, ZONES)
         self._steps += len(self.locals["infos"])
         if self._steps >= self.period:
             lagrangian = comfort_of(self.model)

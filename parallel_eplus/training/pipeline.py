@@ -22,6 +22,13 @@ SINK_ARRAYS = ("observations", "actions", "rewards", "episode_starts", "values",
 SIDE_ARRAYS = (("costs", "comfort_cost"), ("comfort_out", "comfort_out"), ("comfort_zones", "comfort_zones"))
 
 
+def step_value(info: dict, key: str) -> float:
+    """What a step reported under `key`: an episode's last step in `final_info` (the vector env's autoreset puts the
+    next episode's first info on top), every other step in `info` itself; 0 where it reported nothing."""
+    final = info.get("final_info")
+    return (info if final is None else final).get(key, 0.0)
+
+
 def run_pipeline(
     env,
     policy: NumpyPolicy,
@@ -79,7 +86,7 @@ def run_pipeline(
             t = step[i]
             sink.rewards[t, i] = reward
             for array, key in side:
-                array[t, i] = info.get(key, 0.0)
+                array[t, i] = step_value(info, key)
             step_infos[t][i], step_dones[t, i] = info, done
             obs[i], starts[i] = new_obs, done
             step[i] = t + 1

@@ -110,6 +110,7 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
         saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
+        saved.overlap = cfg.overlap
         cfg = saved
     cfg = cfg.resolved()
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
@@ -148,6 +149,7 @@ def _learn(
             if cfg.init_from_baseline:
                 _clone_baseline(cfg, model, env, progress)
         model.lockstep = cfg.lockstep
+        model.overlap = cfg.overlap
         model.set_logger(tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name)))
         start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
