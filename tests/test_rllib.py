@@ -37,7 +37,12 @@ def test_rllib_ppo_trains_with_two_env_runners_sharing_one_output_dir(tmp_path, 
         )
         algo = config.build_algo()
         try:
-            results = [algo.train() for _ in range(3)]
+            try:
+                results = [algo.train() for _ in range(3)]
+            except Exception as e:  # an env runner's error: its own cause, short, where CI's log cut shows it
+                cause = str(e).strip().splitlines()
+                short = "\n".join(cause[:3] + ["..."] + cause[-25:])
+                pytest.fail(f"RLlib training failed: {type(e).__name__}: {short}")
             runners = algo.env_runner_group.foreach_env_runner(_runner_state, local_env_runner=False)
             restarts = algo.env_runner_group.num_remote_worker_restarts()
         finally:

@@ -42,15 +42,15 @@ def _before_batch(monkeypatch, batch: int, strike) -> None:
     """Run `strike()` in the learner as it orders batch `batch` (from 1), before the order goes out: every
     actor is idle then, and each of its EnergyPlus workers waits for its next action (a moment the test
     controls, not a delay)."""
-    collect, calls = RayVectorEnv.collect, []
+    send, calls = RayVectorEnv.send, []
 
-    def striking_collect(self, order, rngs):
+    def striking_send(self, order, rngs):
         calls.append(batch)
         if len(calls) == batch:
             strike()
-        return collect(self, order, rngs)
+        return send(self, order, rngs)
 
-    monkeypatch.setattr(RayVectorEnv, "collect", striking_collect)
+    monkeypatch.setattr(RayVectorEnv, "send", striking_send)
 
 
 def _during_batch(monkeypatch, batch: int, strike) -> None:
