@@ -32,7 +32,7 @@ recipe() {
     # The CRAC's model fails in Golden's cold snap of December 18-19 (roof surfaces past 200 C, its own controls
     # too): its episodes end on December 17 (351 days), on every weather alike.
     datacenter-crac) echo "$COMMON --timesteps 1000000 --comfort-target 99.9 --time-features --run-days 351" ;;
-    office-small) echo "$COMMON --timesteps 500000 --comfort-target 97.5" ;;
+    office-small) echo "$COMMON --timesteps 1000000 --comfort-target 97.5" ;;
     *) echo "unknown building $1" >&2; exit 2 ;;
     esac
 }
