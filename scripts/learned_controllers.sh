@@ -28,7 +28,7 @@ SAVED=$REPO/results/learned
 COMMON="--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2.5"
 recipe() {
     case $1 in
-    datacenter-2zone) echo "--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -3 --algorithm ppo --timesteps 1000000 --comfort-target 99.6 --time-features --schedule-features" ;;
+    datacenter-2zone) echo "--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2 --algorithm ppo --timesteps 1000000 --comfort-target 99.6 --time-features --schedule-features" ;;
     # The CRAC's model fails in Golden's cold snap of December 18-19 (roof surfaces past 200 C, its own controls
     # too): its episodes end on December 17 (351 days), on every weather alike.
     datacenter-crac) echo "$COMMON --timesteps 1000000 --comfort-target 99.9 --time-features --run-days 351" ;;
