@@ -117,8 +117,10 @@ evaluate)
     done
     clone="$SAVED/$b/runs/$b-seed0/cloned/model.zip"  # how close imitation alone gets (one seed: it is a fit)
     [ -f "$clone" ] && policies+=(--policy "$clone=Cloned (before RL)")
+    days=$(recipe "$b" | grep -o -- "--run-days [0-9]*" || true)  # the period trained on (default: the year)
+    # shellcheck disable=SC2086
     "$REPO/.venv/bin/parallel-eplus" evaluate --building "$b" --baseline "${policies[@]}" --weathers CA,CO,FL,IL,VA \
-        --workers 2 --out "$SAVED/$b" --quiet
+        --workers 2 --out "$SAVED/$b" --quiet $days
     ;;
 *) echo "usage: $0 start|status|stop|save|evaluate BUILDING" >&2; exit 2 ;;
 esac
