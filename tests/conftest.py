@@ -21,6 +21,9 @@ MARKER = f"PARALLEL_EPLUS_TEST_SESSION={os.getpid()}"
 _SYSTEM_TMP = os.environ.get("TMPDIR", "/tmp")
 os.environ.setdefault("RAY_TMPDIR", _SYSTEM_TMP)
 os.environ.setdefault("PYTEST_DEBUG_TEMPROOT", _SYSTEM_TMP)
+for _old in Path(_SYSTEM_TMP).glob("pe-tests-*-*"):  # a killed session's folder (its pipes too): its pid is gone
+    if _old.name.split("-")[2].isdigit() and not Path(f"/proc/{_old.name.split('-')[2]}").exists():
+        shutil.rmtree(_old, ignore_errors=True)
 SESSION_TMP = tempfile.mkdtemp(prefix=f"pe-tests-{os.getpid()}-", dir=_SYSTEM_TMP)
 os.environ["TMPDIR"] = tempfile.tempdir = SESSION_TMP
 LEFT_IN_TMP = ("SB3-", "parallel-eplus-")  # SB3's default logger folders; our pipes and temporary episodes
