@@ -1,4 +1,5 @@
-"""`parallel-eplus`: the command line. `parser.py` declares it, `commands.py` runs each subcommand."""
+"""`parallel-eplus`: the command line. `parser.py` declares it, `commands.py` runs each subcommand
+(`many_runs.py`: seeds, sweeps and the run registry)."""
 
 from __future__ import annotations
 

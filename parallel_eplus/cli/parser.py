@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from parallel_eplus.cli import commands as c
+from parallel_eplus.cli import many_runs
 
 DESCRIPTION = "Train and evaluate RL controllers for buildings against parallel EnergyPlus simulations."
 
@@ -134,7 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("spec", type=Path, metavar="SPEC.toml", help="the sweep (docs/training.md); re-run it to continue")
     sw.add_argument("--ray-address", help="a Ray cluster to run the trials on (default: start Ray locally)")
     sw.add_argument("--overwrite", action="store_true", help="move a sweep of the same name aside and start afresh")
-    sw.set_defaults(func=c.cmd_sweep)
+    sw.set_defaults(func=many_runs.cmd_sweep)
 
     ev = sub.add_parser("evaluate", help="controllers x weathers sweep: the paper's table and figures")
     ev.add_argument("--policy", action="append", help="a trained model.zip (or run dir); PATH=LABEL sets the label")
@@ -214,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     for p in (rs, rt):
         p.add_argument("name", help="as `runs` lists it, or a run folder")
         p.add_argument("--dir", type=Path, default=argparse.SUPPRESS, help="the runs folder (default runs)")
-    ru.set_defaults(func=c.cmd_runs)
+    ru.set_defaults(func=many_runs.cmd_runs)
 
     cl = sub.add_parser(
         "clean", help="remove pipe directories left by killed runs; list (or --kill) their leftover EnergyPlus"
