@@ -4,8 +4,11 @@ Timing (one control step = one zone timestep, no shift between an observation an
 - warmup and sizing hold the initial action and never produce a step;
 - at the run period's first AfterPredictorAfterHVACManagers, observation 0 (the state at the end of
   warmup) goes out and action 1 comes back and is applied to timestep 1;
-- at the end of every zone timestep (after zone reporting) observation k goes out and action k+1
-  comes back; AfterPredictorAfterHVACManagers applies it to timestep k+1;
+- at the end of every zone timestep (after zone reporting) observation k goes out; action k+1 is read
+  where it is applied, at timestep k+1's first AfterPredictorAfterHVACManagers: what EnergyPlus does in
+  between (the next timestep's weather, surfaces, the predictor) does not depend on it, so the env's
+  turnaround and the pipe crossings overlap that work (with the same actuator values at the same points,
+  the trajectories are those of reading it at once);
 - after timestep N the observation goes out as an END frame and no action is awaited.
 AfterPredictorAfterHVACManagers runs at every HVAC sub-timestep; actuators keep their values, so the
 action is written once per zone timestep. Frame values: year, day of year, hour, minute (when the
@@ -67,6 +70,7 @@ class Bridge:
         self.started = False
         self.done = False
         self.pending = True  # the current action has not been written to the actuators yet
+        self.awaiting = False  # an observation is out and its action not read yet
         self.minutes = 15
         self.error: BaseException | None = None
         self.sensor_handles: list[int] = []
@@ -145,6 +149,11 @@ class Bridge:
                 self.pending = True
             return
         os.write(self.obs_fd, pipe.encode(values))
+        self.awaiting = True
+
+    def _take_action(self) -> None:
+        """The action for the observation last written, read where it is first needed."""
+        self.awaiting = False
         code, action = self._actions.read(self._wait, self.spin_s)
         if code != pipe.DATA or len(action) != len(self.elements):
             raise pipe.ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
@@ -175,6 +184,8 @@ class Bridge:
             self.started = True
             self.started_at = time.monotonic()
             self._exchange(self._time(state, at_start=True) + self.last_obs)
+        if self.awaiting:
+            self._take_action()
         if self.pending:
             self.pending = False
             set_value = self.x.api.setActuatorValue
@@ -210,7 +221,7 @@ class Bridge:
             return
         self.step, self.done, self.done_at = lib.bridge_step(), bool(lib.bridge_done()), lib.bridge_done_at()
         self.counters = {
-            "waited_s": lib.bridge_wait_s(), "exchanges": lib.bridge_exchanges(),
+            "waited_s": lib.bridge_wait_s(), "ahead_s": lib.bridge_ahead_s(), "exchanges": lib.bridge_exchanges(),
             "apply_calls": lib.bridge_apply_calls(), "observe_calls": lib.bridge_observe_calls(),
         }  # fmt: skip
         message = lib.bridge_error()
@@ -221,6 +232,8 @@ class Bridge:
     def _observe(self, state) -> None:
         if not self._handles_ready(state):
             return
+        if self.awaiting:  # no actuator call since the last observation: still one action per observation
+            self._take_action()
         sensors = self._read_sensors(state)
         if not self.started:  # warmup or sizing: keep the latest state for observation 0
             self.last_obs = sensors

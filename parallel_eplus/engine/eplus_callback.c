@@ -43,6 +43,7 @@ struct api {
 
 static struct {
     int armed, done, pending;
+    int awaiting; /* an observation is out and its action not yet read: it is read where it is applied */
     callback_fn slow_apply, slow_observe; /* the Python Bridge's callbacks, until armed */
     struct api api;
     int obs_fd, act_fd;
@@ -54,7 +55,9 @@ static struct {
     const double *replay; /* raw runs only: one action row per step, applied as the env's would be */
     long replay_rows, replayed;
     double done_at;
-    double wait_s; /* from writing an observation to having its action: what this side waits for the env */
+    double wait_s;  /* blocked on actions: from needing one (where it is applied) to having it */
+    double ahead_s; /* from writing an observation to needing its action: EnergyPlus computing meanwhile */
+    double sent_at;
     long exchanges, apply_calls, observe_calls;
     int minutes;
     double spin_s;
@@ -142,11 +145,30 @@ static int read_action(State state) {
     }
 }
 
+/* The action for the observation last written, read where EnergyPlus first needs it: everything EnergyPlus does
+ * from the end of one zone timestep up to the next one's actuators (weather, surfaces, the predictor) does not
+ * depend on it, so the env's turnaround and the two pipe crossings overlap that work instead of stopping it. */
+static int take_action(State state) {
+    double t = now_s();
+    b.ahead_s += t - b.sent_at;
+    if (read_action(state) != 0)
+        return -1;
+    b.awaiting = 0;
+    b.pending = 1;
+    b.wait_s += now_s() - t;
+    b.exchanges++;
+    return 0;
+}
+
 void *bridge_apply_action(State state) {
     if (!b.armed)
         return b.slow_apply(state);
     b.apply_calls++;
-    if (b.done || b.error[0] || !b.pending)
+    if (b.done || b.error[0])
+        return NULL;
+    if (b.awaiting && take_action(state) != 0)
+        return NULL;
+    if (!b.pending)
         return NULL;
     b.pending = 0;
     for (int i = 0; i < b.n_actuators; i++)
@@ -159,6 +181,8 @@ void *bridge_observe(State state) {
         return b.slow_observe(state);
     b.observe_calls++;
     if (b.done || b.error[0])
+        return NULL;
+    if (b.awaiting && take_action(state) != 0) /* no actuator call since the last observation: one frame each */
         return NULL;
     double values[TIME_FIELDS + MAX_VALUES];
     values[0] = b.api.year(state);
@@ -186,16 +210,12 @@ void *bridge_observe(State state) {
         }
         return NULL;
     }
-    double sent = now_s();
     if (write_frame(0, values, n) < 0) {
         fail(state, "cannot write an observation: the env is gone");
         return NULL;
     }
-    if (read_action(state) == 0) {
-        b.pending = 1;
-        b.wait_s += now_s() - sent;
-        b.exchanges++;
-    }
+    b.sent_at = now_s();
+    b.awaiting = 1;
     return NULL;
 }
 
@@ -246,6 +266,7 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
 
 long bridge_step(void) { return b.step; }
 double bridge_wait_s(void) { return b.wait_s; }
+double bridge_ahead_s(void) { return b.ahead_s; }
 long bridge_exchanges(void) { return b.exchanges; }
 long bridge_apply_calls(void) { return b.apply_calls; }
 long bridge_observe_calls(void) { return b.observe_calls; }

@@ -106,7 +106,7 @@ def register(api, state, bridge, native: str | None) -> list:
     ]  # fmt: skip
     lib.bridge_step.restype = ctypes.c_long
     lib.bridge_done_at.restype = ctypes.c_double
-    lib.bridge_wait_s.restype = ctypes.c_double
+    lib.bridge_wait_s.restype = lib.bridge_ahead_s.restype = ctypes.c_double
     for name in ("bridge_exchanges", "bridge_apply_calls", "bridge_observe_calls"):
         getattr(lib, name).restype = ctypes.c_long
     lib.bridge_error.restype = ctypes.c_char_p
