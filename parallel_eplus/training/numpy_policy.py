@@ -36,6 +36,20 @@ def _layers(module: th.nn.Module) -> list[tuple[np.ndarray, np.ndarray, bool]] |
     return layers
 
 
+def _fuse(actor: list, critic: list) -> list[tuple[np.ndarray, np.ndarray, bool]] | None:
+    """One stack computing [actor | critic] side by side (the first layer's weights joined, the others block-diagonal),
+    so a step costs one matmul per layer instead of two: numpy's fixed cost per call, not the arithmetic, is the
+    price of a 32x32 network on one row. None where the two stacks differ in shape."""
+    if len(actor) != len(critic) or any(a[2] != c[2] for a, c in zip(actor, critic, strict=True)):
+        return None
+    fused = [(np.hstack([actor[0][0], critic[0][0]]), np.concatenate([actor[0][1], critic[0][1]]), actor[0][2])]
+    for (wa, ba, tanh), (wc, bc, _) in zip(actor[1:], critic[1:], strict=True):
+        w = np.zeros((wa.shape[0] + wc.shape[0], wa.shape[1] + wc.shape[1]))
+        w[: wa.shape[0], : wa.shape[1]], w[wa.shape[0] :, wa.shape[1] :] = wa, wc
+        fused.append((w, np.concatenate([ba, bc]), tanh))
+    return fused
+
+
 def _run(layers: list[tuple[np.ndarray, np.ndarray, bool]], x: np.ndarray) -> np.ndarray:
     for w, b, tanh in layers:
         x = x @ w + b
@@ -58,6 +72,8 @@ class NumpyPolicy:
         self.head = _layers(policy.action_net)
         self.actor = self.latent + self.head
         self.critic = _layers(policy.mlp_extractor.value_net) + _layers(policy.value_net)
+        self.both = _fuse(self.actor, self.critic)  # the rollout's per-step forward pass: mean and value at once
+        self.n_actions = self.actor[-1][0].shape[1]
         log_std = policy.log_std.detach().numpy().astype(np.float64)
         self.std = np.exp(log_std)
         self.sde = bool(policy.use_sde)
@@ -112,7 +128,7 @@ class NumpyPolicy:
 
     def log_prob(self, actions: np.ndarray, mean: np.ndarray) -> np.ndarray:
         z = (actions - mean) / self.std
-        return self._log_prob_const - 0.5 * (z * z).sum(axis=1)
+        return self._log_prob_const - 0.5 * np.einsum("ij,ij->i", z, z)
 
     def sample(
         self, obs: np.ndarray, rng: np.random.Generator | list[np.random.Generator]
@@ -124,13 +140,19 @@ class NumpyPolicy:
         x = self._flat(obs)
         if self.sde:
             return self._sample_sde(x, [rng] * len(x) if isinstance(rng, np.random.Generator) else rng)
-        mean = _run(self.actor, x)
+        if self.both is not None:
+            out = _run(self.both, x)
+            mean, values = out[:, : self.n_actions], out[:, self.n_actions]
+        else:
+            mean, values = _run(self.actor, x), _run(self.critic, x)[:, 0]
         if isinstance(rng, np.random.Generator):
             noise = rng.standard_normal(mean.shape)
+        elif len(rng) == 1:  # the pipelined loop's one row: the same draws, without building a list
+            noise = rng[0].standard_normal(mean.shape)
         else:
             noise = np.array([r.standard_normal(mean.shape[1]) for r in rng])
         actions = (mean + self.std * noise).astype(np.float32)
-        return actions, _run(self.critic, x)[:, 0], self.log_prob(actions, mean)
+        return actions, values, self.log_prob(actions, mean)
 
     def _sample_sde(self, x: np.ndarray, rngs: list[np.random.Generator]):
         """gSDE's sample: noise = latent @ the worker's matrix; log-probability under N(mean, latent² @ std²)."""
