@@ -15,6 +15,7 @@ import argparse
 import json
 import logging
 import os
+import resource
 import statistics
 import tempfile
 import time
@@ -40,13 +41,17 @@ class Busy:
 
     def __enter__(self):
         self.load0, self.cpu0, self.t0 = os.getloadavg()[0], _cpu(), time.perf_counter()
+        self.own0 = resource.getrusage(resource.RUSAGE_SELF)
         return self
 
     def __exit__(self, *exc):
         busy, total, ours = (b - a for a, b in zip(self.cpu0, _cpu(), strict=True))
         self.wall_s = time.perf_counter() - self.t0
+        own = resource.getrusage(resource.RUSAGE_SELF)  # this process alone: the learner, in a training phase
+        own_s = own.ru_utime + own.ru_stime - self.own0.ru_utime - self.own0.ru_stime
         self.figures = {"load_start": self.load0, "load_end": os.getloadavg()[0], "machine_busy": busy / total,
-                        "ours_of_machine": ours / total, "others_of_machine": max(busy - ours, 0) / total}  # fmt: skip
+                        "ours_of_machine": ours / total, "others_of_machine": max(busy - ours, 0) / total,
+                        "this_process_cpu_s": own_s, "children_cpu_s": ours - own_s}  # fmt: skip
 
 
 def one_round(mode: str, k: int, root: Path, args: argparse.Namespace) -> dict:
@@ -99,13 +104,15 @@ def main() -> None:
         f"{args.batch_size}, seed 0; rounds alternate",
         "",
         "| round | mode | train steps/s | raw EnergyPlus steps/s (same actions) | train / raw | updates, s | "
-        "machine busy (ours / others), train · replay | load avg |",
-        "|---|---|---|---|---|---|---|---|",
+        "learner CPU, s | EnergyPlus CPU, s: train · replay | machine busy (ours / others), train · replay | "
+        "load avg |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         tb, rb = r["train_busy"], r["replay_busy"]
         lines.append(f"| {r['round'] + 1} | {r['mode']} | {r['train_steps_per_s']:.0f} | {r['raw_steps_per_s']:.0f} | "
-                     f"**{r['train_over_raw']:.2f}** | {r['updates_s']:.1f} | "
+                     f"**{r['train_over_raw']:.2f}** | {r['updates_s']:.1f} | {tb['this_process_cpu_s']:.1f} | "
+                     f"{tb['children_cpu_s']:.1f} · {rb['children_cpu_s']:.1f} | "
                      f"{tb['machine_busy']:.0%} ({tb['ours_of_machine']:.0%} / {tb['others_of_machine']:.0%}) · "
                      f"{rb['machine_busy']:.0%} ({rb['ours_of_machine']:.0%} / {rb['others_of_machine']:.0%}) | "
                      f"{tb['load_start']:.1f} |")  # fmt: skip
