@@ -61,12 +61,12 @@ def run_pipeline(
     def act(i: int) -> None:
         t = step[i]
         actions, values, log_probs = policy.sample(obs[i : i + 1], rngs[i : i + 1])
-        sink.observations[t, i] = obs[i]
+        env.send_one(i, np.clip(actions[0], low, high))  # first: the worker waits for it; the buffer keeps
+        sink.observations[t, i] = obs[i]  # the unclipped action, as in SB3
         sink.actions[t, i] = actions[0]
         sink.episode_starts[t, i] = starts[i]
         sink.values[t, i] = values[0]
         sink.log_probs[t, i] = log_probs[0]
-        env.send_one(i, np.clip(actions[0], low, high))  # the buffer keeps the unclipped one, as in SB3
 
     for i in range(n):
         act(i)
@@ -84,16 +84,16 @@ def run_pipeline(
                 if info.get("TimeLimit.truncated", False):  # a cut episode: bootstrap (SB3 issue #633)
                     reward += gamma * policy.value(info["terminal_observation"][None])[0]
             t = step[i]
+            obs[i], starts[i] = new_obs, done
+            step[i] = t + 1
+            if step[i] < n_steps:
+                act(i)  # the worker's next action before this step's bookkeeping: it waits for nothing else
+            else:
+                pending.discard(i)
             sink.rewards[t, i] = reward
             for array, key in side:
                 array[t, i] = step_value(info, key)
             step_infos[t][i], step_dones[t, i] = info, done
-            obs[i], starts[i] = new_obs, done
-            step[i] = t + 1
-            if step[i] < n_steps:
-                act(i)
-            else:
-                pending.discard(i)
         while reported < min(step):  # vector steps every worker has made, for the callbacks
             if not on_vector_step(step_infos[reported], step_dones[reported]):
                 return False
