@@ -38,15 +38,14 @@ from parallel_eplus.training.pipeline import run_pipeline
 from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 
-def _pipelinable(env: VecEnv, overlap: bool = False) -> tuple[SB3VecEnv | None, VecNormalize | None]:
+def _pipelinable(env: VecEnv) -> tuple[SB3VecEnv | None, VecNormalize | None]:
     """Our workers, and the observation normalization over them, when they can be stepped one by one (local)
-    or collect fragments themselves (Ray)."""
+    or collect fragments themselves (Ray). One worker too: the loop is SB3's, minus `VecNormalize`'s per-row
+    `np.var` and copies, which a lone worker's EnergyPlus waits for at every step."""
     norm = None
     if isinstance(env, VecNormalize) and not env.norm_reward and not isinstance(env.obs_rms, dict):
         norm, env = env, env.venv
-    if isinstance(env, SB3VecEnv) and (
-        env.collects_fragments or (env.steps_one_by_one and (env.num_envs > 1 or overlap))
-    ):
+    if isinstance(env, SB3VecEnv) and (env.collects_fragments or env.steps_one_by_one):
         return env, norm
     return None, None
 
@@ -102,7 +101,7 @@ class NumpyRollouts:
         assert self._last_obs is not None, "No previous observation was provided"
         self.policy.set_training_mode(False)
         policy = NumpyPolicy(self.policy, self.sde_sample_freq)
-        workers, norm = (None, None) if self.lockstep else _pipelinable(env, self.overlap)
+        workers, norm = (None, None) if self.lockstep else _pipelinable(env)
         if workers is not None:
             return self._collect_pipelined(policy, workers, norm, callback, rollout_buffer, n_rollout_steps)
         low, high = self.action_space.low, self.action_space.high
