@@ -61,8 +61,8 @@ def run_pipeline(
     def act(i: int) -> None:
         t = step[i]
         actions, values, log_probs = policy.sample(obs[i : i + 1], rngs[i : i + 1])
-        env.send_one(i, np.clip(actions[0], low, high))  # first: the worker waits for it; the buffer keeps
-        sink.observations[t, i] = obs[i]  # the unclipped action, as in SB3
+        env.send_one(i, np.clip(actions[0], low, high))  # first: the worker waits for nothing else
+        sink.observations[t, i] = obs[i]  # the buffer keeps the unclipped action, as in SB3
         sink.actions[t, i] = actions[0]
         sink.episode_starts[t, i] = starts[i]
         sink.values[t, i] = values[0]
