@@ -2,36 +2,22 @@
 
 Open file descriptors, EnergyPlus processes, pipe directories and resident memory must stay flat: a leak
 of one descriptor or pipe per episode would show as +50 by the end. The figures are printed (-s) and
-quoted in docs/reliability.md.
+quoted in docs/reliability.md. The episodes run in a fresh interpreter (soak_workload.py): in pytest's own
+process, earlier tests' libraries (Ray's gRPC threads) open and close descriptors of their own meanwhile.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
+import json
+import subprocess
+import sys
 import time
-from pathlib import Path
 
-import numpy as np
 import pytest
 
-from parallel_eplus import EnergyPlusEnv
-from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
+from parallel_eplus.buildings.resources import SOURCE_ROOT
 
-from ..conftest import our_processes
-
-VECTOR_EPISODES, SINGLE_EPISODES, SINGLE_ENVS = 50, 50, 16
-
-
-def _sample(episodes: int) -> dict:
-    status = Path("/proc/self/status").read_text()
-    rss_kb = int(next(ln for ln in status.splitlines() if ln.startswith("VmRSS:")).split()[1])
-    pipes = [d for d in os.listdir(tempfile.gettempdir()) if d.startswith(f"parallel-eplus-{os.getpid()}-")]
-    return {
-        "episodes": episodes, "fds": len(os.listdir("/proc/self/fd")), "processes": len(our_processes()),
-        "pipes": len(pipes), "rss_mb": rss_kb / 1024,
-    }  # fmt: skip
+from .soak_workload import SINGLE_ENVS
 
 
 def _report(title: str, samples: list[dict]) -> None:
@@ -54,48 +40,16 @@ def _assert_flat(samples: list[dict], max_processes: int, pipes: int) -> None:
 @pytest.mark.slow
 def test_soak_100_episodes_leave_descriptors_processes_pipes_and_memory_flat(tmp_path, no_leaks):
     t0 = time.monotonic()
-    start = _sample(0)
-
-    venv = EnergyPlusVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path / "v"), keep_episodes=1),
-                               [["CA"], ["FL"]])  # fmt: skip
-    vector = [start]
-    try:
-        venv.reset(seed=0)
-        done = 0
-        while done < VECTOR_EPISODES:
-            _, _, terminated, truncated, _ = venv.step(np.zeros((2, 4), dtype=np.float32))
-            assert not truncated.any()
-            if terminated.any():
-                done += int(terminated.sum())
-                if done % 10 == 0 or done == 2:
-                    vector.append(_sample(done))
-    finally:
-        venv.close()
-    vector.append({**_sample(done), "episodes": -1})  # after close
+    run = subprocess.run([sys.executable, "-m", "tests.faults.soak_workload", str(tmp_path)], cwd=SOURCE_ROOT,
+                         capture_output=True, text=True, timeout=900)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-3000:]
+    samples = json.loads(run.stdout.strip().splitlines()[-1])
+    vector, single = samples["vector"], samples["single"]
     _report("2-worker vector env (-1: after close)", vector)
     _assert_flat(vector[:-1], max_processes=2, pipes=2)
-
-    envs = [EnergyPlusEnv(weather="CO", run_days=1, output_dir=tmp_path / f"s{i}", keep_episodes=1)
-            for i in range(SINGLE_ENVS)]  # fmt: skip
-    single = [_sample(0)]
-    try:
-        for k in range(SINGLE_EPISODES):
-            env = envs[k % SINGLE_ENVS]
-            env.reset(seed=k)
-            terminated = False
-            while not terminated:
-                _, _, terminated, truncated, _ = env.step(np.zeros(4, dtype=np.float32))
-                assert not truncated
-            if (k + 1) % 10 == 0 or k == 1:
-                single.append(_sample(k + 1))
-    finally:
-        for env in envs:
-            env.close()
-    single.append({**_sample(SINGLE_EPISODES), "episodes": -1})
     _report(f"{SINGLE_ENVS} single envs in one process (-1: after close)", single)
     _assert_flat(single[:-1], max_processes=1, pipes=SINGLE_ENVS)
-
-    end = single[-1]
+    start, end = vector[0], single[-1]
     assert end["fds"] <= start["fds"] + 2 and end["processes"] == 0 and end["pipes"] == 0
     print(f"\n100 episodes in {time.monotonic() - t0:.0f} s; fds {start['fds']} -> {end['fds']}, "
           f"RSS {start['rss_mb']:.0f} -> {end['rss_mb']:.0f} MB")  # fmt: skip
