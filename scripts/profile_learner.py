@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.engine.episode import bridge_counters
 from parallel_eplus.training import numpy_policy, sb3_adapter
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
@@ -69,11 +70,8 @@ def main() -> None:
         train(cfg, progress=False)
         counters: dict[str, float] = {}
         for log in Path(tmp, "runs").rglob("energyplus.log"):
-            for line in log.read_text().splitlines():
-                if line.startswith("bridge "):
-                    f = line.split()[1:]
-                    for k in range(0, len(f), 2):
-                        counters[f[k]] = counters.get(f[k], 0.0) + float(f[k + 1])
+            for key, value in bridge_counters(log.parent).items():
+                counters[key] = counters.get(key, 0.0) + value
     d = _steps(marks)
     print(f"{args.workers} worker(s), {len(d)} steps timed (µs per step, median / mean)")
     for phase, column in zip(PHASES, d.T, strict=True):

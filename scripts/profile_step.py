@@ -28,6 +28,7 @@ import numpy as np
 from parallel_eplus.bench.config import BenchConfig
 from parallel_eplus.bench.raw import _bench_jobs, _raw_runs
 from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import bridge_counters
 from parallel_eplus.engine.simulation import Simulation
 
 PHASES = ("send", "wait", "observation", "reward")  # send: check, scale, encode, write; reward: and the record
@@ -73,14 +74,9 @@ def _env(days: int, workdir: Path) -> dict:
             if terminated:
                 t_last = m[3] / 1e9  # its receive then writes the records and waits for EnergyPlus's exit
         t_end = time.perf_counter()
-        log = (sim.episode_dir / "energyplus.log").read_text()
+        counters = bridge_counters(sim.episode_dir)
     finally:
         sim.close()
-    counters = {}
-    for line in log.splitlines():
-        if line.startswith("bridge "):
-            f = line.split()[1:]
-            counters = {f[i]: float(f[i + 1]) for i in range(0, len(f), 2)}
     d = np.diff(marks[:-1], axis=1) / 1e3  # µs per phase (the last step's receive also finishes the episode)
     medians, means = np.median(d, axis=0).round(2).tolist(), d.mean(axis=0).round(2).tolist()
     return {

@@ -28,6 +28,7 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
 
     from parallel_eplus.engine import native
     from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.episode import bridge_counters
     from parallel_eplus.engine.simulation import Simulation
 
     if native.bridge_library() is None:
@@ -47,6 +48,9 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
                 trajectory.append(np.append(obs, [r, info["time"].timestamp()]))
             assert terminated
             runs.append(np.concatenate(trajectory))
+            if use_c:  # every action after the first read where it is applied, EnergyPlus computing meanwhile
+                counters = bridge_counters(sim.episode_dir)
+                assert counters["exchanges"] == len(actions) - 1 and counters["ahead_s"] > 0, counters
         finally:
             sim.close()
     for run in runs[1:]:

@@ -46,6 +46,17 @@ def err_tail(episode_dir: Path | None, lines: int = 12) -> str:
     return "\n".join(parts)
 
 
+def bridge_counters(episode_dir: str | Path) -> dict[str, float]:
+    """What the C bridge reported about an episode's steps (the `bridge ...` line eplus_callback.py prints in its
+    energyplus.log): stepping_s, waited_s, ahead_s, exchanges, callback counts. Empty where the Python bridge ran."""
+    path = Path(episode_dir) / "energyplus.log"
+    for line in path.read_text(errors="replace").splitlines() if path.is_file() else ():
+        if line.startswith("bridge "):
+            fields = line.split()[1:]
+            return {fields[i]: float(fields[i + 1]) for i in range(0, len(fields), 2)}
+    return {}
+
+
 class StepRecorder:
     """Rows of (time, observation, action, reward, components), one list per step until the episode ends.
 
