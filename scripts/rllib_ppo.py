@@ -32,6 +32,9 @@ def main() -> None:
             "keep_episodes": 2,  # each env keeps its newest 2 episodes whole, older ones their summary.json
         })
         .env_runners(num_env_runners=2, num_cpus_per_env_runner=1)
+        # Untrained exploration can heat a zone until EnergyPlus stops with a fatal error (EnergyPlusError): start
+        # that env afresh, as our own trainer restarts the episode, instead of losing the env runner.
+        .fault_tolerance(restart_failed_sub_environments=True)
         .training(train_batch_size_per_learner=2 * 96 * args.run_days, minibatch_size=64, num_epochs=4, lr=3e-4)
     )  # fmt: skip
     algo = config.build_algo()
