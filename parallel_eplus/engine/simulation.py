@@ -39,6 +39,7 @@ from parallel_eplus.engine.episode import (
     write_records,
 )
 from parallel_eplus.engine.idf_prep import prepare_idf
+from parallel_eplus.engine.prepared import EpisodePlan, PreparedEpisode
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
@@ -48,12 +49,24 @@ log = logging.getLogger(__name__)
 class Simulation:
     """Spawns, steps and stops EnergyPlus processes for consecutive episodes."""
 
-    def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0", siblings: int = 1):
-        """`siblings`: how many Simulations one process steps together (sets the default spin)."""
+    def __init__(
+        self,
+        config: SimulationConfig,
+        weathers: list[str] | None = None,
+        name: str = "0",
+        siblings: int = 1,
+        prepare: bool = False,
+    ):
+        """`siblings`: how many Simulations one process steps together (sets the default spin). `prepare`: episode
+        after episode (an env's): two long-lived EnergyPlus-side processes take turns, one running an episode
+        while the other prepares the next (prepared.py, warm_process.py); off for one episode (an evaluation's)."""
         self.config = config
-        self.process = EnergyPlusProcess(
-            config.spin_s, native.bridge_library() if config.native_bridge else None, siblings=siblings
-        )
+        self.prepare_next = prepare
+        bridge = native.bridge_library() if config.native_bridge else None
+        self.process = EnergyPlusProcess(config.spin_s, bridge, siblings=siblings, warm=prepare)
+        self._spare = EnergyPlusProcess(config.spin_s, bridge, siblings=siblings, warm=prepare)
+        self.prepared: PreparedEpisode | None = None
+        self._from_prepared = False  # the running episode was prepared ahead (a failed start-up is retried cold)
         self.name = name
         self.building = load_building(config.building)  # None: the data center, whose variants `model` names
         self.model = self.building.control(config.model) if config.building else control_model(config.model)
@@ -98,6 +111,9 @@ class Simulation:
         self._whole: list[Path] = []  # this Simulation's own episode directories still whole, oldest first
         self.weather = self.weathers[0]
         self.weather_index = 0
+        self.plan: EpisodePlan | None = None
+        self._model_text: bytes | None = None  # the episode's model (idf_prep.py), as every episode writes it
+        self._prepare_due = False  # the next episode is prepared at the first action (reset returns first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
@@ -129,34 +145,34 @@ class Simulation:
         return self.process.running()
 
     # -- episode lifecycle --------------------------------------------------------------------
-    def start(self, weather_index: int | None = None) -> tuple[np.ndarray, dict]:
+    def start(self, weather_index: int | None = None, plan: EpisodePlan | None = None) -> tuple[np.ndarray, dict]:
         """Stop any running process, start the next episode and return observation 0."""
-        self.launch(weather_index)
+        self.launch(weather_index, plan)
         return self.first_observation()
 
-    def launch(self, weather_index: int | None = None) -> None:
-        """Start the next episode's process without waiting for it (the vector env starts many at once).
-
-        Weathers cycle episode by episode unless `weather_index` picks one.
-        """
-        self.stop()
+    def next_plan(self, weather_index: int | None = None, seed: int | None = None, options: dict | None = None):
+        """The next episode's plan: weathers cycle episode by episode unless `weather_index` picks one."""
         i = self.episode % len(self.weathers) if weather_index is None else weather_index
-        self.weather_index = i
+        return EpisodePlan(i, self.weathers[i], self.weather_paths[i], seed, EpisodePlan.options_key(options))
+
+    def launch(self, weather_index: int | None = None, plan: EpisodePlan | None = None) -> None:
+        """Start the next episode without waiting for its first observation (the vector env starts many at once):
+        the prepared one if it was prepared for `plan` and is alive, else a new process."""
+        self.stop()
+        plan = plan or self.next_plan(weather_index)
+        ready, self.prepared = self.prepared, None
+        if ready is not None and (ready.plan != plan or not ready.usable(self.config.start_timeout_s)):
+            ready.discard()
+            ready = None
+        self._from_prepared = ready is not None
+        if ready is not None:  # swap it in; the finished episode's process (and pipes) prepare the one after
+            self.process, self._spare = ready.process, self.process
+            self.episode_dir, self._number = ready.episode_dir, ready.number
+        else:
+            self.episode_dir, self._number = self._spawn(plan, self.process)
+        self.plan = plan
+        self.weather_index, self.weather = plan.weather_index, plan.weather
         self.episode += 1
-        self.weather = self.weathers[i]
-        epw = self.weather_paths[i]
-        label = weather_label(self.weather)
-        self.episode_dir, self._number = claim_episode_dir(self.output_dir, label, self._number + 1)
-        cfg = self.config
-        prepare_idf(self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
-        link_or_copy(epw, self.episode_dir / epw.name)
-        args = [
-            "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
-            "--output-dir", str(self.episode_dir), "--model", self.model.name,
-            *(["--building", str(self.building.spec.path)] if self.config.building else []),
-            "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
-        ]  # fmt: skip
-        self.process.spawn(args, self.episode_dir / "energyplus.log", self.config.start_timeout_s)
         self.records = StepRecorder(self.action_names, self.sensor_names)
         self._action = self.initial_action.tolist()
         self.last_summary = None
@@ -166,18 +182,74 @@ class Simulation:
             rbc = {"schedule": it_load_schedule(self.idf)} | ({} if target is None else {"target_c": target})
             self.base = RuleBasedController(RBCConfig(**rbc))
 
+    def _spawn(self, plan: EpisodePlan, process: EnergyPlusProcess) -> tuple[Path, int]:
+        """Write an episode's directory and model and start its EnergyPlus in `process`: (directory, number)."""
+        label = weather_label(plan.weather)
+        episode_dir, number = claim_episode_dir(self.output_dir, label, self._number + 1)
+        cfg = self.config
+        if self._model_text is None:  # the same for every episode: tokenized once (~20 ms), written each time
+            prepare_idf(self.idf, episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
+            self._model_text = (episode_dir / MODEL_FILE).read_bytes()
+        else:
+            (episode_dir / MODEL_FILE).write_bytes(self._model_text)
+        link_or_copy(plan.epw, episode_dir / plan.epw.name)
+        args = [
+            "--idf", str(episode_dir / MODEL_FILE), "--epw", str(episode_dir / plan.epw.name),
+            "--output-dir", str(episode_dir), "--model", self.model.name,
+            *(["--building", str(self.building.spec.path)] if self.config.building else []),
+            "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
+        ]  # fmt: skip
+        try:
+            process.spawn(args, episode_dir / "energyplus.log", cfg.start_timeout_s)
+        except BaseException:
+            shutil.rmtree(episode_dir, ignore_errors=True)
+            raise
+        return episode_dir, number
+
+    def prepare(self, plan: EpisodePlan | None = None) -> None:
+        """Start the next episode (`plan`, default: the rotation's next) in the spare process, to be swapped in
+        by the `launch` that asks for the same plan."""
+        if self.prepared is not None or self._closed:
+            return
+        plan = plan or self.next_plan()
+        self._spare.kill()
+        episode_dir, number = self._spawn(plan, self._spare)
+        self._number = number  # numbers follow the order episodes began in
+        self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number)
+
+    def discard_prepared(self) -> None:
+        if self.prepared is not None:
+            self.prepared.discard()
+            self.prepared = None
+
     def first_observation(self) -> tuple[np.ndarray, dict]:
-        """Wait through sizing and warmup for observation 0 of the launched episode."""
-        code, values = self._recv("the first observation", self.config.start_timeout_s)
+        """Wait through sizing and warmup for observation 0 of the launched episode (its first action then starts
+        preparing the next one).
+
+        A prepared episode that fails before its first observation is replaced by a cold start of the same plan
+        (the cold one's failure is the episode's)."""
+        try:
+            code, values = self._recv("the first observation", self.config.start_timeout_s)
+        except EnergyPlusError:
+            if not self._from_prepared:
+                raise
+            log.warning("the prepared episode failed to start (%s); starting it afresh", self.episode_dir)
+            self.episode -= 1  # the same episode again: the weather rotation does not move on
+            self.launch(plan=self.plan)
+            code, values = self._recv("the first observation", self.config.start_timeout_s)
         if code != pipe.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
         obs, info = self._observation(values)
+        self._prepare_due = self.prepare_next
         return obs, info
 
     def send(self, action) -> None:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
         if self.proc is None:
             raise RuntimeError("no simulation running: call reset() first")
+        if self._prepare_due:
+            self._prepare_due = False
+            self.prepare()
         if self.base is None:
             self._action = scale_action(action, self.low, self.high, self.action_names)
         else:
@@ -306,8 +378,10 @@ class Simulation:
         if self._closed:
             return
         self._closed = True
+        self.discard_prepared()
         self.stop()
         self.process.close()
+        self._spare.close()
         if self._tmp is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
 

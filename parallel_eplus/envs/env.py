@@ -73,9 +73,10 @@ class EnergyPlusEnv(gym.Env):
     `weather`: a short name (CA, CO, FL, IL, VA), an EPW path, or a list cycled episode by episode;
     `run_days`; `output_dir` and `keep_episodes` for episode records (envs sharing one `output_dir`, in one process
     or several, each get their own `episode-NNNNNN-<weather>` directories); `energyplus_csv=False` drops
-    EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `reward`; `idf` to override the
-    model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the spec's);
-    `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
+    EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `prepare_next=False`
+    starts every episode cold instead of preparing the next while one runs (engine/prepared.py); `reward`; `idf` to
+    override the model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the
+    spec's); `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
     not apply; its reward parameters are the default `reward`; it is checked against its model first).
     """
@@ -100,6 +101,7 @@ class EnergyPlusEnv(gym.Env):
         rbc_target_c: float | None = None,
         building: str | Path | None = None,
         energyplus_csv: bool = True,
+        prepare_next: bool = True,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
         if building is not None:  # a typo costs seconds and a message naming it, not a hung worker
@@ -126,8 +128,9 @@ class EnergyPlusEnv(gym.Env):
             rbc_target_c=rbc_target_c,
             building=None if building is None else str(building),
             energyplus_csv=energyplus_csv,
+            prepare_next=prepare_next,
         )
-        self.sim = Simulation(self.config, weathers)
+        self.sim = Simulation(self.config, weathers, prepare=prepare_next)
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
         self.observation_space = observation_space(time_features, schedule_features, building)
@@ -135,8 +138,11 @@ class EnergyPlusEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        weather_index = (options or {}).get("weather_index")
-        return self.sim.start(weather_index)
+        options = dict(options or {})
+        weather_index = options.pop("weather_index", None)
+        # The episode this reset asks for: the one prepared while the last ran if it was planned for the same
+        # weather, seed and options (the rotation's next, no seed, no options), else a cold start (prepared.py).
+        return self.sim.start(plan=self.sim.next_plan(weather_index, seed, options))
 
     def step(self, action):
         self.sim.send(action)

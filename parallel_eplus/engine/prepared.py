@@ -1,0 +1,75 @@
+"""The next episode, decided and started before `reset()` asks for it (issue 39).
+
+While an episode runs, its worker prepares the next: the episode's directory and model are written and its
+EnergyPlus process (forked warm, forkserver.py) reads its inputs, sizes, warms up and parks at its first control
+step, its observation 0 written and its first action awaited. `reset()` swaps it in if it was prepared for what
+the reset asks (the same `EpisodePlan`); otherwise, or if it died or hung meanwhile, it is discarded (killed, its
+directory removed) and the episode starts cold. Nothing in EnergyPlus sees the difference: the same files, the
+same arguments, the same process code, so a prepared episode equals a cold one bit for bit
+(tests/test_prepared.py).
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from parallel_eplus.engine.process import EnergyPlusProcess
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class EpisodePlan:
+    """What one episode runs, decided before its process starts: its weather (the rotation's pick, or the
+    reset's `weather_index`) and the reset's seed and options it was planned for. Everything drawn per episode
+    (a perturbed weather file, say) belongs here, drawn when the plan is made, so a prepared episode and a cold
+    one with the same plan are the same episode."""
+
+    weather_index: int
+    weather: str
+    epw: Path
+    seed: int | None = None
+    options: tuple = field(default=())  # the reset's options as sorted (key, value) pairs
+
+    @staticmethod
+    def options_key(options: dict | None) -> tuple:
+        return tuple(sorted((options or {}).items(), key=lambda kv: kv[0]))
+
+
+@dataclass
+class PreparedEpisode:
+    """A started episode not yet handed out: its plan, its process and the directory it writes to."""
+
+    plan: EpisodePlan
+    process: EnergyPlusProcess
+    episode_dir: Path
+    number: int
+    started_at: float = field(default_factory=time.monotonic)
+
+    def parked(self) -> bool:
+        """Observation 0 is written: EnergyPlus waits at its first control step."""
+        pipes = self.process.pipes
+        return pipes is not None and (pipes.has_frame() or bool(select.select([pipes.obs_fd], [], [], 0)[0]))
+
+    def usable(self, start_timeout_s: float) -> bool:
+        """Alive, and either parked or still within its start-up deadline: a dead or hung one is replaced."""
+        if not self.process.running():
+            log.warning("the prepared episode's EnergyPlus (%s) died; starting the episode afresh", self.episode_dir)
+            return False
+        if self.parked():
+            self.process.deadline = time.monotonic() + start_timeout_s  # its frame is there: read it now
+            return True
+        if self.process.deadline <= time.monotonic():
+            log.warning("the prepared episode's EnergyPlus (%s) hung in start-up; starting afresh", self.episode_dir)
+            return False
+        return True  # still warming up: the reset waits for it, as for a cold start, but less
+
+    def discard(self) -> None:
+        """Kill its process and remove its directory: it never stepped, so nothing in it is worth keeping."""
+        self.process.kill()
+        shutil.rmtree(self.episode_dir, ignore_errors=True)
