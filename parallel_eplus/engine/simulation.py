@@ -326,8 +326,11 @@ class Simulation:
         return code, values
 
     def _error(self, message: str, kind: type[EnergyPlusError] = EnergyPlusError) -> EnergyPlusError:
-        """Stop the process first, so the error file is complete and nothing is left running."""
+        """Stop the process first, so the error file is complete and nothing is left running (a prepared episode
+        and an idle warm process neither: whoever handles the error starts afresh)."""
         self._kill()
+        self.discard_prepared()
+        self._spare.close()
         if self.records is not None and not self.records.n:
             self.records = None  # keep the failed episode's directory for the user to inspect
         return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))

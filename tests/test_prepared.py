@@ -1,0 +1,156 @@
+"""Prepared episodes (engine/prepared.py): the next episode started while one runs, swapped in by `reset()`."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from parallel_eplus import EnergyPlusEnv
+from parallel_eplus.buildings.resources import SOURCE_ROOT
+from parallel_eplus.engine.pipe_sweep import sweep
+
+from .conftest import our_processes
+
+ZERO = np.zeros(4, dtype=np.float32)
+
+
+def _episode(env: EnergyPlusEnv, **reset) -> np.ndarray:
+    """One whole episode under a constant action: every observation and reward, row by row."""
+    obs, _ = env.reset(**reset)
+    rows, terminated = [np.append(obs, 0.0)], False
+    while not terminated:
+        obs, reward, terminated, truncated, _ = env.step(ZERO)
+        assert not truncated
+        rows.append(np.append(obs, reward))
+    return np.array(rows)
+
+
+def _parked(env: EnergyPlusEnv, timeout_s: float = 120.0):
+    """The env's prepared episode, once it waits at its first control step."""
+    deadline = time.monotonic() + timeout_s
+    while env.sim.prepared is None or not env.sim.prepared.parked():
+        assert time.monotonic() < deadline, "the next episode was not prepared"
+        time.sleep(0.02)
+    return env.sim.prepared
+
+
+@pytest.mark.slow
+def test_a_prepared_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks):
+    weathers = ["CA", "FL"]
+    cold = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "cold", prepare_next=False)
+    warm = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "warm")
+    try:
+        expected = [_episode(cold) for _ in range(3)]
+        got, prepared = [], []
+        for _ in range(3):
+            got.append(_episode(warm))
+            prepared.append(warm.sim._from_prepared)
+    finally:
+        cold.close()
+        warm.close()
+    assert prepared == [False, True, True]  # the first reset has nothing prepared
+    for a, b in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(a, b)  # bit for bit: observations and rewards
+    assert sorted(p.name for p in (tmp_path / "warm").iterdir()) == [
+        "episode-000001-CA", "episode-000002-FL", "episode-000003-CA"
+    ]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_a_reset_with_other_options_or_a_seed_discards_the_prepared_episode(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path)
+    try:
+        env.reset()
+        env.step(ZERO)  # the first action starts preparing the next episode (FL)
+        ready = _parked(env)
+        assert ready.plan.weather == "FL"
+        pid = ready.process.proc.pid
+        obs, info = env.reset(options={"weather_index": 0})  # CA again: not what was prepared
+        assert not env.sim._from_prepared and info["weather"] == "CA"
+        assert not ready.episode_dir.exists()  # discarded: its directory removed, its process ended
+        assert not os.path.exists(f"/proc/{pid}") or _state(pid) == "Z"
+        env.step(ZERO)
+        ready = _parked(env)
+        env.reset(seed=3)  # a seed the prepared episode was not planned for
+        assert not env.sim._from_prepared and not ready.episode_dir.exists()
+        env.step(ZERO)
+        _parked(env)
+        env.reset(options={"weather_index": env.sim.prepared.plan.weather_index})  # exactly what was prepared
+        assert env.sim._from_prepared
+    finally:
+        env.close()
+
+
+def _state(pid: int) -> str:
+    try:
+        return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return ""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", ["killed", "hung"])
+def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path, no_leaks, fault):
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    try:
+        obs, _ = env.reset()
+        rows = [np.append(obs, 0.0)]
+        obs, reward, terminated, _, _ = env.step(ZERO)  # the next episode starts preparing here
+        rows.append(np.append(obs, reward))
+        ready = env.sim.prepared
+        pid = ready.process.proc.pid
+        if fault == "killed":  # died while parked at its first step
+            _parked(env)
+            os.kill(pid, signal.SIGKILL)
+        else:  # stopped in its start-up, and now past its deadline
+            os.kill(pid, signal.SIGSTOP)
+            ready.process.deadline = time.monotonic() - 1
+        while not terminated:
+            obs, reward, terminated, _, _ = env.step(ZERO)
+            rows.append(np.append(obs, reward))
+        again = _episode(env)
+        assert not env.sim._from_prepared  # replaced by a fresh start, not returned
+        np.testing.assert_array_equal(np.array(rows), again)
+        assert not ready.episode_dir.exists() and _state(pid) in ("", "Z")
+    finally:
+        env.close()
+    assert our_processes() == []
+
+
+WORKLOAD = """
+import sys, time, numpy as np
+from parallel_eplus import EnergyPlusEnv
+env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=sys.argv[1])
+env.reset(); env.step(np.zeros(4, np.float32))
+while env.sim.prepared is None or not env.sim.prepared.parked():
+    time.sleep(0.02)
+print(env.sim.process.proc.pid, env.sim.prepared.process.proc.pid, flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
+def test_the_learner_interrupted_or_killed_ends_running_and_prepared_processes(tmp_path, sig):
+    learner = subprocess.Popen([sys.executable, "-c", WORKLOAD, str(tmp_path)], cwd=SOURCE_ROOT,
+                               stdout=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        pids = [int(p) for p in learner.stdout.readline().split()]
+        assert len(pids) == 2
+        learner.send_signal(sig)
+        learner.wait(timeout=30)
+        deadline = time.monotonic() + 30
+        while any(_state(p) not in ("", "Z") for p in pids):
+            assert time.monotonic() < deadline, f"EnergyPlus-side processes outlived the learner: {pids}"
+            time.sleep(0.05)
+    finally:
+        if learner.poll() is None:
+            learner.kill()
+            learner.wait()
+        sweep()  # a killed learner's pipe directories: what its next run's first pipe sweeps
