@@ -31,7 +31,7 @@ class SimulationConfig:
     step_timeout_s: float = 60.0
     idf: str | None = None  # override the model's IDF (same sensors and actuators)
     initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
-    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
+    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see spin.default_spin_s
     time_features: bool = False  # append model.TIME_FEATURES to the observation
     schedule_features: bool = False  # then model.SCHEDULE_FEATURES (the IT-load schedule in the IDF)
     # > 0: the action, times this, corrects the rule-based controller's (rbc.py) instead of acting
