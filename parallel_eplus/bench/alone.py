@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from parallel_eplus.buildings.building import Building
-from parallel_eplus.engine.idf_prep import prepare_idf
+from parallel_eplus.buildings.idf_prep import prepare_idf
 
 
 def _name(i: int, j: int) -> str:

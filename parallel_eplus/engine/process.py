@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.engine import pipe
+from parallel_eplus.engine import pipe, spin
 from parallel_eplus.engine.warm_process import Episode, WarmProcess
 
 log = logging.getLogger(__name__)
@@ -30,7 +30,7 @@ class EnergyPlusProcess:
     """The EnergyPlus side of one worker, episode after episode, over one pipe pair kept between episodes."""
 
     def __init__(self, spin_s: float | None, native_bridge: str | None, siblings: int = 1, warm: bool = False):
-        """`spin_s`: how long both sides' reads spin before blocking; None: `pipe.auto_spins` for `siblings`
+        """`spin_s`: how long both sides' reads spin before blocking; None: `spin.auto_spins` for `siblings`
         EnergyPlus processes stepped by this process, decided again at each spawn. `warm`: run episode after episode
         in one long-lived EnergyPlus-side process (warm_process.py); else a new process per episode."""
         self.warm = WarmProcess() if warm else None
@@ -49,7 +49,7 @@ class EnergyPlusProcess:
             self.pipes = pipe.PipePair()
         self.pipes.drain()
         if self.auto_spin:
-            self.spin_s, self.child_spin_s = pipe.auto_spins(self.siblings)
+            self.spin_s, self.child_spin_s = spin.auto_spins(self.siblings)
         argv = [
             "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path), *args,
             "--spin-us", str(self.child_spin_s * 1e6),
@@ -116,7 +116,7 @@ def wait_any(procs: Sequence, indices: Iterable[int], due: Container[int] = ()) 
 
     For pipelining: serve each simulation as soon as it answers instead of waiting for the slowest. Like
     a single read, it polls for the simulations' spin time first (none when they and this process have
-    no spare core: see `pipe.default_spin_s`).
+    no spare core: see `spin.default_spin_s`).
     """
     indices = list(indices)
     if not indices:
