@@ -114,5 +114,5 @@ if __name__ == "__main__":
     if sys.argv[1:] == ["--serve"]:  # episode after episode in this process (warm_process.py)
         from parallel_eplus.engine.warm_process import serve
 
-        sys.exit(serve())
+        sys.exit(serve(main))
     sys.exit(main())

@@ -25,15 +25,14 @@ import signal
 import subprocess
 import sys
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 
 # -- the EnergyPlus side -----------------------------------------------------------------------
-def serve() -> int:
-    """Run each request's episode in turn in this process; answer `done CODE` after each."""
+def serve(main: Callable[[list[str]], int]) -> int:
+    """Run each request's episode (`main(argv)`: eplus_callback's) in turn in this process; answer `done CODE`."""
     from pyenergyplus.api import EnergyPlusAPI  # noqa: F401 - imported once, before the first request
-
-    from parallel_eplus.engine import eplus_callback
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the learner's to handle; it closes us
     reply = os.dup(1)  # our answers; fds 1 and 2 go to each episode's log
@@ -47,7 +46,7 @@ def serve() -> int:
             os.dup2(log, 1)
             os.dup2(log, 2)
             os.close(log)
-            code = eplus_callback.main(request["argv"])
+            code = main(request["argv"])
         except BaseException:  # noqa: BLE001 - an episode's failure is its own; the process serves the next
             traceback.print_exc()
         finally:
