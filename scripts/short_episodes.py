@@ -3,14 +3,7 @@
     python scripts/short_episodes.py --days 1 7 --episodes 10 --pairs 3      # consecutive episodes, reset latency
     python scripts/short_episodes.py --train --days 1 7 14 365 --pairs 1     # TRPO steps/s by episode length
 
-1. Ten consecutive episodes through one `EnergyPlusEnv` (a constant action, resets included, from constructing the
-   env to closing it), prepared ahead (the default) and cold (`prepare_next=False`), against EnergyPlus alone
-   running the same ten periods one after another in one process (bench/alone.py: the same prepared model, the
-   action held by EnergyPlus's own EMS, a new API state per run). Interleaved alone / prepared / cold, `--pairs`
-   times; ratios are taken within each round and their median reported, so a machine shared with other work
-   meets every side alike.
-2. Reset latency: each `reset()` of those runs (p50, p99).
-3. `--train`: TRPO `learn` steps/s with 2 workers at each episode length (bench/rates.py's training_rate).
+What each measures: parallel_eplus/bench/short.py.
 """
 
 from __future__ import annotations
@@ -18,90 +11,11 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-import numpy as np
-
-from parallel_eplus.bench.alone import alone_model, run_alone
-from parallel_eplus.bench.raw import _physical
-from parallel_eplus.buildings.building import load_building
-from parallel_eplus.envs.env import EnergyPlusEnv
-
-
-def env_episodes(days: int, episodes: int, weather: str, prepare: bool, workdir: Path, action: float = 0.0) -> dict:
-    """Wall seconds for `episodes` consecutive episodes in one env, and each reset's seconds."""
-    t0 = time.perf_counter()
-    env = EnergyPlusEnv(weather=weather, run_days=days, output_dir=workdir, keep_episodes=0, energyplus_csv=False,
-                        prepare_next=prepare)  # fmt: skip
-    a = np.full(env.action_space.shape, action, dtype=np.float32)
-    resets = []
-    try:
-        for _ in range(episodes):
-            t = time.perf_counter()
-            env.reset()
-            resets.append(time.perf_counter() - t)
-            terminated = False
-            while not terminated:
-                _, _, terminated, _, _ = env.step(a)
-    finally:
-        env.close()
-    return {"wall_s": time.perf_counter() - t0, "resets_s": resets}
-
-
-def alone_episodes(days: int, episodes: int, weather: str, workdir: Path, action: float = 0.0) -> dict:
-    building = load_building(None)
-    idf = alone_model(building, workdir / "model.idf", days, _physical([action] * len(building.actions)))
-    epw = building.spec.weathers.get(weather) or Path(weather)
-    return run_alone(workdir / "out", [(idf, epw)] * episodes)
-
-
-def consecutive(days: int, episodes: int, pairs: int, weather: str) -> dict:
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="parallel-eplus-short-") as tmp:
-        for k in range(pairs):
-            alone = alone_episodes(days, episodes, weather, Path(tmp) / f"alone{k}")
-            prepared = env_episodes(days, episodes, weather, True, Path(tmp) / f"prep{k}")
-            cold = env_episodes(days, episodes, weather, False, Path(tmp) / f"cold{k}")
-            rows.append({"alone": alone, "prepared": prepared, "cold": cold})
-            logging.info("%d days, round %d: alone %.2f s, prepared %.2f s, cold %.2f s", days, k,
-                         alone["wall_s"], prepared["wall_s"], cold["wall_s"])  # fmt: skip
-    med = statistics.median
-    resets = sorted(r for row in rows for r in row["prepared"]["resets_s"][1:])  # the first reset is always cold
-    cold_resets = sorted(r for row in rows for r in row["cold"]["resets_s"][1:])
-    return {
-        "days": days, "episodes": episodes, "pairs": pairs,
-        "alone_s": med(r["alone"]["wall_s"] for r in rows),
-        "prepared_s": med(r["prepared"]["wall_s"] for r in rows),
-        "cold_s": med(r["cold"]["wall_s"] for r in rows),
-        "prepared_over_alone": med(r["prepared"]["wall_s"] / r["alone"]["wall_s"] for r in rows),
-        "cold_over_alone": med(r["cold"]["wall_s"] / r["alone"]["wall_s"] for r in rows),
-        "reset_p50_ms": 1e3 * float(np.percentile(resets, 50)), "reset_p99_ms": 1e3 * float(np.percentile(resets, 99)),
-        "cold_reset_p50_ms": 1e3 * float(np.percentile(cold_resets, 50)),
-        "cold_reset_p99_ms": 1e3 * float(np.percentile(cold_resets, 99)),
-    }  # fmt: skip
-
-
-def training(days: list[int], train_steps: int, pairs: int) -> dict:
-    """TRPO steps/s with 2 workers at each episode length, the lengths interleaved round by round."""
-    from parallel_eplus.bench.config import BenchConfig
-    from parallel_eplus.bench.rates import training_rate
-
-    rates: dict[int, list[float]] = {d: [] for d in days}
-    with tempfile.TemporaryDirectory(prefix="parallel-eplus-short-train-") as tmp:
-        for k in range(pairs):
-            for d in days:
-                cfg = BenchConfig(workers=2, train_steps=train_steps, batch_size=train_steps, ray=False)
-                rates[d].append(training_rate(cfg, Path(tmp) / f"t{d}_{k}", run_days=d)["steps_per_s"])
-                logging.info("TRPO, %d-day episodes, round %d: %.0f steps/s", d, k, rates[d][-1])
-    year = max(days)
-    return {
-        f"train_{d}d_steps_per_s": statistics.median(r) for d, r in rates.items()
-    } | {f"train_{d}d_over_{year}d": statistics.median(a / b for a, b in zip(rates[d], rates[year], strict=True))
-         for d in days}  # fmt: skip
+from parallel_eplus.bench.short import consecutive, parked_resets, training
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -110,6 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--episodes", type=int, default=10)
     p.add_argument("--pairs", type=int, default=3)
     p.add_argument("--weather", default="CA")
+    p.add_argument("--resets", type=int, default=30, help="resets timed with the prepared episode parked")
     p.add_argument("--train", action="store_true", help="TRPO steps/s by episode length instead")
     p.add_argument("--train-steps", type=int, default=16384)
     p.add_argument("--out", type=Path, help="write the figures as JSON here")
@@ -119,6 +34,8 @@ def main(argv: list[str] | None = None) -> int:
         out = training(args.days, args.train_steps, args.pairs)
     else:
         out = {f"{d}d": consecutive(d, args.episodes, args.pairs, args.weather) for d in args.days}
+        with tempfile.TemporaryDirectory(prefix="parallel-eplus-short-") as tmp:
+            out["parked"] = parked_resets(1, args.resets, args.weather, Path(tmp))
     text = json.dumps(out, indent=2)
     print(text)
     if args.out:

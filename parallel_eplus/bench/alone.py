@@ -24,9 +24,13 @@ def _name(i: int, j: int) -> str:
     return f"pe_a{i}_{j}"  # EMS names: letters, digits and underscores
 
 
-def ems_objects(building: Building, action: list[float]) -> str:
+CALLING_POINT = "BeginTimestepBeforePredictor"
+
+
+def ems_objects(building: Building, action: list[float], calling_point: str = CALLING_POINT) -> str:
     """EMS objects holding every actuator of action element i at `action[i]` (physical units), the initial
-    action during warmup, set at the point where the env's EnergyPlus side sets them."""
+    action during warmup. Set once per zone timestep, before the predictor: an actuator keeps its value, and
+    nothing of the model's writes these between there and where the env's EnergyPlus side writes them."""
     objects, hold, warm = [], [], []
     for i, element in enumerate(building.actions):
         for j, a in enumerate(element.actuators):
@@ -36,17 +40,18 @@ def ems_objects(building: Building, action: list[float]) -> str:
             warm.append(f"  SET {_name(i, j)} = {element.initial!r}")
     lines = ["IF WarmupFlag == 1", *warm, "ELSE", *hold, "ENDIF"]
     objects.append("EnergyManagementSystem:Program,\n  pe_hold,\n" + ",\n".join(lines) + ";")
-    objects.append("EnergyManagementSystem:ProgramCallingManager,\n  pe_hold_manager,\n"
-                   "  AfterPredictorAfterHVACManagers,\n  pe_hold;")  # fmt: skip
+    objects.append(f"EnergyManagementSystem:ProgramCallingManager,\n  pe_hold_manager,\n  {calling_point},\n  pe_hold;")
     return "\n\n".join(objects) + "\n"
 
 
-def alone_model(building: Building, target: Path, run_days: int, action: list[float]) -> Path:
+def alone_model(
+    building: Building, target: Path, run_days: int, action: list[float], calling_point: str = CALLING_POINT
+) -> Path:
     """The episode's model (EnergyPlus's CSV off, as training runs it) with the EMS program appended."""
     target.parent.mkdir(parents=True, exist_ok=True)
     prepare_idf(building.control().idf, target, run_days, energyplus_csv=False)
     with target.open("a", encoding="latin-1") as f:
-        f.write("\n\n" + ems_objects(building, action))
+        f.write("\n\n" + ems_objects(building, action, calling_point))
     return target
 
 
@@ -85,3 +90,18 @@ def main(argv: list[str]) -> int:
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))
+
+
+def alone_seconds(cfg, workdir: Path, days: int | None = None, runs: int = 1) -> float:
+    """EnergyPlus alone under the bench's constant action (`cfg`: a BenchConfig) for `days` (default its
+    `raw_days`), `runs` periods one after another in one process: wall seconds, start-up included, as the env run
+    and `raw_seconds` are timed."""
+    from parallel_eplus.bench.config import bench_building
+    from parallel_eplus.bench.raw import _physical
+    from parallel_eplus.buildings.weather import resolve_weather
+
+    building = bench_building(cfg)
+    action = _physical([cfg.action] * len(building.actions), cfg.building)
+    idf = alone_model(building, workdir / "model.idf", days or cfg.raw_days, action)
+    epw = building.spec.weathers.get(cfg.weather) or resolve_weather(cfg.weather)
+    return float(run_alone(workdir / "out", [(idf, epw)] * runs)["wall_s"])

@@ -147,8 +147,8 @@ def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
     return sum(rates)
 
 
-def training_rate(cfg: BenchConfig, workdir: Path, backend: str = "local") -> dict[str, float]:
-    """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded.
+def training_rate(cfg: BenchConfig, workdir: Path, backend: str = "local", run_days: int = 365) -> dict[str, float]:
+    """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded; `run_days` per episode.
 
     backend "ray": the same run through a local Ray, one actor per worker collecting fragments.
     """
@@ -158,6 +158,7 @@ def training_rate(cfg: BenchConfig, workdir: Path, backend: str = "local") -> di
 
     tc = TrainConfig(
         workers=cfg.workers, weathers=[cfg.weather], building=cfg.building, timesteps=cfg.train_steps,
+        run_days=run_days,
         batch_size=-(-cfg.batch_size // cfg.workers) * cfg.workers,  # split evenly across the workers
         run_name="bench", runs_dir=str(workdir / "runs"), tensorboard_dir=str(workdir / "tb"),
         checkpoint_every=10**9, keep_episodes=0, backend=backend, workers_per_actor=1,
