@@ -73,8 +73,8 @@ def test_a_reset_with_other_options_or_a_seed_discards_the_prepared_episode(tmp_
         pid = ready.process.proc.pid
         obs, info = env.reset(options={"weather_index": 0})  # CA again: not what was prepared
         assert not env.sim._from_prepared and info["weather"] == "CA"
-        assert not ready.episode_dir.exists()  # discarded: its directory removed, its process ended
-        assert not os.path.exists(f"/proc/{pid}") or _state(pid) == "Z"
+        assert not ready.episode_dir.exists()  # discarded: its directory removed, its run over
+        assert ready.process.proc is None and ready.process.warm.proc.pid == pid  # stopped, its process kept
         env.step(ZERO)
         ready = _parked(env)
         env.reset(seed=3)  # a seed the prepared episode was not planned for

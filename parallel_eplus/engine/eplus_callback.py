@@ -111,7 +111,7 @@ def _run(args: argparse.Namespace, opened: list[int]) -> int:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["--serve"]:  # episode after episode in this process (warm_process.py)
+    if sys.argv[1:2] == ["--serve"]:  # episode after episode in this process (warm_process.py)
         from parallel_eplus.engine.warm_process import serve
 
         sys.exit(serve(main))

@@ -11,16 +11,20 @@ same arguments, the same process code, so a prepared episode equals a cold one b
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import select
 import shutil
+import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from parallel_eplus.engine import pipe
 from parallel_eplus.engine.process import EnergyPlusProcess
 
 log = logging.getLogger(__name__)
+STOP_GRACE_S = 5.0  # for a discarded parked episode to stop before its process is killed
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,15 @@ class PreparedEpisode:
         return True  # still warming up: the reset waits for it, as for a cold start, but less
 
     def discard(self) -> None:
-        """Kill its process and remove its directory: it never stepped, so nothing in it is worth keeping."""
-        self.process.kill()
+        """End its episode and remove its directory: it never stepped, so nothing in it is worth keeping.
+
+        A parked episode in a long-lived process is stopped, not killed: a control frame where its first action is
+        awaited ends its run (the bridge stops EnergyPlus), and the process stays for the next episode."""
+        proc = self.process.proc
+        if self.process.warm is not None and proc is not None and self.process.running() and self.parked():
+            with contextlib.suppress(OSError):
+                self.process.pipes.send(pipe.encode([], pipe.END))  # not an action: the bridge stops EnergyPlus
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=STOP_GRACE_S)
+        self.process.kill()  # what did not stop in time, or was not parked
         shutil.rmtree(self.episode_dir, ignore_errors=True)

@@ -56,7 +56,7 @@ class EnergyPlusProcess:
             *(["--native", self.native_bridge] if self.native_bridge else []),
         ]  # fmt: skip
         if self.warm is not None:
-            self.proc = self.warm.run(argv, log_path)
+            self.proc = self.warm.run(argv, log_path, self.pipes.dir)
         else:
             with open(log_path, "wb") as logf:
                 self.proc = subprocess.Popen(

@@ -12,7 +12,7 @@ with its output in `log`; one line back on its stdout when the episode is over (
 that pipe: readable means the episode is over or the process died (EOF). The process exits when its stdin
 closes (we closed it, exited, or were killed); an episode of a dead env fails at its pipes first.
 
-    python -m parallel_eplus.engine.eplus_callback --serve
+    python -m parallel_eplus.engine.eplus_callback --serve --pipes DIR   # DIR: the pipes it serves, for `clean`
 """
 
 from __future__ import annotations
@@ -67,18 +67,20 @@ class WarmProcess:
         self.start_timeout_s = start_timeout_s
         self.proc: subprocess.Popen | None = None
 
-    def _start(self) -> None:
-        cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--serve"]
+    def _start(self, pipe_dir: Path) -> None:
+        # The pipes it serves name its owner: `parallel-eplus clean` finds it if its owner dies (pipe_sweep.py).
+        cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--serve", "--pipes", str(pipe_dir)]
         self.proc = subprocess.Popen(
             cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True
         )  # its own session, as the episodes' processes had: Ctrl-C reaches the learner, which closes us
         os.set_blocking(self.proc.stdout.fileno(), False)
 
-    def run(self, argv: list[str], log_path: Path) -> Episode:
-        """Start one episode (`eplus_callback.main(argv)`, its output in `log_path`) and return at once."""
+    def run(self, argv: list[str], log_path: Path, pipe_dir: Path) -> Episode:
+        """Start one episode (`eplus_callback.main(argv)`, its output in `log_path`, over the pipes in `pipe_dir`)
+        and return at once."""
         if self.proc is None or self.proc.poll() is not None:
             self.close()
-            self._start()
+            self._start(pipe_dir)
         self.proc.stdin.write(json.dumps({"argv": argv, "log": str(log_path)}).encode() + b"\n")
         self.proc.stdin.flush()
         return Episode(self)
