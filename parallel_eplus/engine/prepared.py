@@ -20,7 +20,11 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from parallel_eplus.buildings.idf_prep import prepare_idf
+from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine import pipe
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import MODEL_FILE, claim_episode_dir, link_or_copy
 from parallel_eplus.engine.process import EnergyPlusProcess
 
 log = logging.getLogger(__name__)
@@ -43,6 +47,35 @@ class EpisodePlan:
     @staticmethod
     def options_key(options: dict | None) -> tuple:
         return tuple(sorted((options or {}).items(), key=lambda kv: kv[0]))
+
+
+class EpisodeStarter:
+    """Writes an episode's directory (its model, its weather) and starts its EnergyPlus: one code path for a cold
+    start and a prepared one, which is why they are the same episode."""
+
+    def __init__(self, output_dir: Path, idf: Path, config: SimulationConfig, args: list[str]):
+        """`args`: the EnergyPlus side's arguments every episode shares (model, steps, initial action)."""
+        self.output_dir, self.idf, self.config, self.args = output_dir, idf, config, args
+        self._model: bytes | None = None  # the episode's model (idf_prep.py), the same for every episode
+
+    def start(self, plan: EpisodePlan, process: EnergyPlusProcess, number: int) -> tuple[Path, int]:
+        """Claim the episode's directory (numbered `number` or above), write its files, start its EnergyPlus in
+        `process` without waiting: (the directory, its number)."""
+        episode_dir, number = claim_episode_dir(self.output_dir, weather_label(plan.weather), number)
+        cfg, model = self.config, episode_dir / MODEL_FILE
+        try:
+            if self._model is None:  # tokenized once (~20 ms), written each time
+                prepare_idf(self.idf, model, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
+                self._model = model.read_bytes()
+            else:
+                model.write_bytes(self._model)
+            link_or_copy(plan.epw, episode_dir / plan.epw.name)
+            args = ["--idf", str(model), "--epw", str(episode_dir / plan.epw.name), "--output-dir", str(episode_dir)]
+            process.spawn([*args, *self.args], episode_dir / "energyplus.log", cfg.start_timeout_s)
+        except BaseException:
+            shutil.rmtree(episode_dir, ignore_errors=True)
+            raise
+        return episode_dir, number
 
 
 @dataclass

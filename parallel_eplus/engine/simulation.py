@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.model import (
     ACTIONS,
     control_model,
@@ -31,15 +30,12 @@ from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
 from parallel_eplus.engine.config import SimulationConfig, policy_action_names
 from parallel_eplus.engine.episode import (
-    MODEL_FILE,
     StepRecorder,
-    claim_episode_dir,
     err_tail,
-    link_or_copy,
     prune_episodes,
     write_records,
 )
-from parallel_eplus.engine.prepared import EpisodePlan, PreparedEpisode
+from parallel_eplus.engine.prepared import EpisodePlan, EpisodeStarter, PreparedEpisode
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
@@ -112,7 +108,11 @@ class Simulation:
         self.weather = self.weathers[0]
         self.weather_index = 0
         self.plan: EpisodePlan | None = None
-        self._model_text: bytes | None = None  # the episode's model (idf_prep.py), as every episode writes it
+        building = ["--building", str(self.building.spec.path)] if config.building else []
+        self._starter = EpisodeStarter(self.output_dir, self.idf, config, [
+            "--model", self.model.name, *building, "--steps", str(self.steps_per_episode),
+            "--initial-action", *map(str, self.initial_action),
+        ])  # fmt: skip
         self._prepare_due = False  # the next episode is prepared at the first action (reset returns first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
@@ -169,7 +169,7 @@ class Simulation:
             self.process, self._spare = ready.process, self.process
             self.episode_dir, self._number = ready.episode_dir, ready.number
         else:
-            self.episode_dir, self._number = self._spawn(plan, self.process)
+            self.episode_dir, self._number = self._starter.start(plan, self.process, self._number + 1)
         self.plan = plan
         self.weather_index, self.weather = plan.weather_index, plan.weather
         self.episode += 1
@@ -182,30 +182,6 @@ class Simulation:
             rbc = {"schedule": it_load_schedule(self.idf)} | ({} if target is None else {"target_c": target})
             self.base = RuleBasedController(RBCConfig(**rbc))
 
-    def _spawn(self, plan: EpisodePlan, process: EnergyPlusProcess) -> tuple[Path, int]:
-        """Write an episode's directory and model and start its EnergyPlus in `process`: (directory, number)."""
-        label = weather_label(plan.weather)
-        episode_dir, number = claim_episode_dir(self.output_dir, label, self._number + 1)
-        cfg = self.config
-        if self._model_text is None:  # the same for every episode: tokenized once (~20 ms), written each time
-            prepare_idf(self.idf, episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
-            self._model_text = (episode_dir / MODEL_FILE).read_bytes()
-        else:
-            (episode_dir / MODEL_FILE).write_bytes(self._model_text)
-        link_or_copy(plan.epw, episode_dir / plan.epw.name)
-        args = [
-            "--idf", str(episode_dir / MODEL_FILE), "--epw", str(episode_dir / plan.epw.name),
-            "--output-dir", str(episode_dir), "--model", self.model.name,
-            *(["--building", str(self.building.spec.path)] if self.config.building else []),
-            "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
-        ]  # fmt: skip
-        try:
-            process.spawn(args, episode_dir / "energyplus.log", cfg.start_timeout_s)
-        except BaseException:
-            shutil.rmtree(episode_dir, ignore_errors=True)
-            raise
-        return episode_dir, number
-
     def prepare(self, plan: EpisodePlan | None = None) -> None:
         """Start the next episode (`plan`, default: the rotation's next) in the spare process, to be swapped in
         by the `launch` that asks for the same plan."""
@@ -213,7 +189,7 @@ class Simulation:
             return
         plan = plan or self.next_plan()
         self._spare.kill()
-        episode_dir, number = self._spawn(plan, self._spare)
+        episode_dir, number = self._starter.start(plan, self._spare, self._number + 1)
         self._number = number  # numbers follow the order episodes began in
         self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number)
 
