@@ -154,3 +154,32 @@ def test_the_learner_interrupted_or_killed_ends_running_and_prepared_processes(t
             learner.kill()
             learner.wait()
         sweep()  # a killed learner's pipe directories: what its next run's first pipe sweeps
+
+
+@pytest.mark.slow
+def test_a_vector_env_worker_whose_prepared_process_died_starts_its_next_episode_afresh(tmp_path, no_leaks):
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
+
+    venv = EnergyPlusVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path)), [["CA"], ["FL"]])
+    actions = np.zeros((2, 4), dtype=np.float32)
+    try:
+        venv.reset(seed=0)
+        venv.step(actions)
+        sim = venv.sims[0]
+        deadline = time.monotonic() + 120
+        while sim.prepared is None or not sim.prepared.parked():
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        struck = sim.prepared
+        os.kill(struck.process.proc.pid, signal.SIGKILL)
+        ended = np.zeros(2, int)
+        while ended.min() < 2:
+            _, _, terminated, truncated, _ = venv.step(actions)
+            assert not truncated.any()  # replaced before it was handed out: no episode failed
+            ended += terminated
+    finally:
+        venv.close()
+    assert not struck.episode_dir.exists()  # what it prepared is gone; both episodes that ran are whole
+    done = sorted((tmp_path / "worker-0").glob("episode-*"))
+    assert struck.episode_dir not in done and len(done) == 2 and all((d / "steps.parquet").is_file() for d in done)
