@@ -38,8 +38,9 @@ class EnergyPlusEnv(gym.Env):
     ## Description
     EnergyPlus's two-zone data center (`2ZoneDataCenterHVAC_wEconomizer`, West and East zones, each with
     its own air loop) with the built-in setpoint managers and fan control replaced by the agent
-    (Moriyama et al. 2018). `reset()` starts a new EnergyPlus process on the next weather file and a
-    private pair of named pipes; every `step()` runs one zone timestep (15 minutes) under the action.
+    (Moriyama et al. 2018). `reset()` starts the next episode on the next weather file (prepared while the
+    last one ran, so it is already at its first step: engine/prepared.py), over a private pair of named pipes;
+    every `step()` runs one zone timestep (15 minutes) under the action.
 
     ## Action Space
     `Box(-1, 1, (4,))`, scaled linearly to physical units (`buildings/model.py` `ACTIONS`): West and
