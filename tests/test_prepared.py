@@ -183,3 +183,23 @@ def test_a_vector_env_worker_whose_prepared_process_died_starts_its_next_episode
     assert not struck.episode_dir.exists()  # what it prepared is gone; both episodes that ran are whole
     done = sorted((tmp_path / "worker-0").glob("episode-*"))
     assert struck.episode_dir not in done and len(done) == 2 and all((d / "steps.parquet").is_file() for d in done)
+
+
+@pytest.mark.slow
+def test_a_reset_mid_episode_stops_energyplus_and_keeps_its_process_and_the_partial_record(tmp_path, no_leaks):
+    import json
+
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    try:
+        env.reset()
+        for _ in range(5):
+            env.step(ZERO)
+        cut, pid = env.episode_dir, env.sim.proc.pid
+        warm = env.sim.process.warm
+        env.reset()
+        assert warm.proc is not None and warm.proc.pid == pid  # stopped by a control frame, not killed
+        summary = json.loads((cut / "summary.json").read_text())
+        assert summary["complete"] is False and summary["steps"] == 5
+        _episode(env, options={"weather_index": 0})  # the same process serves a later episode
+    finally:
+        env.close()

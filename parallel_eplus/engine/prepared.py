@@ -11,18 +11,15 @@ same arguments, the same process code, so a prepared episode equals a cold one b
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import select
 import shutil
-import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.weather import weather_label
-from parallel_eplus.engine import pipe
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import MODEL_FILE, claim_episode_dir, link_or_copy
 from parallel_eplus.engine.process import EnergyPlusProcess
@@ -107,15 +104,9 @@ class PreparedEpisode:
         return True  # still warming up: the reset waits for it, as for a cold start, but less
 
     def discard(self) -> None:
-        """End its episode and remove its directory: it never stepped, so nothing in it is worth keeping.
-
-        A parked episode in a long-lived process is stopped, not killed: a control frame where its first action is
-        awaited ends its run (the bridge stops EnergyPlus), and the process stays for the next episode."""
-        proc = self.process.proc
-        if self.process.warm is not None and proc is not None and self.process.running() and self.parked():
-            with contextlib.suppress(OSError):
-                self.process.pipes.send(pipe.encode([], pipe.END))  # not an action: the bridge stops EnergyPlus
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                proc.wait(timeout=STOP_GRACE_S)
-        self.process.kill()  # what did not stop in time, or was not parked
+        """End its episode (a parked one in a long-lived process is stopped, the process kept) and remove its
+        directory: it never stepped, so nothing in it is worth keeping."""
+        if self.parked():
+            self.process.end_episode(STOP_GRACE_S)
+        self.process.kill()  # what was still starting up
         shutil.rmtree(self.episode_dir, ignore_errors=True)

@@ -89,6 +89,17 @@ class EnergyPlusProcess:
             log.warning("EnergyPlus did not exit within %.0f s of the last step; killing it", grace_s)
         self.kill()
 
+    def end_episode(self, grace_s: float = 5.0) -> None:
+        """End a running episode early. A long-lived process gets a control frame where EnergyPlus awaits its next
+        action (the bridge stops EnergyPlus) and stays for the next episode; one that does not stop in
+        `grace_s`, or a process of its own, is killed."""
+        if self.warm is not None and self.running():
+            with contextlib.suppress(OSError):
+                self.pipes.send(pipe.encode([], pipe.END))  # not an action: the bridge stops EnergyPlus
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.proc.wait(timeout=grace_s)
+        self.kill()
+
     def kill(self) -> None:
         proc, self.proc = self.proc, None
         if proc is None:

@@ -343,9 +343,10 @@ class Simulation:
         self.process.kill()
 
     def stop(self) -> None:
-        """End a running episode early: kill EnergyPlus and keep the partial record."""
+        """End a running episode early (EnergyPlus stopped, its long-lived process kept) and keep the partial
+        record."""
         if self.proc is not None:
-            self._kill()
+            self.process.end_episode()
         if self.records is not None:
             if self.records.n:
                 self._write_records(complete=False)
@@ -357,6 +358,8 @@ class Simulation:
         if self._closed:
             return
         self._closed = True
+        self._kill()  # no need to stop EnergyPlus gracefully: its process goes too
+        self._spare.kill()
         self.discard_prepared()
         self.stop()
         self.process.close()
