@@ -78,12 +78,20 @@ class WarmProcess:
     def run(self, argv: list[str], log_path: Path, pipe_dir: Path) -> Episode:
         """Start one episode (`eplus_callback.main(argv)`, its output in `log_path`, over the pipes in `pipe_dir`)
         and return at once."""
-        if self.proc is None or self.proc.poll() is not None:
-            self.close()
-            self._start(pipe_dir)
-        self.proc.stdin.write(json.dumps({"argv": argv, "log": str(log_path)}).encode() + b"\n")
-        self.proc.stdin.flush()
-        return Episode(self)
+        request = json.dumps({"argv": argv, "log": str(log_path)}).encode() + b"\n"
+        for attempt in range(2):  # a process that died while idle is replaced once
+            if self.proc is None or self.proc.poll() is not None:
+                self.close()
+                self._start(pipe_dir)
+            try:
+                self.proc.stdin.write(request)
+                self.proc.stdin.flush()
+                return Episode(self)
+            except BrokenPipeError:
+                if attempt:
+                    raise
+                self.close()
+        raise AssertionError("unreachable")
 
     def close(self) -> None:
         """Close its requests (it exits) and make sure it has; kill it if it is inside an episode."""
