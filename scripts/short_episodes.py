@@ -27,11 +27,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--resets", type=int, default=30, help="resets timed with the prepared episode parked")
     p.add_argument("--train", action="store_true", help="TRPO steps/s by episode length instead")
     p.add_argument("--train-steps", type=int, default=16384)
+    p.add_argument("--cold", action="store_true", help="with --train: each length also with cold starts, paired")
     p.add_argument("--out", type=Path, help="write the figures as JSON here")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.train:
-        out = training(args.days, args.train_steps, args.pairs)
+        out = training(args.days, args.train_steps, args.pairs, args.cold)
     else:
         out = {f"{d}d": consecutive(d, args.episodes, args.pairs, args.weather) for d in args.days}
         with tempfile.TemporaryDirectory(prefix="parallel-eplus-short-") as tmp:

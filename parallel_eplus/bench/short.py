@@ -107,20 +107,29 @@ def parked_resets(days: int, resets: int, weather: str, workdir: Path) -> dict:
             "parked_resets": resets}  # fmt: skip
 
 
-def training(days: list[int], train_steps: int, pairs: int) -> dict:
-    """TRPO steps/s with 2 workers at each episode length, the lengths interleaved round by round."""
+def training(days: list[int], train_steps: int, pairs: int, cold: bool = False) -> dict:
+    """TRPO steps/s with 2 workers at each episode length, the lengths interleaved round by round; with `cold`,
+    each length also with every episode started cold (prepare_next off), right after the prepared run."""
     from parallel_eplus.bench.config import BenchConfig
     from parallel_eplus.bench.rates import training_rate
 
-    rates: dict[int, list[float]] = {d: [] for d in days}
+    modes = [True, False] if cold else [True]
+    rates: dict[tuple[int, bool], list[float]] = {(d, m): [] for d in days for m in modes}
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-short-train-") as tmp:
         for k in range(pairs):
             for d in days:
-                cfg = BenchConfig(workers=2, train_steps=train_steps, batch_size=train_steps, ray=False)
-                rates[d].append(training_rate(cfg, Path(tmp) / f"t{d}_{k}", run_days=d)["steps_per_s"])
-                log.info("TRPO, %d-day episodes, round %d: %.0f steps/s", d, k, rates[d][-1])
-    year = max(days)
-    return {
-        f"train_{d}d_steps_per_s": statistics.median(r) for d, r in rates.items()
-    } | {f"train_{d}d_over_{year}d": statistics.median(a / b for a, b in zip(rates[d], rates[year], strict=True))
-         for d in days}  # fmt: skip
+                for m in modes:
+                    cfg = BenchConfig(workers=2, train_steps=train_steps, batch_size=train_steps, ray=False)
+                    where = Path(tmp) / f"t{d}_{m}_{k}"
+                    rates[d, m].append(training_rate(cfg, where, run_days=d, prepare_next=m)["steps_per_s"])
+                    log.info("TRPO, %d-day episodes, %s, round %d: %.0f steps/s", d,
+                             "prepared" if m else "cold", k, rates[d, m][-1])  # fmt: skip
+    year, med = max(days), statistics.median
+    out = {f"train_{d}d_steps_per_s": med(rates[d, True]) for d in days}
+    out |= {f"train_{d}d_over_{year}d": med(a / b for a, b in zip(rates[d, True], rates[year, True], strict=True))
+            for d in days}  # fmt: skip
+    if cold:
+        out |= {f"train_{d}d_cold_steps_per_s": med(rates[d, False]) for d in days}
+        out |= {f"train_{d}d_prepared_over_cold": med(a / b for a, b in zip(rates[d, True], rates[d, False],
+                strict=True)) for d in days}  # fmt: skip
+    return out
