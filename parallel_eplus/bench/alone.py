@@ -6,7 +6,7 @@ EnergyPlus side holds it), run by `pyenergyplus` with no callback of ours: runs 
 new API state per run. What the env costs beyond it is what our side adds: the process per episode, its imports,
 the callbacks and the pipes.
 
-    python -m parallel_eplus.bench.alone OUT_DIR IDF EPW [IDF EPW ...]   # prints one `run_s` line per run
+`run_alone(out_dir, [(idf, epw), ...])` runs them in a fresh process (`RUNNER`) and times it.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def run_alone(out_dir: Path, runs: list[tuple[Path, Path]]) -> dict[str, float |
     out_dir.mkdir(parents=True, exist_ok=True)
     args = [str(p) for pair in runs for p in pair]
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", __name__, str(out_dir), *args], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", RUNNER, str(out_dir), *args], capture_output=True, text=True)
     wall = time.perf_counter() - t0
     if done.returncode != 0:
         raise RuntimeError(f"EnergyPlus alone failed: {done.stderr[-2000:]}")
@@ -69,27 +69,25 @@ def run_alone(out_dir: Path, runs: list[tuple[Path, Path]]) -> dict[str, float |
     return {"wall_s": wall, "runs_s": each}
 
 
-def main(argv: list[str]) -> int:
-    from pyenergyplus.api import EnergyPlusAPI
-
-    out, pairs = Path(argv[0]), argv[1:]
-    api = EnergyPlusAPI()
-    for k in range(0, len(pairs), 2):
-        t0 = time.perf_counter()
-        state = api.state_manager.new_state()
-        api.runtime.set_console_output_status(state, False)
-        run_dir = out / f"run{k // 2}"
-        status = api.runtime.run_energyplus(state, ["-d", str(run_dir), "-w", pairs[k + 1], pairs[k]])
-        api.state_manager.delete_state(state)
-        if status != 0:
-            print(f"EnergyPlus exited with status {status} ({run_dir})", file=sys.stderr)
-            return 1
-        print(f"run_s {time.perf_counter() - t0:.6f}", flush=True)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+# The process that runs EnergyPlus alone imports nothing of ours (our package would import gymnasium, this one
+# the whole bench): only pyenergyplus, as a user's script running EnergyPlus would.
+RUNNER = """
+import sys, time
+from pathlib import Path
+from pyenergyplus.api import EnergyPlusAPI
+out, pairs = Path(sys.argv[1]), sys.argv[2:]
+api = EnergyPlusAPI()
+for k in range(0, len(pairs), 2):
+    t0 = time.perf_counter()
+    state = api.state_manager.new_state()
+    api.runtime.set_console_output_status(state, False)
+    run_dir = out / f"run{k // 2}"
+    status = api.runtime.run_energyplus(state, ["-d", str(run_dir), "-w", pairs[k + 1], pairs[k]])
+    api.state_manager.delete_state(state)
+    if status != 0:
+        sys.exit(f"EnergyPlus exited with status {status} ({run_dir})")
+    print(f"run_s {time.perf_counter() - t0:.6f}", flush=True)
+"""
 
 
 def alone_seconds(cfg, workdir: Path, days: int | None = None, runs: int = 1) -> float:
