@@ -53,6 +53,7 @@ class SimulationConfig:
     weather_noise: str | None = None
     # Seeds each episode's noise and forecast error with (seed, worker, episode number); `reset(seed=)` sets one.
     seed: int = 0
+    fixed_seed: bool = False  # every episode's seed is `seed` itself (evaluate's noisy year N: the same for all)
     forecast_hours: int = 0  # > 0: the outdoor dry bulb's next N hours end the observation (buildings/forecast.py)
     forecast_error: str | None = None  # BOPTEST's "low", "medium" or "high" error on that forecast; None: exact
 

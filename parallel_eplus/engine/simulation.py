@@ -226,6 +226,8 @@ class Simulation:
     def _episode_weather(self, epw: Path, seed: int | None) -> Path:
         """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file) and its
         forecasts, which read that same file."""
+        if seed is None and self.config.fixed_seed:
+            seed = self.config.seed
         if seed is None:
             seed = int(np.random.SeedSequence([self.config.seed, zlib.crc32(self.name.encode()), self._number])
                        .generate_state(1)[0])  # fmt: skip
