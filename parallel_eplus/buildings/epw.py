@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 HEADER_LINES = 8
 # The 35 fields of a data row, EnergyPlus's Auxiliary Programs "EPW data dictionary", short names as Sinergym's.
@@ -35,6 +38,8 @@ def column_index(name: str) -> int:
 
 def read_epw(path: str | Path) -> tuple[list[str], pd.DataFrame]:
     """(the 8 header lines, the records as a DataFrame with `COLUMNS`)."""
+    import pandas as pd  # here: specs (which name columns) load in the EnergyPlus-side process, without pandas
+
     text = Path(path).read_text(encoding="latin-1")
     lines = text.splitlines(keepends=True)
     if len(lines) <= HEADER_LINES or not lines[0].upper().startswith("LOCATION"):
