@@ -215,7 +215,7 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
     days = cfg.imitation.run_days or cfg.run_days
     work = cfg.run_dir / "baseline-record"
     demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, work,
-                            (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
+                            (cfg.time_features, cfg.schedule_features), progress, cfg.forecast_hours)  # fmt: skip
     building = load_building(cfg.building)
     regulated = [building.sensor_names.index(t) for t in building.temperatures]
     report = clone(model, env, demos, cfg.imitation, cfg.seed, regulated, building.band)
