@@ -15,13 +15,15 @@ import logging
 import select
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.engine.episode import MODEL_FILE, claim_episode_dir, link_or_copy
+from parallel_eplus.engine.episode import MODEL_FILE, claim_episode_dir
 from parallel_eplus.engine.process import EnergyPlusProcess
 
 log = logging.getLogger(__name__)
@@ -55,9 +57,14 @@ class EpisodeStarter:
         self.output_dir, self.idf, self.config, self.args = output_dir, idf, config, args
         self._model: bytes | None = None  # the episode's model (idf_prep.py), the same for every episode
 
-    def start(self, plan: EpisodePlan, process: EnergyPlusProcess, number: int) -> tuple[Path, int]:
+    def start(
+        self, plan: EpisodePlan, process: EnergyPlusProcess, number: int, weather: Callable[..., tuple[Path, Any]]
+    ) -> tuple[Path, int, Any]:
         """Claim the episode's directory (numbered `number` or above), write its files, start its EnergyPlus in
-        `process` without waiting: (the directory, its number)."""
+        `process` without waiting: (the directory, its number, what `weather` made beside the weather file).
+
+        `weather(plan, episode_dir, number)` writes the episode's weather file into its directory (a link, or a
+        perturbed copy: the noise is drawn here, when the episode is prepared) and returns (its path, extras)."""
         episode_dir, number = claim_episode_dir(self.output_dir, weather_label(plan.weather), number)
         cfg, model = self.config, episode_dir / MODEL_FILE
         try:
@@ -66,13 +73,13 @@ class EpisodeStarter:
                 self._model = model.read_bytes()
             else:
                 model.write_bytes(self._model)
-            link_or_copy(plan.epw, episode_dir / plan.epw.name)
-            args = ["--idf", str(model), "--epw", str(episode_dir / plan.epw.name), "--output-dir", str(episode_dir)]
+            epw, extras = weather(plan, episode_dir, number)
+            args = ["--idf", str(model), "--epw", str(epw), "--output-dir", str(episode_dir)]
             process.spawn([*args, *self.args], episode_dir / "energyplus.log", cfg.start_timeout_s)
         except BaseException:
             shutil.rmtree(episode_dir, ignore_errors=True)
             raise
-        return episode_dir, number
+        return episode_dir, number, extras
 
 
 @dataclass
@@ -83,6 +90,7 @@ class PreparedEpisode:
     process: EnergyPlusProcess
     episode_dir: Path
     number: int
+    weather: Any = None  # what the episode's weather file came with (noise parameters, forecasts)
     started_at: float = field(default_factory=time.monotonic)
 
     def parked(self) -> bool:

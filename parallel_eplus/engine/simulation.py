@@ -11,11 +11,13 @@ from __future__ import annotations
 import logging
 import shutil
 import tempfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.forecast import Forecaster
 from parallel_eplus.buildings.model import (
     ACTIONS,
     control_model,
@@ -26,12 +28,14 @@ from parallel_eplus.buildings.model import (
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import reward
 from parallel_eplus.buildings.weather import resolve_weather, weather_label
+from parallel_eplus.buildings.weather_noise import parse_noise, perturb_epw
 from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
-from parallel_eplus.engine.config import SimulationConfig, policy_action_names
+from parallel_eplus.engine.config import SimulationConfig, forecast_specs, policy_action_names
 from parallel_eplus.engine.episode import (
     StepRecorder,
     err_tail,
+    link_or_copy,
     prune_episodes,
     write_records,
 )
@@ -76,6 +80,10 @@ class Simulation:
         if not self.idf.is_file():
             raise FileNotFoundError(f"model file not found: {self.idf}")
         self._schedule = it_load_schedule(self.idf) if config.schedule_features else None
+        self.noise = parse_noise(config.weather_noise)  # a malformed option fails before anything is spawned
+        self.forecasts = forecast_specs(config)
+        self._forecaster: Forecaster | None = None
+        self.weather_params: dict = {}  # this episode's seed and noise parameters, for its records
         self.weathers = weathers or [config.weather]
         named = self.building.spec.weathers  # the spec's short names, then codes and .epw paths
         self.weather_paths = [named.get(w) or resolve_weather(w) for w in self.weathers]  # fail before spawning
@@ -151,7 +159,9 @@ class Simulation:
         return self.first_observation()
 
     def next_plan(self, weather_index: int | None = None, seed: int | None = None, options: dict | None = None):
-        """The next episode's plan: weathers cycle episode by episode unless `weather_index` picks one."""
+        """The next episode's plan: weathers cycle episode by episode unless `weather_index` picks one. `seed`: the
+        episode's weather noise and forecast error (None: drawn from the config's seed, this worker's name and the
+        episode's number, when its directory is claimed)."""
         i = self.episode % len(self.weathers) if weather_index is None else weather_index
         return EpisodePlan(i, self.weathers[i], self.weather_paths[i], seed, EpisodePlan.options_key(options))
 
@@ -168,8 +178,10 @@ class Simulation:
         if ready is not None:  # swap it in; the finished episode's process (and pipes) prepare the one after
             self.process, self._spare = ready.process, self.process
             self.episode_dir, self._number = ready.episode_dir, ready.number
+            self.weather_params, self._forecaster = ready.weather
         else:
-            self.episode_dir, self._number = self._starter.start(plan, self.process, self._number + 1)
+            started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather)
+            self.episode_dir, self._number, (self.weather_params, self._forecaster) = started
         self.plan = plan
         self.weather_index, self.weather = plan.weather_index, plan.weather
         self.episode += 1
@@ -189,9 +201,9 @@ class Simulation:
             return
         plan = plan or self.next_plan()
         self._spare.kill()
-        episode_dir, number = self._starter.start(plan, self._spare, self._number + 1)
+        episode_dir, number, weather = self._starter.start(plan, self._spare, self._number + 1, self._episode_weather)
         self._number = number  # numbers follow the order episodes began in
-        self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number)
+        self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number, weather)
 
     def discard_prepared(self) -> None:
         if self.prepared is not None:
@@ -263,6 +275,27 @@ class Simulation:
         return obs, r, terminated, info
 
     # -- internals ----------------------------------------------------------------------------
+    def _episode_weather(self, plan: EpisodePlan, episode_dir: Path, number: int) -> tuple[Path, tuple]:
+        """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file), and
+        (its seed and noise parameters for its records, its forecasts, which read that same file)."""
+        seed = plan.seed
+        if seed is None and self.config.fixed_seed:
+            seed = self.config.seed
+        if seed is None:
+            seed = int(np.random.SeedSequence([self.config.seed, zlib.crc32(self.name.encode()), number])
+                       .generate_state(1)[0])  # fmt: skip
+        target = episode_dir / plan.epw.name
+        if self.noise is None:
+            link_or_copy(plan.epw, target)
+            params = {}
+        else:
+            params = {"weather_seed": seed, **perturb_epw(plan.epw, target, self.noise, seed)}
+        if self.forecasts and any(f.error for f in self.forecasts):
+            params.setdefault("weather_seed", seed)
+        per_hour, days = self.building.steps_per_day // 24, self.config.run_days
+        forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
+        return target, (params, forecaster)
+
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
         if len(values) != pipe.TIME_FIELDS + len(self.sensor_names):
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
@@ -279,10 +312,12 @@ class Simulation:
                 info["raw_observation"] = raw.copy()
                 obs = np.clip(obs, self.obs_low, self.obs_high)
                 break
-        if self.config.time_features or self._schedule:
+        if self.config.time_features or self._schedule or self._forecaster:
             extra = time_features(info["time"]) if self.config.time_features else ()
             if self._schedule:
                 extra += schedule_features(info["time"], self._schedule)
+            if self._forecaster:  # the spec's forecasts, then --forecast's
+                extra += self._forecaster(info["time"])
             obs = np.concatenate([obs, np.array(extra, np.float32)])
         self._info, self._sensed = info, sensed
         return obs, info
@@ -331,6 +366,7 @@ class Simulation:
             "model": self.model.name,
             "run_days": self.config.run_days,
             "complete": complete,
+            **self.weather_params,
         }
         if self.config.building:  # what `plot` reads the episode's signals from (none: the data center)
             extra["building"] = str(self.building.spec.path)
