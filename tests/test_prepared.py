@@ -203,3 +203,21 @@ def test_a_reset_mid_episode_stops_energyplus_and_keeps_its_process_and_the_part
         _episode(env, options={"weather_index": 0})  # the same process serves a later episode
     finally:
         env.close()
+
+
+@pytest.mark.slow
+def test_a_prepared_episode_with_weather_noise_equals_a_cold_one(tmp_path, no_leaks):
+    """The noise is drawn when the episode is prepared, from the same seed a cold start draws it from."""
+    kw = {"weather": "CA", "run_days": 1, "weather_noise": "drybulb=1:0:24", "seed": 7}
+    cold = EnergyPlusEnv(output_dir=tmp_path / "cold", prepare_next=False, **kw)
+    warm = EnergyPlusEnv(output_dir=tmp_path / "warm", **kw)
+    try:
+        expected = [_episode(cold) for _ in range(2)]
+        got = [_episode(warm) for _ in range(2)]
+        assert warm.sim._from_prepared
+    finally:
+        cold.close()
+        warm.close()
+    for a, b in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(got[0][:, 0], got[1][:, 0])  # each episode its own perturbed outdoor temperature
