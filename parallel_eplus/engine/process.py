@@ -89,6 +89,14 @@ class EnergyPlusProcess:
             log.warning("EnergyPlus did not exit within %.0f s of the last step; killing it", grace_s)
         self.kill()
 
+    def warm_up(self) -> None:
+        """Start the long-lived process now, with no episode yet: its start-up and imports then run beside the
+        episode before the one it will prepare."""
+        if self.warm is not None and self.warm.proc is None:
+            if self.pipes is None:
+                self.pipes = pipe.PipePair()
+            self.warm.start(self.pipes.dir)
+
     def end_episode(self, grace_s: float = 5.0) -> None:
         """End a running episode early. A long-lived process gets a control frame where EnergyPlus awaits its next
         action (the bridge stops EnergyPlus) and stays for the next episode; one that does not stop in

@@ -182,6 +182,8 @@ class Simulation:
         else:
             started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather)
             self.episode_dir, self._number, (self.weather_params, self._forecaster) = started
+        if self.prepare_next:
+            self._spare.warm_up()  # the first episode's spare process starts up beside it
         self.plan = plan
         self.weather_index, self.weather = plan.weather_index, plan.weather
         self.episode += 1

@@ -67,7 +67,7 @@ class WarmProcess:
         self.start_timeout_s = start_timeout_s
         self.proc: subprocess.Popen | None = None
 
-    def _start(self, pipe_dir: Path) -> None:
+    def start(self, pipe_dir: Path) -> None:
         # The pipes it serves name its owner: `parallel-eplus clean` finds it if its owner dies (pipe_sweep.py).
         cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--serve", "--pipes", str(pipe_dir)]
         self.proc = subprocess.Popen(
@@ -82,7 +82,7 @@ class WarmProcess:
         for attempt in range(2):  # a process that died while idle is replaced once
             if self.proc is None or self.proc.poll() is not None:
                 self.close()
-                self._start(pipe_dir)
+                self.start(pipe_dir)
             try:
                 self.proc.stdin.write(request)
                 self.proc.stdin.flush()
