@@ -30,6 +30,7 @@ def env_run(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
     env = EnergyPlusEnv(
         weather=cfg.weather, run_days=cfg.raw_days, output_dir=workdir, keep_episodes=0, building=cfg.building,
         energyplus_csv=False,  # as training runs it, and as raw_seconds runs EnergyPlus alone
+        prepare_next=False,  # one episode: a next one prepared beside it would only take CPU from it
     )  # fmt: skip
     action = np.full(env.action_space.shape, cfg.action, dtype=np.float32)
     try:
