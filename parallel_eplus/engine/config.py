@@ -48,6 +48,8 @@ class SimulationConfig:
     # Read-back output variables (key, variable) added to the model's EnergyPlus CSV, every timestep: what the
     # building's own controls chose, for `train --init-from-baseline` (training/imitation.py).
     extra_outputs: tuple[tuple[str, str], ...] = ()
+    # What the reward's energy term counts (energy, hvac, cost, emissions; buildings/kpis.py). None: the spec's.
+    objective: str | None = None
 
 
 RESIDUAL_SPACES = ("action", "demand")

@@ -8,6 +8,7 @@ drives several, writing every action before reading any observation.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import shutil
 import tempfile
@@ -61,6 +62,12 @@ class Simulation:
         self.obs_low, self.obs_high = (np.array(b, dtype=np.float32) for b in self.building.bounds())
         self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
         self.comfort = self.building.comfort  # zones, band, when it applies, energy (buildings/comfort.py)
+        if config.objective and config.objective != self.comfort.objective:
+            if self.comfort.kpis is None and config.objective != "energy":
+                raise ValueError(f"objective {config.objective!r} needs the building's HVAC signals ([kpis] hvac)")
+            self.comfort = dataclasses.replace(self.comfort, objective=config.objective)
+        self._observed = len(self.building.observed)  # the sensors after these are read for the figures only
+        self._hidden = self.building.hidden
         self._temps = self.comfort.temperatures
         self.elements = self.model.actions
         self.idf = Path(config.idf) if config.idf else self.model.idf
@@ -204,7 +211,8 @@ class Simulation:
         info.update(parts)
         info["comfort_applies"] = applies
         if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward
-            cost, out = comfort.cost(temps, margin) if applies else (0.0, 0)
+            bounds = comfort.bounds(info) if comfort.per_step else None
+            cost, out = comfort.cost(temps, margin, bounds) if applies else (0.0, 0)
             info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
         self.records.add(info["time"], (*self._sensed, *self._action, r, *parts.values(), float(applies)))
         terminated = code == pipe.END
@@ -224,9 +232,13 @@ class Simulation:
         info = dict(zip(self.sensor_names, sensed, strict=True))
         info["time"] = pipe.frame_time(fields)
         info["weather"] = self.weather
-        raw = values[pipe.TIME_FIELDS :]
+        if self._hidden:  # thermostat schedules, HVAC meters: in `info` and the step table, not the observation
+            raw = values[pipe.TIME_FIELDS : pipe.TIME_FIELDS + self._observed]
+            observed = sensed[: self._observed]
+        else:
+            raw, observed = values[pipe.TIME_FIELDS :], sensed
         obs = raw.astype(np.float32)
-        for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True):
+        for lo, v, hi in zip(self._lows, observed, self._highs, strict=True):
             if not lo <= v <= hi:  # (NaN too)
                 info["raw_observation"] = raw.copy()
                 obs = np.clip(obs, self.obs_low, self.obs_high)

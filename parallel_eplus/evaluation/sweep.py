@@ -180,7 +180,7 @@ def run_sweep(
     jobs = [(c, _job_config(c, w, building, run_days, reward, out_dir)) for c in controllers for w in weathers]
     steps_per_day = load_building(building).steps_per_day
     total_steps = len(jobs) * run_days * steps_per_day
-    band = dict(zip(("band_low_c", "band_high_c"), load_building(building).band, strict=True)) if building else {}
+    band = _band_columns(building)
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:
         if backend == "ray":
@@ -292,3 +292,13 @@ def run_local(
         for job in active:
             job["sim"].close()
     return rows, failures
+
+
+def _band_columns(building: str | None) -> dict:
+    """A spec's one band beside its "% in band"; none where each zone has its own bounds (thermostat, per zone)."""
+    if not building:
+        return {}
+    b = load_building(building)
+    if b.spec.reward.thermostat or b.spec.reward.zone_bands:
+        return {}
+    return dict(zip(("band_low_c", "band_high_c"), b.band, strict=True))

@@ -143,7 +143,7 @@ def policy_features(model_zip: str | Path, building: str | None = None) -> tuple
     from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES
 
     n = read_stats(normalization_file(Path(model_zip))).n_observations
-    sensors = len(load_building(building).sensors)
+    sensors = len(load_building(building).observed)
     options = [(t, s) for t in (False, True) for s in (False, True)]
     found = [o for o in options if sensors + len(TIME_FEATURES) * o[0] + len(SCHEDULE_FEATURES) * o[1] == n]
     if not found:
