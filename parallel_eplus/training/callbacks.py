@@ -82,6 +82,10 @@ class EpisodeMetrics(BaseCallback):
         "energy_kwh": "energy_kwh",  # BOPTEST's figures (buildings/comfort.py)
         "peak_power_kw": "peak_power_kw",
         "discomfort_kh": "discomfort_kh",
+        "hvac_energy_kwh_m2": "hvac_energy_kwh_m2",  # BOPTEST's ener_tot, cost_tot, emis_tot (buildings/kpis.py)
+        "energy_kwh_m2": "energy_kwh_m2",
+        "cost_m2": "cost_m2",
+        "emissions_kg_m2": "emissions_kg_m2",
     }  # and every reward temperature's mean and std, and the share in band where it applies (`_tags`)
 
     def __init__(self, episodes_csv: Path, progress: tqdm | None, steps_per_year: int = STEPS_PER_YEAR):

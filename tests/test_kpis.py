@@ -1,0 +1,132 @@
+"""BOPTEST's figures on real short episodes of the small office (buildings/thermostat.py, kpis.py, comfort.py).
+
+The office's thermostats follow HTGSETP_SCH and CLGSETP_SCH (RefBldgSmallOfficeNew2004_Chicago.idf): 21.0 and
+24.0 °C while the building is in use (weekdays 06-22 h), 15.6 and 26.7 °C set back otherwise.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from parallel_eplus.buildings.resources import model_file, spec_file
+from parallel_eplus.buildings.spec import SpecError, load_spec
+from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+
+OFFICE_IDF = model_file("RefBldgSmallOfficeNew2004_Chicago.idf")
+
+EXTRA = """
+[[observations]]
+name = "building_power_w"               # lights and plug loads: what no HVAC controller touches
+variable = "Facility Total Building Electricity Demand Rate"
+key = "Whole Building"
+low = 0.0
+high = 1e9
+"""
+
+
+def office_spec(tmp_path: Path, kpis: str) -> Path:
+    """The shipped office spec with another observation and its own `[kpis]`, beside the test's files."""
+    text = spec_file("office-small").read_text()
+    text = text.replace('idf = "RefBldgSmallOfficeNew2004_Chicago.idf"', f'idf = "{OFFICE_IDF}"')
+    text = text.replace('baseline_idf = "RefBldgSmallOfficeNew2004_Chicago.idf"', f'baseline_idf = "{OFFICE_IDF}"')
+    head, _, tail = text.partition("[[actions]]")
+    text = head + EXTRA + "\n[[actions]]" + tail
+    head, _, _ = text.partition("[kpis]")
+    path = tmp_path / "office.toml"
+    path.write_text(head + kpis)
+    return path
+
+
+TARIFF = """[kpis]
+hvac = { Electricity = "hvac_power_w", NaturalGas = "NaturalGas:HVAC" }
+tariff = { Electricity = { day = 0.30, night = 0.10, day_hours = [7, 22] }, NaturalGas = 0.05 }
+emissions = { Electricity = 0.5, NaturalGas = 0.2 }
+"""
+
+
+@pytest.fixture(scope="module")
+def baseline_episode(tmp_path_factory):
+    """Two days (a Sunday, then a Monday: 2006 begins on a Sunday) of the office on its own controls."""
+    tmp = tmp_path_factory.mktemp("kpis")
+    spec = office_spec(tmp, TARIFF)
+    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], 2, 1, tmp / "out", False, building=str(spec))
+    episode = Path(df["episode_dir"][0])
+    return pd.read_parquet(episode / "steps.parquet"), json.loads((episode / "summary.json").read_text()), df
+
+
+@pytest.mark.slow
+def test_comfort_bounds_follow_the_setpoint_schedules(baseline_episode, no_leaks):
+    steps, summary, df = baseline_episode
+    low, high = steps["setpoint_htgsetp_sch"], steps["setpoint_clgsetp_sch"]
+    start = steps["time"] - pd.Timedelta(minutes=10)
+    hour = start.dt.hour
+    in_use = (start.dt.day_of_week < 5) & (hour >= 6) & (hour < 22)
+    assert in_use.any() and (~in_use).any()
+    assert np.allclose(low[in_use], 21.0) and np.allclose(high[in_use], 24.0)
+    assert np.allclose(low[~in_use], 15.6) and np.allclose(high[~in_use], 26.7)
+    # the comfort figures count the occupied samples against those bounds: the built-in controls hold them
+    assert summary["in_band_pct"] >= 95.0
+    assert "band_low_c" not in df.columns  # no one band to name: each zone has its own
+    # the bounds are not in the observation: the policy's input is unchanged
+    from parallel_eplus.envs.env import observation_space
+
+    assert observation_space(building="office-small").shape == (10,)
+
+
+@pytest.mark.slow
+def test_hvac_energy_excludes_lights_and_plugs(baseline_episode, no_leaks):
+    steps, summary, _ = baseline_episode
+    h = 10 / 60 / 1000  # kWh per W over a 10-minute step
+    facility, building = steps["power_w"].sum() * h, steps["building_power_w"].sum() * h
+    hvac = summary["hvac_electricity_kwh"]
+    assert 0 < hvac < facility - building + 1e-6  # lights and plugs are in the facility's, never in the HVAC figure
+    assert hvac == pytest.approx(facility - building, rel=0.02)  # what is left of the facility is the HVAC's
+    gas = steps["gas_w"].sum() * h  # the furnaces and the water heater
+    assert 0 < summary["hvac_naturalgas_kwh"] < gas  # the water heater's gas is not HVAC
+    total = summary["hvac_electricity_kwh"] + summary["hvac_naturalgas_kwh"]
+    assert summary["hvac_energy_kwh"] == pytest.approx(total)
+    assert summary["floor_area_m2"] == pytest.approx(511.16, rel=1e-3)  # the model's five zones
+    assert summary["hvac_energy_kwh_m2"] == pytest.approx(total / summary["floor_area_m2"])
+
+
+@pytest.mark.slow
+def test_cost_under_a_day_night_tariff_is_the_hand_computation(baseline_episode, no_leaks):
+    steps, summary, _ = baseline_episode
+    h = 10 / 60 / 1000
+    cost = emissions = 0.0
+    for _, r in steps.iterrows():
+        start = r["time"] - pd.Timedelta(minutes=10)
+        price = 0.30 if 7 <= start.hour < 22 else 0.10
+        cost += r["hvac_power_w"] * h * price + r["hvac_naturalgas_w"] * h * 0.05
+        emissions += r["hvac_power_w"] * h * 0.5 + r["hvac_naturalgas_w"] * h * 0.2
+    assert summary["cost"] == pytest.approx(cost, rel=1e-9)
+    assert summary["emissions_kg"] == pytest.approx(emissions, rel=1e-9)
+    assert summary["cost_m2"] == pytest.approx(cost / summary["floor_area_m2"])
+
+
+def test_spec_errors_name_the_bad_band_and_kpis(tmp_path):
+    text = spec_file("office-small").read_text().replace("RefBldgSmallOfficeNew2004_Chicago.idf", str(OFFICE_IDF))
+    bad = text.replace('band = "thermostat"', 'band = { core_temp_c = [21.0, 24.0], kitchen = [20.0, 19.0] }')
+    bad = bad.replace('hvac = { Electricity', 'tariff = { Electricity = "cheap" }\nemissions = { Coal = -1 }\n'
+                      'hvac = { Electricity')  # fmt: skip
+    path = tmp_path / "bad.toml"
+    path.write_text(bad)
+    with pytest.raises(SpecError) as e:
+        load_spec(path)
+    message = str(e.value)
+    for expected in ("reward.band.kitchen", "no band for", "kpis.tariff.Electricity", "kpis.emissions.Coal"):
+        assert expected in message
+    per_zone = text.replace(
+        'band = "thermostat"',
+        "band = { core_temp_c = [21.0, 24.0], perimeter_1_temp_c = [20.0, 25.0], perimeter_2_temp_c = [20.0, 25.0],"
+        " perimeter_3_temp_c = [20.0, 25.0], perimeter_4_temp_c = [19.0, 26.0] }",
+    )
+    path.write_text(per_zone)
+    spec = load_spec(path)
+    assert spec.reward.zone_bands[0] == (21.0, 24.0) and spec.reward.band == (19.0, 26.0)
+    assert spec.reward.tolerance == 0.0 and load_spec(spec_file("office-small")).reward.tolerance == 0.2
