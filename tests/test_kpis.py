@@ -111,7 +111,7 @@ def test_cost_under_a_day_night_tariff_is_the_hand_computation(baseline_episode,
 
 def test_spec_errors_name_the_bad_band_and_kpis(tmp_path):
     text = spec_file("office-small").read_text().replace("RefBldgSmallOfficeNew2004_Chicago.idf", str(OFFICE_IDF))
-    bad = text.replace('band = "thermostat"', 'band = { core_temp_c = [21.0, 24.0], kitchen = [20.0, 19.0] }')
+    bad = text.replace('band = "thermostat"', "band = { core_temp_c = [21.0, 24.0], kitchen = [20.0, 19.0] }")
     bad = bad.replace('hvac = { Electricity', 'tariff = { Electricity = "cheap" }\nemissions = { Coal = -1 }\n'
                       'hvac = { Electricity')  # fmt: skip
     path = tmp_path / "bad.toml"
@@ -130,3 +130,41 @@ def test_spec_errors_name_the_bad_band_and_kpis(tmp_path):
     spec = load_spec(path)
     assert spec.reward.zone_bands[0] == (21.0, 24.0) and spec.reward.band == (19.0, 26.0)
     assert spec.reward.tolerance == 0.0 and load_spec(spec_file("office-small")).reward.tolerance == 0.2
+
+
+@pytest.mark.slow
+def test_a_scenario_period_lies_where_its_definition_says(tmp_path, no_leaks):
+    """BOPTEST's days from the built-in controls' loads (here five weeks of January: days 14-34 are available), and
+    the run that scores one: a week of warm-up, then the two weeks centred on the day, on the same weekdays."""
+    from parallel_eplus.evaluation.scenarios import LOADS, find_days, loads, period
+
+    base = [Controller(BASELINE_LABEL, "baseline")]
+    df = run_sweep(base, ["CA"], 35, 1, tmp_path / "loads", None, False, "office-small", extra_outputs=LOADS)
+    year = Path(df["episode_dir"][0])
+    heat, cool = loads(year)
+    days = find_days(heat, cool)
+    day_of = (heat.index.normalize() - heat.index[0].normalize()).days
+    q = heat.resample("15min").mean()
+    q_day = (q.index.normalize() - heat.index[0].normalize()).days
+    assert q[q_day >= 14].idxmax().normalize() == heat.index[0].normalize() + pd.Timedelta(days=days["peak_heat"])
+    daily = heat.groupby(day_of).max()  # the typical day: the highest daily peak at or below the median
+    median = daily[daily > 1].median()
+    assert daily[days["typical_heat"]] <= median
+    assert (
+        days["typical_heat"] >= 14
+        and not (daily[(daily.index >= 14) & (daily <= median)] > daily[days["typical_heat"]]).any()
+    )
+
+    p = period("peak_heat", days["peak_heat"], heat.index[0].normalize().to_pydatetime())
+    assert (p.start_day, p.run_days, p.warmup_days) == (days["peak_heat"] - 13, 21, 7)
+    run = run_sweep(base, ["CA"], 1, 1, tmp_path / "period", None, False, "office-small", periods={"CA": p})
+    summary = json.loads((Path(run["episode_dir"][0]) / "summary.json").read_text())
+    first = heat.index[0].normalize() + pd.Timedelta(days=days["peak_heat"] - 7, minutes=10)
+    assert pd.Timestamp(summary["period_start"]) == first  # the two weeks begin 7 days before the day
+    assert pd.Timestamp(summary["period_end"]) == first + pd.Timedelta(days=14, minutes=-10)
+    assert summary["steps"] == 14 * 144 and summary["warmup_days"] == 7
+    steps = pd.read_parquet(Path(run["episode_dir"][0]) / "steps.parquet").set_index("time")
+    before = pd.read_parquet(year / "steps.parquet").set_index("time")
+    shared = steps.index.intersection(before.index)
+    assert len(shared) > 7 * 144  # the same dates, on the same weekdays: the schedules fall as they did
+    assert (steps.loc[shared, "setpoint_htgsetp_sch"] == before.loc[shared, "setpoint_htgsetp_sch"]).all()

@@ -50,6 +50,11 @@ class SimulationConfig:
     extra_outputs: tuple[tuple[str, str], ...] = ()
     # What the reward's energy term counts (energy, hvac, cost, emissions; buildings/kpis.py). None: the spec's.
     objective: str | None = None
+    # A test period (evaluation/scenarios.py): the run starts on this day of the year, on this weekday (None: the
+    # model's own), and its first `warmup_days` are simulated but left out of the episode's figures.
+    start_day: int = 1
+    start_weekday: str | None = None
+    warmup_days: int = 0
 
 
 RESIDUAL_SPACES = ("action", "demand")

@@ -78,6 +78,8 @@ class Simulation:
         named = self.building.spec.weathers  # the spec's short names, then codes and .epw paths
         self.weather_paths = [named.get(w) or resolve_weather(w) for w in self.weathers]  # fail before spawning
         self.steps_per_episode = config.run_days * self.building.steps_per_day
+        if config.warmup_days >= config.run_days and config.warmup_days:
+            raise ValueError(f"warmup_days ({config.warmup_days}) must be fewer than run_days ({config.run_days})")
         self.low = tuple(e.low for e in self.elements)
         self.high = tuple(e.high for e in self.elements)
         self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
@@ -155,7 +157,10 @@ class Simulation:
         label = weather_label(self.weather)
         self.episode_dir, self._number = claim_episode_dir(self.output_dir, label, self._number + 1)
         cfg = self.config
-        prepare_idf(self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
+        prepare_idf(
+            self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
+            cfg.start_day, cfg.start_weekday,
+        )  # fmt: skip
         link_or_copy(epw, self.episode_dir / epw.name)
         args = [
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
@@ -295,7 +300,14 @@ class Simulation:
         }
         if self.config.building:  # what `plot` reads the episode's signals from (none: the data center)
             extra["building"] = str(self.building.spec.path)
-        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, self.comfort)
+        steps = self.records.frame()
+        scored = None
+        if self.config.warmup_days:  # a test period: its figures leave out the warm-up before it
+            scored = steps.iloc[self.config.warmup_days * self.building.steps_per_day :]
+            if len(scored):
+                extra |= {"warmup_days": self.config.warmup_days, "period_start": str(scored["time"].iloc[0]),
+                          "period_end": str(scored["time"].iloc[-1])}  # fmt: skip
+        self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored)
         self.records = None
         if prune:
             self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)

@@ -149,8 +149,13 @@ def run_sweep(
     backend: str = "local",
     ray_address: str | None = None,
     keep_going: bool = False,
+    periods: dict | None = None,
+    extra_outputs: tuple[tuple[str, str], ...] = (),
 ) -> pd.DataFrame:
     """One episode per (controller, weather), up to `workers` at once; returns results.csv's table.
+
+    `periods`: weather -> a test period (evaluation/scenarios.py) run instead of `run_days` from January 1;
+    `extra_outputs`: (key, variable) pairs EnergyPlus reports every step in each episode's eplusout.csv.
 
     `backend` "ray": each episode is a Ray task (ray_sweep.py), on `ray_address`'s cluster or a local Ray.
 
@@ -178,8 +183,15 @@ def run_sweep(
             c.make(building)
     controllers = unique_labels(controllers)
     jobs = [(c, _job_config(c, w, building, run_days, reward, out_dir)) for c in controllers for w in weathers]
+    for _, cfg in jobs:
+        cfg.extra_outputs = extra_outputs
+        p = (periods or {}).get(weather_label(cfg.weather))
+        if p is not None:
+            cfg.run_days, cfg.start_day, cfg.start_weekday, cfg.warmup_days = (
+                p.run_days, p.start_day, p.weekday, p.warmup_days
+            )  # fmt: skip
     steps_per_day = load_building(building).steps_per_day
-    total_steps = len(jobs) * run_days * steps_per_day
+    total_steps = sum(cfg.run_days for _, cfg in jobs) * steps_per_day
     band = _band_columns(building)
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:

@@ -147,6 +147,7 @@ class TrainConfig:
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
     comfort: ComfortConstraint = field(default_factory=ComfortConstraint)  # --comfort-target (training/lagrangian.py)
+    objective: str | None = None  # --objective: energy, hvac, cost, emissions (buildings/kpis.py); None: the spec's
     init_from_baseline: bool = False  # imitate the building's own controls first (training/imitation.py)
     imitation: ImitationSettings = field(default_factory=ImitationSettings)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)

@@ -60,6 +60,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         rbc_target_c=cfg.rbc_target_c,
         step_timeout_s=cfg.step_timeout_s,
         comfort_margin_c=cfg.comfort.margin_c if cfg.constrained else None,
+        objective=cfg.objective,
     )
     shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
