@@ -168,3 +168,29 @@ def test_a_scenario_period_lies_where_its_definition_says(tmp_path, no_leaks):
     shared = steps.index.intersection(before.index)
     assert len(shared) > 7 * 144  # the same dates, on the same weekdays: the schedules fall as they did
     assert (steps.loc[shared, "setpoint_htgsetp_sch"] == before.loc[shared, "setpoint_htgsetp_sch"]).all()
+
+
+@pytest.mark.slow
+def test_the_objective_sets_what_the_reward_pays_for(tmp_path, no_leaks):
+    """`objective = "cost"`: the reward's energy term is each fuel's HVAC watts priced relative to electricity (here
+    day 0.30, night 0.10: a mean of 0.2375), so the night's electricity costs less than the day's."""
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
+
+    spec = office_spec(tmp_path, TARIFF)
+    sim = Simulation(SimulationConfig(weather="CA", building=str(spec), run_days=1, objective="cost"))
+    weight = sim.config.reward.power_weight
+    try:
+        sim.start()
+        for _ in range(30):
+            sim.send(np.zeros(2))
+            _, _, _, info = sim.receive()
+            start = info["time"] - pd.Timedelta(minutes=10)
+            price = 0.30 if 7 <= start.hour < 22 else 0.10
+            mean = (15 * 0.30 + 9 * 0.10) / 24
+            expected = (info["hvac_power_w"] * price + info["hvac_naturalgas_w"] * 0.05) / mean
+            assert info["reward_power"] == pytest.approx(-weight * expected)
+    finally:
+        sim.close()
+    with pytest.raises(ValueError, match="objective 'nonsense'"):
+        Simulation(SimulationConfig(building=str(spec), objective="nonsense"))

@@ -26,6 +26,7 @@ from parallel_eplus.buildings.model import (
 )
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import reward
+from parallel_eplus.buildings.spec import OBJECTIVES
 from parallel_eplus.buildings.weather import resolve_weather, weather_label
 from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
@@ -63,6 +64,8 @@ class Simulation:
         self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
         self.comfort = self.building.comfort  # zones, band, when it applies, energy (buildings/comfort.py)
         if config.objective and config.objective != self.comfort.objective:
+            if config.objective not in OBJECTIVES:
+                raise ValueError(f"objective {config.objective!r} is not one of {list(OBJECTIVES)}")
             if self.comfort.kpis is None and config.objective != "energy":
                 raise ValueError(f"objective {config.objective!r} needs the building's HVAC signals ([kpis] hvac)")
             self.comfort = dataclasses.replace(self.comfort, objective=config.objective)
