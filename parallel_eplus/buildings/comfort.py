@@ -113,7 +113,7 @@ class Comfort:
         return n, dist
 
     def cost(self, temps: tuple[float, ...], margin_c: float, bounds=None) -> tuple[float, int]:
-        """A step's comfort cost where the band applies (training/lagrangian.py): per zone 0 inside its bounds
+        """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside its bounds
         shrunk by `margin_c` on each side, rising linearly to 1 at their edge and 1 beyond, averaged over the zones;
         and the number of zones outside the bounds themselves. `bounds`: this step's (`bounds`); None: fixed."""
         total, out = 0.0, 0
