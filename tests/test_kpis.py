@@ -15,7 +15,8 @@ import pytest
 
 from parallel_eplus.buildings.resources import model_file, spec_file
 from parallel_eplus.buildings.spec import SpecError, load_spec
-from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+from parallel_eplus.evaluation.sweep import run_sweep
 
 OFFICE_IDF = model_file("RefBldgSmallOfficeNew2004_Chicago.idf")
 

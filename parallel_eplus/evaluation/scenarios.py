@@ -92,7 +92,8 @@ def find_periods(
     """Each weather's period for `scenario`, from a year of the built-in controls (run once per weather and kept in
     `out_dir/scenarios.json` with every scenario's day, so other scenarios reuse it)."""
     from parallel_eplus.buildings.weather import weather_label
-    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
 
     path = out_dir / PERIODS_FILE
     known = json.loads(path.read_text()) if path.is_file() else {}
