@@ -195,3 +195,22 @@ def test_the_objective_sets_what_the_reward_pays_for(tmp_path, no_leaks):
         sim.close()
     with pytest.raises(ValueError, match="objective 'nonsense'"):
         Simulation(SimulationConfig(building=str(spec), objective="nonsense"))
+
+
+def test_results_give_boptest_figures_beside_their_ratio_to_the_built_in(tmp_path):
+    from parallel_eplus.evaluation.building_table import write_results
+
+    rows = []
+    for c, hvac, cost in ((BASELINE_LABEL, 4000.0, 400.0), ("Learned", 3000.0, 360.0)):
+        rows.append({"controller": c, "weather": "CA", "power_kw": 5.0, "reward_mean": 0.0, "energy_kwh": 40000.0,
+                     "peak_power_kw": 10.0, "discomfort_kh": 1.0, "core_in_band_pct": 99.0, "in_band_pct": 99.0,
+                     "hvac_energy_kwh": hvac, "cost": cost, "emissions_kg": 1000.0, "floor_area_m2": 500.0,
+                     "hvac_energy_kwh_m2": hvac / 500, "energy_kwh_m2": 80.0, "cost_m2": cost / 500,
+                     "emissions_kg_m2": 2.0, "hvac_electricity_peak_kw_m2": 0.01})  # fmt: skip
+    write_results(pd.DataFrame(rows), tmp_path, BASELINE_LABEL)
+    text = (tmp_path / "results.md").read_text()
+    assert "× built-in" in text and "per m² of the model's 500 m² floor" in text
+    assert "| Learned | CA | 6.00 | 0.750 | 80.00 | 1.000 | 0.720 | 0.900 |" in text
+    table = pd.read_csv(tmp_path / "results.csv").set_index("controller")
+    assert table.loc["Learned", "hvac_energy_kwh_vs_builtin"] == pytest.approx(0.75)
+    assert table.loc["Learned", "cost_vs_builtin"] == pytest.approx(0.9)

@@ -97,6 +97,20 @@ BOPTEST = (
 )
 
 
+RATIOS = ("hvac_energy_kwh", "energy_kwh", "cost", "emissions_kg", "discomfort_kh")
+
+
+def with_ratios(df: pd.DataFrame, baseline: str) -> pd.DataFrame:
+    """`<figure>_vs_builtin` columns: each BOPTEST figure over the built-in controls' mean on the same weather."""
+    if baseline not in set(df["controller"]):
+        return df
+    df = df.copy()
+    base = df[df.controller == baseline].groupby("weather")
+    for key in (k for k in RATIOS if k in df.columns):
+        df[f"{key}_vs_builtin"] = df[key] / df["weather"].map(base[key].mean())
+    return df
+
+
 def boptest_markdown(df: pd.DataFrame, baseline: str) -> str:
     """BOPTEST's figures per controller and weather, each beside its ratio to the built-in controls (CityLearn's
     normalization: 1.00 is the built-in's own), then averaged over the weathers every controller finished."""
@@ -155,7 +169,7 @@ def write_results(
     table (seeds.py) of controllers with several runs."""
     from parallel_eplus.evaluation import seeds
 
-    full = df if full is None else full
+    full = with_ratios(df if full is None else full, baseline)
     out_dir.mkdir(parents=True, exist_ok=True)
     full.to_csv(out_dir / "results.csv", index=False)
     extra = seeds.seeds_markdown(across) if across is not None else ""
