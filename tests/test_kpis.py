@@ -214,3 +214,24 @@ def test_results_give_boptest_figures_beside_their_ratio_to_the_built_in(tmp_pat
     table = pd.read_csv(tmp_path / "results.csv").set_index("controller")
     assert table.loc["Learned", "hvac_energy_kwh_vs_builtin"] == pytest.approx(0.75)
     assert table.loc["Learned", "cost_vs_builtin"] == pytest.approx(0.9)
+
+
+@pytest.mark.slow
+def test_training_reports_each_episode_beside_the_built_in(tmp_path, no_leaks):
+    """With `--init-from-baseline` the built-in controls' figures are at hand: every training episode's HVAC energy,
+    cost, emissions and discomfort go to episodes.csv and TensorBoard also as ratios to them."""
+    from parallel_eplus.training.config import TrainConfig
+    from parallel_eplus.training.train import train
+
+    cfg = TrainConfig(
+        workers=1, weathers=["CA"], building="office-small", run_days=1, timesteps=288, batch_size=144,
+        run_name="ratios", runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
+        init_from_baseline=True,
+    )  # fmt: skip
+    train(cfg, progress=False)
+    run = tmp_path / "runs" / "ratios"
+    builtin = pd.read_csv(run / "builtin.csv").iloc[0]
+    episodes = pd.read_csv(run / "episodes.csv")
+    assert len(episodes) >= 1
+    for key in ("hvac_energy_kwh", "cost", "emissions_kg"):
+        assert np.allclose(episodes[f"{key}_vs_builtin"], episodes[key] / builtin[key])

@@ -36,7 +36,13 @@ from parallel_eplus.runs.policy_files import (
 )
 from parallel_eplus.runs.run_names import claim_run_name
 from parallel_eplus.runs.run_status import RunStatus
-from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather, tensorboard_logger
+from parallel_eplus.training.callbacks import (
+    BUILTIN_FILE,
+    EpisodeMetrics,
+    UpdateTimer,
+    episodes_per_weather,
+    tensorboard_logger,
+)
 from parallel_eplus.training.config import TrainConfig
 
 log = logging.getLogger(__name__)
@@ -213,6 +219,8 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
     work = cfg.run_dir / "baseline-record"
     demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, work,
                             (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
+    if days == cfg.run_days and demos.builtin:  # the built-in's figures: episodes' ratios to them (callbacks.py)
+        io.write_text(cfg.run_dir / BUILTIN_FILE, pd.DataFrame(demos.builtin).to_csv(index=False))
     building = load_building(cfg.building)
     regulated = [building.sensor_names.index(t) for t in building.temperatures]
     report = clone(model, env, demos, cfg.imitation, cfg.seed, regulated, building.band)
