@@ -67,6 +67,10 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         step_timeout_s=cfg.step_timeout_s,
         comfort_margin_c=cfg.comfort.margin_c if cfg.constrained else None,
         objective=cfg.objective,
+        weather_noise=cfg.weather_noise,
+        seed=cfg.seed,
+        forecast_hours=cfg.forecast_hours,
+        forecast_error=cfg.forecast_error,
     )
     shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
@@ -218,7 +222,7 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
     days = cfg.imitation.run_days or cfg.run_days
     work = cfg.run_dir / "baseline-record"
     demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, work,
-                            (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
+                            (cfg.time_features, cfg.schedule_features), progress, cfg.forecast_hours)  # fmt: skip
     if days == cfg.run_days and demos.builtin:  # the built-in's figures: episodes' ratios to them (callbacks.py)
         io.write_text(cfg.run_dir / BUILTIN_FILE, pd.DataFrame(demos.builtin).to_csv(index=False))
     building = load_building(cfg.building)
