@@ -69,7 +69,8 @@ class EpisodeStarter:
         cfg, model = self.config, episode_dir / MODEL_FILE
         try:
             if self._model is None:  # tokenized once (~20 ms), written each time
-                prepare_idf(self.idf, model, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
+                prepare_idf(self.idf, model, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs, cfg.start_day,
+                            cfg.start_weekday)  # fmt: skip
                 self._model = model.read_bytes()
             else:
                 model.write_bytes(self._model)
