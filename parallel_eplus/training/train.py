@@ -55,6 +55,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         model=cfg.model,
         building=cfg.building,
         run_days=cfg.run_days,
+        prepare_next=cfg.prepare_next,
         output_dir=str(cfg.run_dir / "episodes"),
         keep_episodes=cfg.keep_episodes,
         energyplus_csv=False,  # the kept episodes' records are steps.parquet
