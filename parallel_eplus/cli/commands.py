@@ -168,6 +168,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         BASELINE_LABEL,
         RBC_LABEL,
         Controller,
+        http_controller,
         policy_controllers,
         run_sweep,
     )
@@ -186,8 +187,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
     controllers += [c for p in args.policy or [] for c in policy_controllers(p)]
+    controllers += [http_controller(url) for url in args.controller_url or []]
     if not controllers:
-        raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
+        raise ValueError(
+            "nothing to evaluate: give --baseline, --rbc, --rbc-targets, --policy PATH and/or --controller-url URL"
+        )
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),

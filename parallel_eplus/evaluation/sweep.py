@@ -38,7 +38,7 @@ class Controller:
     """One column of the paper's table: a label and how it acts."""
 
     label: str
-    kind: str  # "baseline", "policy" or "rbc"
+    kind: str  # "baseline", "policy", "rbc" or "http" (a served controller: `url`)
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
     schedule_features: bool = False  # and model.SCHEDULE_FEATURES
@@ -47,6 +47,7 @@ class Controller:
     residual_space: str = "action"  # what the correction applies to (SimulationConfig)
     building: str | None = None  # the spec a policy was trained on (its config.json); None: the data center
     run: str = ""  # a policy's training run (its folder's name): policies sharing a label are one recipe's runs
+    url: str | None = None  # "http": where `parallel-eplus serve` answers
 
     @property
     def model(self) -> str:
@@ -64,6 +65,10 @@ class Controller:
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
+        if self.kind == "http":
+            from parallel_eplus.evaluation.http_controller import HttpController
+
+            return HttpController(self.url)
         from parallel_eplus.training.policy_files import load_policy
 
         act = load_policy(self.path)
@@ -121,6 +126,20 @@ def policy_controller(spec: str) -> Controller:
     )  # fmt: skip
 
 
+def http_controller(url: str) -> Controller:
+    """A controller served at `url`, labelled by its contract's algorithm and run; it acts in the building it was
+    exported for (the features it observes are computed by the server from each step's time)."""
+    from parallel_eplus.evaluation.http_controller import HttpController
+
+    client = HttpController(url)
+    try:
+        policy = client.contract["policy"]
+        label = f"{policy['algorithm'].upper()} via HTTP ({policy['run']})"
+        return Controller(label, "http", building=client.building(), run=str(policy["run"]), url=url)
+    finally:
+        client.close()
+
+
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
     """Policies sharing a label from different runs are one recipe's runs (seeds); any other repeat is renamed."""
     seen: dict[str, list[Controller]] = {}
@@ -166,10 +185,11 @@ def run_sweep(
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
     for c in controllers:  # a policy acts only in the building it was trained on
-        trained = str(load_building(c.building).spec.path) if c.kind == "policy" and c.building else None
-        if c.kind == "policy" and trained != (building or None):
+        acting = c.kind in ("policy", "http")
+        trained = str(load_building(c.building).spec.path) if acting and c.building else None
+        if acting and trained != (building or None):
             raise ValueError(
-                f"{c.path} was trained on building {c.building or 'datacenter-2zone (default)'}, "
+                f"{c.path or c.url} was trained on building {c.building or 'datacenter-2zone (default)'}, "
                 f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"
             )
     weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs
