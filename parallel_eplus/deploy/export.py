@@ -38,7 +38,7 @@ def model_file(path: Path) -> Path:
 
 
 def run_settings(model_zip: Path) -> dict:
-    from parallel_eplus.training.policy_files import run_dir_of
+    from parallel_eplus.runs.policy_files import run_dir_of
 
     config = run_dir_of(model_zip) / "config.json"
     return json.loads(config.read_text()) if config.is_file() else {}
@@ -111,7 +111,7 @@ def _sha256(path: Path) -> str:
 
 def _results(model_zip: Path) -> dict:
     """The training run's last episode per weather, as episodes.csv recorded it."""
-    from parallel_eplus.training.policy_files import run_dir_of
+    from parallel_eplus.runs.policy_files import run_dir_of
 
     path = run_dir_of(model_zip) / "episodes.csv"
     if not path.is_file():
@@ -128,9 +128,9 @@ def _results(model_zip: Path) -> dict:
 
 def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
     """The graph's arrays and the contract of a saved policy (refused when it cannot act alone)."""
-    from parallel_eplus.training.norm_stats import read_stats
-    from parallel_eplus.training.policy_files import policy_features, require_policy_files, saved_shapes
-    from parallel_eplus.training.safe_load import load_policy_network
+    from parallel_eplus.runs.norm_stats import read_stats
+    from parallel_eplus.runs.policy_files import policy_features, require_policy_files, saved_shapes
+    from parallel_eplus.runs.safe_load import load_policy_network
 
     stats_file = require_policy_files(model_zip)
     saved = run_settings(model_zip)
@@ -202,7 +202,7 @@ def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
 
 def reference_actions(model_zip: Path, observations: np.ndarray) -> np.ndarray:
     """Physical setpoints as `evaluate --policy` computes them in process, one observation at a time."""
-    from parallel_eplus.training.policy_files import load_policy
+    from parallel_eplus.runs.policy_files import load_policy
 
     act = load_policy(model_zip)
     saved = run_settings(model_zip)
