@@ -93,8 +93,10 @@ def build_model(p: PolicyArrays, doc: str = "") -> onnx.ModelProto:
         else:
             raise ValueError(f"layer {layer.op!r} has no ONNX form here")
     one = b.const("one", 1.0)
-    if p.squash:
-        x = b.op("Tanh", [x])
+    if p.squash:  # SAC: tanh, then onto the [-1, 1] action space as SB3's predict does: -1 + 0.5 * (a + 1) * 2
+        x = b.op("Mul", [b.op("Mul", [b.const("half_", 0.5), b.op("Add", [b.op("Tanh", [x]), one])]),
+                         b.const("two", 2.0)])  # fmt: skip
+        x = b.op("Add", [b.const("minus_one_", -1.0), x])
     x = b.op("Max", [b.op("Min", [x, one]), b.const("minus_one", -1.0)])  # the action space; then check_action's
     x = b.float32_round(x)  # the policy's action is float32
     # scale_action: lo + (v + 1) * 0.5 * (hi - lo), in that order
