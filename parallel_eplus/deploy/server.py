@@ -76,9 +76,12 @@ def create_app(directory: Path) -> FastAPI:
 
     @app.get("/health")
     def health() -> dict:
+        import sys
+
         return {
             "status": "ok", "building": contract.data["building"]["name"], "run": contract.data["policy"]["run"],
             "uptime_s": round(time.time() - started, 1), **served,
+            "loaded": {m: m in sys.modules for m in ("onnxruntime", "torch", "stable_baselines3")},
         }  # fmt: skip
 
     @app.get("/contract")
