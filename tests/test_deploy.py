@@ -202,12 +202,13 @@ def get(url: str) -> dict:
 
 
 @pytest.fixture
-def served(controller):
-    """`parallel-eplus serve` in its own process."""
+def served(controller, tmp_path):
+    """`parallel-eplus serve` in its own process (its log in a file: a pipe nobody reads would fill up)."""
     port = free_port()
+    log = tmp_path / "server.log"
     proc = subprocess.Popen(
         [sys.executable, "-m", "parallel_eplus.cli", "serve", str(controller), "--port", str(port)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        stdout=log.open("w"), stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
     url = f"http://127.0.0.1:{port}"
     try:
@@ -218,9 +219,9 @@ def served(controller):
                 break
             except OSError:
                 if proc.poll() is not None or time.monotonic() > deadline:
-                    raise AssertionError(f"the server did not start: {proc.stdout.read()}") from None
+                    raise AssertionError(f"the server did not start: {log.read_text()}") from None
                 time.sleep(0.2)
-        yield url, proc
+        yield url, log
     finally:
         proc.terminate()
         proc.wait(timeout=30)
@@ -228,7 +229,7 @@ def served(controller):
 
 @pytest.mark.slow
 def test_closed_loop_through_the_server_equals_the_in_process_episode_step_by_step(tmp_path, served, no_leaks):
-    url, proc = served
+    url, log = served
     health = get(url + "/health")
     assert health["loaded"] == {"onnxruntime": True, "torch": False, "stable_baselines3": False}
     policy = policy_controller(str(MODELS / "paper-ca-co-fl-time"))
@@ -240,6 +241,7 @@ def test_closed_loop_through_the_server_equals_the_in_process_episode_step_by_st
     figures = ["power_kw", "in_band_pct", "west_temp_mean", "east_temp_mean"]
     assert df[figures].iloc[0].tolist() == pytest.approx(df[figures].iloc[1].tolist(), rel=1e-9)
     assert get(url + "/health")["act"] == 96
+    assert log.read_text().count("POST /act 200") == 96  # every request logged
     assert not get(url + "/health")["loaded"]["torch"]
     assert math.isfinite(health["uptime_s"])
     assert np.isfinite(in_process.west_setpoint_c).all()
