@@ -245,3 +245,34 @@ def test_closed_loop_through_the_server_equals_the_in_process_episode_step_by_st
     assert not get(url + "/health")["loaded"]["torch"]
     assert math.isfinite(health["uptime_s"])
     assert np.isfinite(in_process.west_setpoint_c).all()
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "parallel_eplus.cli", *args], capture_output=True, text=True, timeout=300
+    )
+
+
+@pytest.mark.slow
+def test_evaluate_with_no_server_at_the_url_says_so(tmp_path):
+    r = cli(
+        "evaluate", "--controller-url", f"http://127.0.0.1:{free_port()}", "--run-days", "1", "--out", str(tmp_path)
+    )
+    assert r.returncode == 2 and "is it serving?" in r.stderr
+    r = cli("evaluate", "--controller-url", "ftp://host", "--out", str(tmp_path))
+    assert r.returncode == 2 and "give http://HOST:PORT" in r.stderr
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_export_command_writes_both_files_and_refuses_what_it_cannot_export(tmp_path):
+    r = cli("export", str(MODELS / "ppo-ca-co-fl-time"), "-o", str(tmp_path / "ppo"))
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (tmp_path / "ppo").iterdir()) == ["controller.json", "controller.onnx"]
+    assert Contract.read(tmp_path / "ppo").data["policy"]["algorithm"] == "ppo"
+    r = cli("export", str(MODELS / "residual-demand"), "-o", str(tmp_path / "res"))
+    assert r.returncode == 2 and "corrects the rule-based controller" in r.stderr
+    r = cli("export", str(tmp_path / "nothing"), "-o", str(tmp_path / "x"))
+    assert r.returncode == 2 and "no trained policy" in r.stderr
+    r = cli("serve", str(tmp_path / "nothing"))
+    assert r.returncode == 2 and "controller.json not found" in r.stderr
