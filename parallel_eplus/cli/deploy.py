@@ -19,7 +19,16 @@ def add_commands(sub) -> None:
     se.set_defaults(func=cmd_serve)
 
 
+def _needs(extra: str, error: ImportError) -> ValueError:
+    return ValueError(f"{error.name} is not installed: pip install 'parallel-eplus[{extra}]' (scripts/setup.sh does)")
+
+
 def cmd_export(args: argparse.Namespace) -> int:
+    try:
+        import onnx  # noqa: F401
+        import onnxruntime  # noqa: F401
+    except ImportError as e:
+        raise _needs("export", e) from None
     from parallel_eplus.deploy.export import export
 
     path = export(args.policy, args.out)
@@ -28,7 +37,10 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from parallel_eplus.deploy.server import serve  # no torch: the server imports onnxruntime and the contract only
+    try:
+        from parallel_eplus.deploy.server import serve  # no torch: onnxruntime, FastAPI and the contract only
+    except ImportError as e:
+        raise _needs("serve", e) from None
 
     serve(args.controller, args.host, args.port)
     return 0

@@ -157,7 +157,8 @@ def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
         float(stats.clip_obs), layers, squash,
         np.array([a.low for a in building.actions], float), np.array([a.high for a in building.actions], float),
     )  # fmt: skip
-    assert len(obs_low) == n_obs, (len(obs_low), n_obs)
+    if len(obs_low) != n_obs:
+        raise ValueError(f"{model_zip} observes {n_obs} values; its building and features make {len(obs_low)}")
     spec = building.spec
     inputs = [
         {"name": s.name, "source": "sensor", "variable": s.variable, "key": s.key, "meter": s.meter,

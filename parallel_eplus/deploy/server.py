@@ -7,8 +7,10 @@ JSON names the field (`{"error", "field"}`), never a crash; every request is log
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -49,8 +51,6 @@ def create_app(directory: Path) -> FastAPI:
     onnx_path = directory / contract.data["onnx"].get("file", ONNX_FILE)
     if not onnx_path.is_file():
         raise FileNotFoundError(f"{onnx_path} not found beside {directory / 'controller.json'}")
-    import hashlib
-
     expected = contract.data["onnx"].get("sha256")
     if expected and hashlib.sha256(onnx_path.read_bytes()).hexdigest() != expected:
         raise ValueError(f"{onnx_path} is not the file its contract was written for (sha256 differs): export again")
@@ -76,8 +76,6 @@ def create_app(directory: Path) -> FastAPI:
 
     @app.get("/health")
     def health() -> dict:
-        import sys
-
         return {
             "status": "ok", "building": contract.data["building"]["name"], "run": contract.data["policy"]["run"],
             "uptime_s": round(time.time() - started, 1), **served,

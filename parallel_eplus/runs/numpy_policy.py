@@ -178,14 +178,20 @@ def squashed_mean(policy):
     so both give the same setpoints. None for anything but a plain MLP actor (torch then acts)."""
     from stable_baselines3.sac.policies import SACPolicy
 
-    if type(policy) is not SACPolicy or policy.actor.use_sde or type(policy.actor.features_extractor) is not FlattenExtractor:
+    if (
+        type(policy) is not SACPolicy
+        or policy.actor.use_sde
+        or type(policy.actor.features_extractor) is not FlattenExtractor
+    ):
         return None
     steps: list[tuple] = []
     for m in [*policy.actor.latent_pi, policy.actor.mu]:
         if type(m) is th.nn.Linear and m.bias is not None:
             steps.append((m.weight.detach().double().numpy().T.copy(), m.bias.detach().double().numpy().copy()))
-        elif type(m) in (th.nn.ReLU, th.nn.Tanh):
-            steps.append((type(m),))
+        elif type(m) is th.nn.ReLU:
+            steps.append((lambda x: np.maximum(x, 0.0),))
+        elif type(m) is th.nn.Tanh:
+            steps.append((np.tanh,))
         else:
             return None
     low, high = (np.asarray(b, dtype=np.float64) for b in (policy.action_space.low, policy.action_space.high))
@@ -193,10 +199,7 @@ def squashed_mean(policy):
     def mean(obs: np.ndarray) -> np.ndarray:
         x = obs.reshape(len(obs), -1).astype(np.float64)
         for step in steps:
-            if len(step) == 2:
-                x = x @ step[0] + step[1]
-            else:
-                x = np.maximum(x, 0.0) if step[0] is th.nn.ReLU else np.tanh(x)
+            x = x @ step[0] + step[1] if len(step) == 2 else step[0](x)
         return low + 0.5 * (np.tanh(x) + 1.0) * (high - low)
 
     return mean
