@@ -8,13 +8,16 @@ the server. It writes:
 - results/deploy/closed_loop.md: the two runs' tables and step tables compared, and what a year costs over HTTP
   against in process (the two episodes' wall times, run side by side).
 
-    .venv/bin/python scripts/deploy_year.py [--days 365] [--other-days 365] [--weather CA]
+    .venv/bin/python scripts/deploy_year.py [--days 365] [--cases 0,1,2,3,4] [--weather CA]
+
+Each case's figures are kept in results/deploy/year.json; a run replaces the cases it ran and the tables show all.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime as dt
+import json
 import logging
 import os
 import socket
@@ -33,7 +36,7 @@ from parallel_eplus.evaluation.controllers import http_controller, policy_contro
 from parallel_eplus.evaluation.sweep import run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
-CASES = [  # (name, committed policy, building: None for the data center)
+CASES = [  # (name, committed policy, building: None for the data center); --cases picks by index
     ("TRPO, data center (time features)", "results/paper/models/paper-ca-co-fl-time", None),
     ("PPO, data center (time features)", "results/paper/models/ppo-ca-co-fl-time", None),
     ("SAC, data center", "results/compare/runs/sac", None),
@@ -73,19 +76,21 @@ def wall_s(episode_dir: Path) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--days", type=int, default=365, help="the first case's period (default a year)")
-    parser.add_argument("--other-days", type=int, default=365, help="the other cases' period (default a year)")
+    parser.add_argument("--days", type=int, default=365, help="each episode's period (default a year)")
+    parser.add_argument("--cases", default=",".join(str(i) for i in range(len(CASES))), help="indices into CASES")
     parser.add_argument("--weather", default="CA")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "deploy")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     from parallel_eplus.errors import Interrupts
 
-    parity, loop = [], []
+    store = args.out / "year.json"  # every case measured so far; a run updates the rows of the cases it ran
+    rows = json.loads(store.read_text()) if store.is_file() else {}
     with tempfile.TemporaryDirectory(prefix="deploy-year-") as tmp_text, Interrupts():
         tmp = Path(tmp_text)
-        for i, (name, model, building) in enumerate(CASES):
-            days = args.days if i == 0 else args.other_days
+        for i in [int(k) for k in args.cases.split(",")]:
+            name, model, building = CASES[i]
+            days = args.days
             controller_dir = tmp / f"controller-{i}"
             export(ROOT / model, controller_dir)
             url, proc = serve(controller_dir, tmp)
@@ -99,33 +104,37 @@ def main() -> None:
                 proc.wait(timeout=30)
             dirs = [Path(d) for d in df.episode_dir]
             local, http = (pd.read_parquet(d / "steps.parquet") for d in dirs)
-            parity.append((name, model, days, replay(controller_dir, local)))
+            result = replay(controller_dir, local)
             numeric = local.select_dtypes("number").columns
             step_diff = float((local[numeric] - http[numeric]).abs().max().max())
             figures = [f for f in FIGURES if f in df]
             same = bool(np.array_equal(*(df[figures].iloc[k].to_numpy(float) for k in (0, 1)), equal_nan=True))
             walls = [wall_s(d) for d in dirs]
-            loop.append(
-                (name, days, len(local), local.equals(http), step_diff, same, df[figures].iloc[0].to_dict(), walls)
-            )
+            rows[name] = {
+                "index": i, "model": model, "days": days, "parity": result, "steps": len(local),
+                "identical": bool(local.equals(http)), "step_diff": step_diff, "same_row": same,
+                "figures": df[figures].iloc[0].to_dict(), "walls": walls,
+                "when": f"{dt.datetime.now():%Y-%m-%d %H:%M}, load average {os.getloadavg()[0]:.1f}",
+            }  # fmt: skip
             log.info("%s: identical %s, in process %.0f s, over HTTP %.0f s", name, local.equals(http), *walls)
-            write(args, parity, loop)  # after each case: a stopped run keeps what it measured
+            args.out.mkdir(parents=True, exist_ok=True)
+            store.write_text(json.dumps(rows, indent=1))
+            write(args, rows)  # after each case: a stopped run keeps what it measured
 
 
-def write(args, parity, loop) -> None:
-    args.out.mkdir(parents=True, exist_ok=True)
-    when = (
-        f"{dt.date.today()}, {os.cpu_count()} cores shared with other sessions, load average {os.getloadavg()[0]:.1f}"
-    )
+def write(args, store: dict) -> None:
+    cases = sorted(store.values(), key=lambda r: r["index"])
+    when = "; ".join(f"{CASES[r['index']][0]}: {r['when']}" for r in cases)
     head = (
-        f"`python scripts/deploy_year.py --days {args.days} --other-days {args.other_days} --weather {args.weather}` "
-        f"({when})."
+        f"`python scripts/deploy_year.py --weather {args.weather}` on {os.cpu_count()} cores shared with other "
+        f"sessions (when: {when})."
     )
     rows = []
-    for name, model, days, r in parity:
+    for c in cases:
+        r = c["parity"]
         worst = max(r["max_abs_diff"].values())
         each = ", ".join(f"{k} {v:.1e}" for k, v in r["max_abs_diff"].items())
-        rows.append(f"| {name} | `{model}` | {days} | {r['steps']} | {worst:.1e} | {each} |")
+        rows.append(f"| {CASES[c['index']][0]} | `{c['model']}` | {c['days']} | {r['steps']} | {worst:.1e} | {each} |")
     (args.out / "parity.md").write_text("\n".join([
         "# Export parity over a year",
         "",
@@ -138,10 +147,11 @@ def write(args, parity, loop) -> None:
         *rows, "",
     ]))  # fmt: skip
     rows = [
-        f"| {name} | {days} | {n} | {'yes' if equal else 'no'} | {diff:.1e} | {'yes' if same else 'no'} | "
-        f"{figs.get('power_kw', float('nan')):.2f} | {figs.get('in_band_pct', float('nan')):.2f} | "
-        f"{walls[0]:.0f} | {walls[1]:.0f} | {walls[1] / walls[0]:.2f} |"
-        for name, days, n, equal, diff, same, figs, walls in loop
+        f"| {CASES[c['index']][0]} | {c['days']} | {c['steps']} | {'yes' if c['identical'] else 'no'} | "
+        f"{c['step_diff']:.1e} | {'yes' if c['same_row'] else 'no'} | {c['figures'].get('power_kw', float('nan')):.2f}"
+        f" | {c['figures'].get('in_band_pct', float('nan')):.2f} | {c['walls'][0]:.0f} | {c['walls'][1]:.0f} | "
+        f"{c['walls'][1] / c['walls'][0]:.2f} |"
+        for c in cases
     ]
     (args.out / "closed_loop.md").write_text("\n".join([
         "# Closed loop through the controller server",
