@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import socket
 import subprocess
 import sys
@@ -11,7 +10,6 @@ import time
 import urllib.request
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 
@@ -237,14 +235,12 @@ def test_closed_loop_through_the_server_equals_the_in_process_episode_step_by_st
     assert df.controller.tolist() == ["TRPO (CA-CO-FL)", "TRPO via HTTP (paper-ca-co-fl-time)"]
     in_process, over_http = (pd.read_parquet(Path(d) / "steps.parquet") for d in df.episode_dir)
     assert len(in_process) == 96
-    pd.testing.assert_frame_equal(in_process, over_http, check_exact=False, rtol=1e-9, atol=1e-9)
+    pd.testing.assert_frame_equal(in_process, over_http, check_exact=True)  # every reading and setpoint, every step
     figures = ["power_kw", "in_band_pct", "west_temp_mean", "east_temp_mean"]
-    assert df[figures].iloc[0].tolist() == pytest.approx(df[figures].iloc[1].tolist(), rel=1e-9)
+    assert df[figures].iloc[0].tolist() == df[figures].iloc[1].tolist()
     assert get(url + "/health")["act"] == 96
     assert log.read_text().count("POST /act 200") == 96  # every request logged
     assert not get(url + "/health")["loaded"]["torch"]
-    assert math.isfinite(health["uptime_s"])
-    assert np.isfinite(in_process.west_setpoint_c).all()
 
 
 def cli(*args: str) -> subprocess.CompletedProcess:
