@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from parallel_eplus.buildings import resources
+from parallel_eplus.buildings.forecast import ForecastSpec
 
 REWARD_KEYS = ("center", "lower", "upper", "gaussian_weight", "band_weight", "power_weight")
 WEEKDAYS = ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")
@@ -125,6 +126,9 @@ class BuildingSpec:
     schedule_features: bool = False
     timesteps_per_hour: int | None = None  # None: the IDF's Timestep
     baseline_idf: Path | None = None  # the model with its own controls, for evaluation; None: `idf` itself
+    # Observations that are forecasts of the episode's weather file (`forecast = "drybulb"` entries), computed on
+    # the learner's side after the sensors and the opt-in features (buildings/forecast.py).
+    forecasts: tuple[ForecastSpec, ...] = ()
 
 
 def _close(value: str, names) -> str:
@@ -191,8 +195,12 @@ def load_spec(path: str | Path) -> BuildingSpec:
     baseline_idf = _resolve(path, data["baseline_idf"], "baseline_idf", errors) if "baseline_idf" in data else None
 
     observations = []
+    forecasts = []
     for i, t in enumerate(data.get("observations", [])):
         where = f"observations[{i}]."
+        if "forecast" in t:
+            forecasts += _forecast(t, where, errors)
+            continue
         n = need(t, "name", where)
         low, high = bounds(t, where)
         if ("meter" in t) == ("variable" in t):
@@ -281,7 +289,31 @@ def load_spec(path: str | Path) -> BuildingSpec:
         bool(data.get("schedule_features", False)),
         data.get("timesteps_per_hour"),
         baseline_idf,
+        tuple(forecasts),
     )
+
+
+FORECAST_KEYS = {"name", "forecast", "hours", "steps", "stride", "error", "low", "high"}
+
+
+def _forecast(t: dict[str, Any], where: str, errors: list[str]) -> list[ForecastSpec]:
+    """`{ name = "outdoor_next", forecast = "drybulb", hours = 6 }`: the next 6 hours of the EPW's dry bulb;
+    `steps = 8` instead counts control steps; `stride` (default 1, in the same unit); `error = "low"`, "medium"
+    or "high" adds BOPTEST's forecast error; `low`/`high`: the bounds (default the EPW's, -70 and 70)."""
+    unknown = sorted(set(t) - FORECAST_KEYS)
+    if unknown:
+        errors.append(f"{where[:-1]}: unknown key(s) {unknown}; a forecast takes {sorted(FORECAST_KEYS)}")
+    if ("hours" in t) == ("steps" in t):
+        errors.append(f"{where[:-1]}: a forecast gives either hours or steps (how many values)")
+        return []
+    count = t.get("hours", t.get("steps"))
+    try:
+        return [ForecastSpec(str(t.get("name", t["forecast"])), str(t["forecast"]), int(count),
+                             float(t.get("stride", 1)), "steps" in t, t.get("error"),
+                             float(t.get("low", -70.0)), float(t.get("high", 70.0)))]  # fmt: skip
+    except (ValueError, TypeError) as e:
+        errors.append(f"{where}forecast: {e}")
+        return []
 
 
 def _occupancy(table: Any, observations: list[Observation], errors: list[str]) -> Occupancy | None:

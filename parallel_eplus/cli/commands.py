@@ -124,6 +124,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         reward=RewardConfig.from_any(args.reward),
         comfort=ComfortConstraint(target_pct=args.comfort_target, margin_c=args.comfort_margin),
         init_from_baseline=args.init_from_baseline,
+        weather_noise=args.weather_noise,
+        forecast_hours=args.forecast,
+        forecast_error=args.forecast_error,
         trpo=TRPOSettings(
             log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
         ),  # fmt: skip
@@ -177,6 +180,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     weathers = (
         [w.strip() for w in args.weathers.split(",") if w.strip()] if args.building else parse_weathers(args.weathers)
     )
+    if args.building and args.weathers.strip().lower() == "all":
+        weathers = parse_weathers("all")
     if args.workers < 1 or not 1 <= args.run_days <= 365:
         raise ValueError("--workers must be at least 1 and --run-days within 1..365")
     controllers = []
@@ -196,6 +201,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
         not args.quiet, args.building, args.backend, args.ray_address, keep_going=True,
+        weather_noise=args.weather_noise, noisy_years=args.noisy_years,
     )  # fmt: skip
     failures = df.attrs.get("failures", [])
     if df.empty:

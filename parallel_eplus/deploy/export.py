@@ -60,6 +60,13 @@ def _refuse_unexportable(model_zip: Path, saved: dict) -> None:
             "clock live outside the network, so an ONNX file alone cannot act as it does; export a policy trained "
             "without --residual, or run it with `evaluate --policy`"
         )
+    if int(saved.get("forecast_hours", 0)):
+        raise ValueError(
+            f"{model_zip}: this policy observes {saved['forecast_hours']} hours of weather forecast "
+            "(train --forecast); "
+            "a deployed controller would need them from the building's forecast service as inputs, which the contract "
+            "does not describe yet: export a policy trained without --forecast"
+        )
     if saved.get("model", "temp_fan") != "temp_fan" and not saved.get("building"):
         raise ValueError(f"{model_zip}: trained on model {saved['model']!r}; export takes temp_fan or a building spec")
 
@@ -137,6 +144,11 @@ def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
     _refuse_unexportable(model_zip, saved)
     building_name = spec_name(saved)
     building = load_building(building_name)
+    if building.spec.forecasts:
+        raise ValueError(
+            f"{model_zip}: building {building.spec.name} observes weather forecasts (its spec's forecast entries); "
+            "the contract does not describe forecast inputs yet, so it cannot be exported"
+        )
     with_time, with_schedule = policy_features(model_zip, building_name)
     n_obs, n_act = saved_shapes(model_zip)
     if n_act != len(building.actions):

@@ -96,6 +96,7 @@ def record_baseline(
     out_dir: Path,
     features: tuple[bool, bool] = (False, False),
     progress: bool = True,
+    forecast_hours: int = 0,
 ) -> Demonstrations:
     """Run the building's own controls on each weather (`workers` at a time) and pair every observation with what
     those controls set next. `features`: the policy's (time, schedule) observation features."""
@@ -120,7 +121,7 @@ def record_baseline(
     jobs = [
         (controller, SimulationConfig(
             weather=w, model="baseline", building=building, run_days=run_days, time_features=features[0],
-            schedule_features=features[1], extra_outputs=outputs, energyplus_csv=False,
+            schedule_features=features[1], extra_outputs=outputs, energyplus_csv=False, forecast_hours=forecast_hours,
             output_dir=str(out_dir / slug(weather_label(w))),
         ))
         for w in weathers

@@ -129,6 +129,7 @@ class EpisodeMetrics(BaseCallback):
         """Summary key -> TensorBoard tag: the fixed ones, each reward temperature's, the share in band."""
         tags = {k: t for k, t in self.KEYS.items() if k in summary}
         tags |= {k: k for k in summary if k.endswith(("_temp_mean", "_temp_std"))}
+        tags |= {k: k for k in summary if k.startswith("noise_")}  # the episode's weather noise (weather_noise.py)
         if "in_band_pct" in summary:  # the data center's tag names its band, as its runs always have
             tags["in_band_pct"] = "in_22_25_pct" if "west_temp_mean" in summary else "in_band_pct"
         return tags
