@@ -149,6 +149,17 @@ def test_a_residual_policy_is_refused_with_the_reason(tmp_path):
     assert not (tmp_path / "out" / "controller.onnx").exists()
 
 
+def test_a_policy_observing_forecasts_is_refused_with_the_reason(tmp_path):
+    import shutil
+
+    run = tmp_path / "forecast"
+    shutil.copytree(MODELS / "paper-ca-co-fl-10m", run)
+    config = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({**config, "forecast_hours": 6}))
+    with pytest.raises(ValueError, match="6 hours of weather forecast"):
+        export(run, tmp_path / "out")
+
+
 def test_a_controller_edited_after_export_is_refused(controller, tmp_path):
     from parallel_eplus.deploy.server import create_app
 
