@@ -78,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
         "applies, by a Lagrange multiplier adapted each batch (default: the reward's fixed comfort weights)",
     )  # fmt: skip
     tr.add_argument(
+        "--objective", choices=("energy", "hvac", "cost", "emissions"),
+        help="what the reward's energy term (and the comfort constraint) trades against: the spec's energy signals, "
+        "HVAC energy, its cost or its emissions (docs/kpis.md; default: the spec's reward.objective)",
+    )  # fmt: skip
+    tr.add_argument(
         "--comfort-margin", type=float, default=0.5, metavar="K",
         help="with --comfort-target: the comfort cost rises over this far inside the band's edges (default 0.5)",
     )  # fmt: skip
@@ -165,6 +170,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--building", help="a building spec (TOML path or built-in name), checked first; default: the data center"
     )
     ev.add_argument("--run-days", type=int, default=365)
+    ev.add_argument(
+        "--scenario", default="year", choices=("year", "peak_heat", "typical_heat", "peak_cool", "typical_cool"),
+        help="BOPTEST's test periods: two weeks around each weather's peak or typical heating or cooling day of the "
+        "built-in controls, after a one-week warm-up (evaluation/scenarios.py); default: the year (--run-days)",
+    )  # fmt: skip
     ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
     ev.add_argument("--out", type=Path, default=Path("results") / "latest")
     ev.add_argument("--histogram", help="CONTROLLER,WEATHER for the West-zone histogram (default: last, VA)")

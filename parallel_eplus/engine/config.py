@@ -48,6 +48,13 @@ class SimulationConfig:
     # Read-back output variables (key, variable) added to the model's EnergyPlus CSV, every timestep: what the
     # building's own controls chose, for `train --init-from-baseline` (learning/imitation.py).
     extra_outputs: tuple[tuple[str, str], ...] = ()
+    # What the reward's energy term counts (energy, hvac, cost, emissions; buildings/kpis.py). None: the spec's.
+    objective: str | None = None
+    # A test period (evaluation/scenarios.py): the run starts on this day of the year, on this weekday (None: the
+    # model's own), and its first `warmup_days` are simulated but left out of the episode's figures.
+    start_day: int = 1
+    start_weekday: str | None = None
+    warmup_days: int = 0
     # Weather that varies per episode (buildings/weather_noise.py's `parse_noise` form, e.g. "drybulb=1:0:24"):
     # each episode runs a perturbed copy of its EPW, written into its folder. None: the file as it is.
     weather_noise: str | None = None

@@ -8,6 +8,7 @@ drives several, writing every action before reading any observation.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import shutil
 import tempfile
@@ -28,6 +29,7 @@ from parallel_eplus.buildings.model import (
 )
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import reward
+from parallel_eplus.buildings.spec import OBJECTIVES
 from parallel_eplus.buildings.weather import resolve_weather, weather_label
 from parallel_eplus.buildings.weather_noise import parse_noise, perturb_epw
 from parallel_eplus.engine import native, pipe
@@ -64,6 +66,14 @@ class Simulation:
         self.obs_low, self.obs_high = (np.array(b, dtype=np.float32) for b in self.building.bounds())
         self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
         self.comfort = self.building.comfort  # zones, band, when it applies, energy (buildings/comfort.py)
+        if config.objective and config.objective != self.comfort.objective:
+            if config.objective not in OBJECTIVES:
+                raise ValueError(f"objective {config.objective!r} is not one of {list(OBJECTIVES)}")
+            if self.comfort.kpis is None and config.objective != "energy":
+                raise ValueError(f"objective {config.objective!r} needs the building's HVAC signals ([kpis] hvac)")
+            self.comfort = dataclasses.replace(self.comfort, objective=config.objective)
+        self._observed = len(self.building.observed)  # the sensors after these are read for the figures only
+        self._hidden = self.building.hidden
         self._temps = self.comfort.temperatures
         self.elements = self.model.actions
         self.idf = Path(config.idf) if config.idf else self.model.idf
@@ -78,6 +88,8 @@ class Simulation:
         named = self.building.spec.weathers  # the spec's short names, then codes and .epw paths
         self.weather_paths = [named.get(w) or resolve_weather(w) for w in self.weathers]  # fail before spawning
         self.steps_per_episode = config.run_days * self.building.steps_per_day
+        if config.warmup_days >= config.run_days and config.warmup_days:
+            raise ValueError(f"warmup_days ({config.warmup_days}) must be fewer than run_days ({config.run_days})")
         self.low = tuple(e.low for e in self.elements)
         self.high = tuple(e.high for e in self.elements)
         self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
@@ -156,7 +168,10 @@ class Simulation:
         label = weather_label(self.weather)
         self.episode_dir, self._number = claim_episode_dir(self.output_dir, label, self._number + 1)
         cfg = self.config
-        prepare_idf(self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
+        prepare_idf(
+            self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
+            cfg.start_day, cfg.start_weekday,
+        )  # fmt: skip
         epw = self._episode_weather(epw, seed)
         args = [
             "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(epw),
@@ -212,7 +227,8 @@ class Simulation:
         info.update(parts)
         info["comfort_applies"] = applies
         if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward
-            cost, out = comfort.cost(temps, margin) if applies else (0.0, 0)
+            bounds = comfort.bounds(info) if comfort.per_step else None
+            cost, out = comfort.cost(temps, margin, bounds) if applies else (0.0, 0)
             info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
         self.records.add(info["time"], (*self._sensed, *self._action, r, *parts.values(), float(applies)))
         terminated = code == pipe.END
@@ -252,9 +268,13 @@ class Simulation:
         info = dict(zip(self.sensor_names, sensed, strict=True))
         info["time"] = pipe.frame_time(fields)
         info["weather"] = self.weather
-        raw = values[pipe.TIME_FIELDS :]
+        if self._hidden:  # thermostat schedules, HVAC meters: in `info` and the step table, not the observation
+            raw = values[pipe.TIME_FIELDS : pipe.TIME_FIELDS + self._observed]
+            observed = sensed[: self._observed]
+        else:
+            raw, observed = values[pipe.TIME_FIELDS :], sensed
         obs = raw.astype(np.float32)
-        for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True):
+        for lo, v, hi in zip(self._lows, observed, self._highs, strict=True):
             if not lo <= v <= hi:  # (NaN too)
                 info["raw_observation"] = raw.copy()
                 obs = np.clip(obs, self.obs_low, self.obs_high)
@@ -314,7 +334,14 @@ class Simulation:
         }
         if self.config.building:  # what `plot` reads the episode's signals from (none: the data center)
             extra["building"] = str(self.building.spec.path)
-        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, self.comfort)
+        steps = self.records.frame()
+        scored = None
+        if self.config.warmup_days:  # a test period: its figures leave out the warm-up before it
+            scored = steps.iloc[self.config.warmup_days * self.building.steps_per_day :]
+            if len(scored):
+                extra |= {"warmup_days": self.config.warmup_days, "period_start": str(scored["time"].iloc[0]),
+                          "period_end": str(scored["time"].iloc[-1])}  # fmt: skip
+        self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored)
         self.records = None
         if prune:
             self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)

@@ -42,10 +42,15 @@ def run_sweep(
     backend: str = "local",
     ray_address: str | None = None,
     keep_going: bool = False,
+    periods: dict | None = None,
+    extra_outputs: tuple[tuple[str, str], ...] = (),
     weather_noise: str | None = None,
     noisy_years: int = 1,
 ) -> pd.DataFrame:
     """One episode per (controller, weather), up to `workers` at once; returns results.csv's table.
+
+    `periods`: weather -> a test period (evaluation/scenarios.py) run instead of `run_days` from January 1;
+    `extra_outputs`: (key, variable) pairs EnergyPlus reports every step in each episode's eplusout.csv.
 
     `weather_noise` (buildings/weather_noise.py): instead, `noisy_years` episodes per (controller, weather), year k
     the weather perturbed with seed k for every controller; each year is a `run` of the row's controller, so the
@@ -88,9 +93,16 @@ def run_sweep(
         (c, _job_config(c, w, building, run_days, reward, out_dir, weather_noise, k))
         for c in controllers for w in weathers for k in years
     ]  # fmt: skip
+    for _, cfg in jobs:
+        cfg.extra_outputs = extra_outputs
+        p = (periods or {}).get(weather_label(cfg.weather))
+        if p is not None:
+            cfg.run_days, cfg.start_day, cfg.start_weekday, cfg.warmup_days = (
+                p.run_days, p.start_day, p.weekday, p.warmup_days
+            )  # fmt: skip
     steps_per_day = load_building(building).steps_per_day
-    total_steps = len(jobs) * run_days * steps_per_day
-    band = dict(zip(("band_low_c", "band_high_c"), load_building(building).band, strict=True)) if building else {}
+    total_steps = sum(cfg.run_days for _, cfg in jobs) * steps_per_day
+    band = _band_columns(building)
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:
         if backend == "ray":
@@ -196,3 +208,13 @@ def run_local(
         for job in active:
             job["sim"].close()
     return rows, failures
+
+
+def _band_columns(building: str | None) -> dict:
+    """A spec's one band beside its "% in band"; none where each zone has its own bounds (thermostat, per zone)."""
+    if not building:
+        return {}
+    b = load_building(building)
+    if b.spec.reward.thermostat or b.spec.reward.zone_bands:
+        return {}
+    return dict(zip(("band_low_c", "band_high_c"), b.band, strict=True))

@@ -53,6 +53,7 @@ class Demonstrations:
     high: np.ndarray
     names: tuple[str, ...] = ()
     weathers: list[str] = field(default_factory=list)
+    builtin: list[dict] = field(default_factory=list)  # each weather's episode summary under the built-in controls
 
     def to_physical(self, actions: np.ndarray) -> np.ndarray:
         return self.low + (np.clip(actions, -1, 1) + 1) / 2 * (self.high - self.low)
@@ -148,7 +149,7 @@ def record_baseline(
     high = np.array([a.high for a in spec.actions])
     actions = np.clip(2 * (physical_all - low) / (high - low) - 1, -1, 1).astype(np.float32)
     names = tuple(a.name for a in spec.actions)
-    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels)
+    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, rows)
 
 
 def _actor_mean(policy, obs: th.Tensor) -> th.Tensor:

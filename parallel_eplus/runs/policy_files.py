@@ -155,7 +155,7 @@ def policy_features(model_zip: str | Path, building: str | None = None) -> tuple
 
     n = read_stats(normalization_file(Path(model_zip))).n_observations
     spec = load_building(building).spec
-    sensors = len(load_building(building).sensors) + sum(f.count for f in spec.forecasts)
+    sensors = len(load_building(building).observed) + sum(f.count for f in spec.forecasts)
     sensors += policy_forecast(model_zip)[0]
     options = [(t, s) for t in (False, True) for s in (False, True)]
     found = [o for o in options if sensors + len(TIME_FEATURES) * o[0] + len(SCHEDULE_FEATURES) * o[1] == n]

@@ -61,6 +61,7 @@ class TrainConfig:
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
     comfort: ComfortConstraint = field(default_factory=ComfortConstraint)  # --comfort-target (learning/lagrangian.py)
+    objective: str | None = None  # --objective: energy, hvac, cost, emissions (buildings/kpis.py); None: the spec's
     # Weather noise per episode (buildings/weather_noise.py's form, "drybulb=1:0:24"; None: the files as they are)
     # and the outdoor dry bulb's next `forecast_hours` as observations, with BOPTEST's `forecast_error` level.
     weather_noise: str | None = None
