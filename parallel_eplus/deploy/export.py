@@ -175,7 +175,7 @@ def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
     inputs = [
         {"name": s.name, "source": "sensor", "variable": s.variable, "key": s.key, "meter": s.meter,
          "unit": unit_of(s.name, o.unit), "low": s.low, "high": s.high, "scale": s.scale}
-        for s, o in zip(building.sensors, spec.observations, strict=True)
+        for s, o in zip(building.observed, spec.observations, strict=True)
     ]  # fmt: skip
     inputs += [
         {"name": f, "source": "time" if f in TIME_FEATURES else "schedule", "unit": "", "low": -1.0, "high": 1.0}
