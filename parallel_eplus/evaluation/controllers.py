@@ -32,7 +32,7 @@ class Controller:
     """One column of the paper's table: a label and how it acts."""
 
     label: str
-    kind: str  # "baseline", "policy" or "rbc"
+    kind: str  # "baseline", "policy", "rbc" or "http" (a served controller: `url`)
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
     schedule_features: bool = False  # and model.SCHEDULE_FEATURES
@@ -41,6 +41,7 @@ class Controller:
     residual_space: str = "action"  # what the correction applies to (SimulationConfig)
     building: str | None = None  # the spec a policy was trained on (its config.json); None: the data center
     run: str = ""  # a policy's training run (its folder's name): policies sharing a label are one recipe's runs
+    url: str | None = None  # "http": where `parallel-eplus serve` answers
     forecast_hours: int = 0  # the policy observes the outdoor dry bulb's next hours (train --forecast)
     forecast_error: str | None = None
 
@@ -60,6 +61,10 @@ class Controller:
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
+        if self.kind == "http":
+            from parallel_eplus.evaluation.http_controller import HttpController
+
+            return HttpController(self.url)
         from parallel_eplus.runs.policy_files import load_policy
 
         act = load_policy(self.path)
@@ -122,6 +127,20 @@ def policy_controller(spec: str) -> Controller:
         run=saved.get("run_name") or run_dir_of(path).name, forecast_hours=policy_forecast(path)[0],
         forecast_error=policy_forecast(path)[1],
     )  # fmt: skip
+
+
+def http_controller(url: str) -> Controller:
+    """A controller served at `url`, labelled by its contract's algorithm and run; it acts in the building it was
+    exported for (the features it observes are computed by the server from each step's time)."""
+    from parallel_eplus.evaluation.http_controller import HttpController
+
+    client = HttpController(url)
+    try:
+        policy = client.contract["policy"]
+        label = f"{policy['algorithm'].upper()} via HTTP ({policy['run']})"
+        return Controller(label, "http", building=client.building(), run=str(policy["run"]), url=url)
+    finally:
+        client.close()
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
