@@ -82,6 +82,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.learning.model_based.settings import MPCSettings
     from parallel_eplus.training.config import (
         ComfortConstraint,
         ImitationSettings,
@@ -128,6 +129,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
         ),  # fmt: skip
         sac=SACSettings(gamma=args.gamma),
+        mpc=MPCSettings.from_text(args.mpc),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)

@@ -38,7 +38,7 @@ class Controller:
     """One column of the paper's table: a label and how it acts."""
 
     label: str
-    kind: str  # "baseline", "policy" or "rbc"
+    kind: str  # "baseline", "policy", "rbc" or "planner" (a model-based run's planner: learning/model_based/)
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
     schedule_features: bool = False  # and model.SCHEDULE_FEATURES
@@ -64,6 +64,10 @@ class Controller:
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
+        if self.kind == "planner":  # plans on its model with the episode's weather file as the forecast
+            from parallel_eplus.learning.model_based.control import PlannerActor
+
+            return PlannerActor(self.path)
         from parallel_eplus.training.policy_files import load_policy
 
         act = load_policy(self.path)
@@ -75,7 +79,7 @@ def policy_controllers(spec: str) -> list[Controller]:
     that has a model.zip, labelled by the folder's name unless LABEL is given: one recipe's seeds)."""
     path_text, _, label = spec.partition("=")
     path = Path(path_text)
-    if path.is_dir() and not (path / "model.zip").is_file():
+    if path.name != "planner" and path.suffix != ".pt" and path.is_dir() and not (path / "model.zip").is_file():
         runs = sorted(p.parent for p in path.glob("*/model.zip"))
         if not runs:
             raise FileNotFoundError(f"{path}: no model.zip in it or in a run folder below it")
@@ -87,6 +91,9 @@ def policy_controller(spec: str) -> Controller:
     """'runs/A/model.zip' or 'runs/A/model.zip=LABEL'; the label defaults to 'TRPO (<training weathers>)'."""
     path_text, _, label = spec.partition("=")
     path = Path(path_text)
+    planner = _planner_controller(path, label)
+    if planner is not None:
+        return planner
     if path.is_dir():
         path = path / "model.zip"
     from parallel_eplus.engine.config import policy_action_names
@@ -121,12 +128,31 @@ def policy_controller(spec: str) -> Controller:
     )  # fmt: skip
 
 
+def _planner_controller(path: Path, label: str) -> Controller | None:
+    """A model-based run's planner (`runs/<name>/planner` or its planner.pt), or None for anything else."""
+    if path.name != "planner" and path.suffix != ".pt":
+        return None
+    from parallel_eplus.learning.model_based.control import planner_file
+
+    found = planner_file(path)
+    if found is None:
+        raise FileNotFoundError(f"{path}: no planner.pt (a `train --algorithm mpc` run writes runs/<name>/planner/)")
+    config = found.parent / "config.json"
+    saved = json.loads(config.read_text()) if config.is_file() else {}
+    building = saved.get("building")
+    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
+        building = Path(building).stem
+    label = label or f"MPC ({'-'.join(saved.get('weathers', []))})"
+    return Controller(label, "planner", found, building=building, run=saved.get("run_name") or found.parent.name)
+
+
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
     """Policies sharing a label from different runs are one recipe's runs (seeds); any other repeat is renamed."""
     seen: dict[str, list[Controller]] = {}
     for c in controllers:
         earlier = seen.get(c.label, [])
-        seeds = earlier and c.kind == "policy" and all(e.kind == "policy" and e.run != c.run for e in earlier)
+        learned = c.kind in ("policy", "planner")
+        seeds = earlier and learned and all(e.kind == c.kind and e.run != c.run for e in earlier)
         if earlier and not seeds:
             c.label = f"{c.label} [{c.path.parent.name if c.path else len(earlier) + 1}]"
         seen.setdefault(c.label, []).append(c)
@@ -166,8 +192,9 @@ def run_sweep(
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
     for c in controllers:  # a policy acts only in the building it was trained on
-        trained = str(load_building(c.building).spec.path) if c.kind == "policy" and c.building else None
-        if c.kind == "policy" and trained != (building or None):
+        learned = c.kind in ("policy", "planner")
+        trained = str(load_building(c.building).spec.path) if learned and c.building else None
+        if learned and trained != (building or None):
             raise ValueError(
                 f"{c.path} was trained on building {c.building or 'datacenter-2zone (default)'}, "
                 f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"

@@ -53,6 +53,7 @@ class Demonstrations:
     high: np.ndarray
     names: tuple[str, ...] = ()
     weathers: list[str] = field(default_factory=list)
+    times: list = field(default_factory=list)  # each row's time (the end of the step it observed)
 
     def to_physical(self, actions: np.ndarray) -> np.ndarray:
         return self.low + (np.clip(actions, -1, 1) + 1) / 2 * (self.high - self.low)
@@ -104,12 +105,14 @@ def record_baseline(
     wanted = readbacks(building)
     spec = load_building(building)
     recorded: dict[str, list[np.ndarray]] = {}
+    times: dict[str, list] = {}
     empty = np.zeros(0, dtype=np.float32)
 
     class Recorder(Controller):
         def make(self, building=None):
             def act(obs: np.ndarray, info: dict) -> np.ndarray:
                 recorded.setdefault(weather_label(info["weather"]), []).append(np.array(obs, np.float32))
+                times.setdefault(weather_label(info["weather"]), []).append(info["time"])
                 return empty
 
             return act
@@ -131,7 +134,7 @@ def record_baseline(
         log.warning("the built-in controls did not finish %s (%s): cloning without it", f["weather"], f["error"])
     if not rows:
         raise ValueError("the built-in controls finished no weather: nothing to imitate")
-    observations, physical, labels = [], [], []
+    observations, physical, labels, when = [], [], [], []
     for row in rows:
         weather = row["weather"]
         obs = np.stack(recorded[weather])
@@ -141,12 +144,13 @@ def record_baseline(
         observations.append(obs)
         physical.append(chosen)
         labels += [weather] * len(obs)
+        when += times[weather]
     physical_all = np.concatenate(physical)
     low = np.array([a.low for a in spec.actions])
     high = np.array([a.high for a in spec.actions])
     actions = np.clip(2 * (physical_all - low) / (high - low) - 1, -1, 1).astype(np.float32)
     names = tuple(a.name for a in spec.actions)
-    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels)
+    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, when)
 
 
 def _actor_mean(policy, obs: th.Tensor) -> th.Tensor:
