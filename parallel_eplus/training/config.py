@@ -187,7 +187,7 @@ class TrainConfig:
         if self.algorithm not in ("trpo", "ppo", "sac", "mpc"):
             raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo, ppo, sac or mpc")
         if self.algorithm == "mpc" and (self.overlap or self.init_from or self.residual_scale):
-            raise ValueError("--algorithm mpc plans on a model it learns: --overlap, --init-from, --residual do not apply")
+            raise ValueError("--algorithm mpc plans on a model it learns: no --overlap, --init-from or --residual")
         if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
             raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
         if self.residual_space not in RESIDUAL_SPACES:
