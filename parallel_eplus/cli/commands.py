@@ -83,6 +83,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.learning.model_based.settings import MPCSettings
+    from parallel_eplus.runs.policy_files import normalization_file
     from parallel_eplus.training.config import (
         ComfortConstraint,
         ImitationSettings,
@@ -90,7 +91,6 @@ def cmd_train(args: argparse.Namespace) -> int:
         TrainConfig,
         TRPOSettings,
     )
-    from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
@@ -165,14 +165,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.errors import EnergyPlusError
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, RBC_LABEL, Controller, policy_controllers
     from parallel_eplus.evaluation.results import failures_markdown, write_results
-    from parallel_eplus.evaluation.sweep import (
-        BASELINE_LABEL,
-        RBC_LABEL,
-        Controller,
-        policy_controllers,
-        run_sweep,
-    )
+    from parallel_eplus.evaluation.sweep import run_sweep
 
     # bad input fails here, before anything runs (a spec's own short names: in run_sweep, against the spec)
     weathers = (
@@ -187,7 +182,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(RBC_LABEL, "rbc"))
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    controllers += [c for p in args.policy or [] for c in policy_controllers(p)]
+    from parallel_eplus.learning.model_based.control import planner_controller
+
+    controllers += [c for p in args.policy or [] for c in ([planner_controller(p)] if planner_controller(p) else
+                                                           policy_controllers(p))]  # fmt: skip
     if not controllers:
         raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
@@ -201,7 +199,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.online:
         import pandas as pd
 
-        from parallel_eplus.evaluation.online import run_online
+        from parallel_eplus.experiments.online import run_online
 
         policies = [c for c in controllers if c.kind == "policy"]
         if not policies:
@@ -217,7 +215,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from parallel_eplus.evaluation.plots import plot_path
+    from parallel_eplus.evaluation.redraw import plot_path
 
     written = plot_path(args.path)
     for path in written if isinstance(written, list) else [written]:

@@ -142,7 +142,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         starting an episode), a failure, or a deadline passed.
 
         Blocks until there is at least one. Like a single worker's read, it polls for the workers' spin
-        time first (none when the workers and the learner have no spare core: see `pipe.default_spin_s`).
+        time first (none when the workers and the learner have no spare core: see `spin.default_spin_s`).
         """
         return wait_any(self.sims, indices, self._send_errors)
 

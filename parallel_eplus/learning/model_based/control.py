@@ -93,6 +93,34 @@ class MPC:
         return cls.from_state(state, workers, seed)
 
 
+def planner_controller(spec: str):
+    """`evaluate --policy runs/<name>/planner[=LABEL]` (or a planner.pt): the planner as an evaluation
+    controller; None when `spec` names anything else (a policy)."""
+    import functools
+    import json
+
+    from parallel_eplus.evaluation.controllers import Controller
+
+    path_text, _, label = spec.partition("=")
+    path = Path(path_text)
+    if path.name != "planner" and path.suffix != ".pt":
+        return None
+    found = planner_file(path)
+    if found is None:
+        raise FileNotFoundError(
+            f"{path}: no {PLANNER_FILE} (a `train --algorithm mpc` run writes runs/<name>/planner/)"
+        )
+    config = found.parent / "config.json"
+    saved = json.loads(config.read_text()) if config.is_file() else {}
+    building = saved.get("building")
+    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
+        building = Path(building).stem  # a built-in spec, saved by path by another checkout or install
+    label = label or f"MPC planner ({'-'.join(saved.get('weathers', []))})"
+    run = saved.get("run_name") or found.parent.parent.name
+    return Controller(label, "planner", found, building=building, run=run,
+                      factory=functools.partial(PlannerActor, found))  # fmt: skip
+
+
 def planner_file(path: str | Path) -> Path | None:
     """The planner a path names (a planner.pt, a folder with one, or a run folder with planner/), or None."""
     path = Path(path)

@@ -20,10 +20,9 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.training.checkpoints import save_checkpoint
-from parallel_eplus.training.config import TrainConfig
-from parallel_eplus.training.imitation import Demonstrations, clone
-from parallel_eplus.training.policy_files import MODEL_FILE
+from parallel_eplus.learning.imitation import Demonstrations, clone
+from parallel_eplus.runs.checkpoints import save_checkpoint
+from parallel_eplus.runs.run_files import MODEL_FILE
 
 log = logging.getLogger(__name__)
 MIN_UPDATES = 3000
@@ -37,13 +36,9 @@ def demonstrations(building: str | None, observations: np.ndarray, actions: np.n
     return Demonstrations(observations, actions, physical, low, high, tuple(a.name for a in b.actions))
 
 
-def distill(cfg: TrainConfig, venv, observations: np.ndarray, actions: np.ndarray) -> Path:
-    """Fit a new policy (the run's network, TRPO's by default) to the planner's actions; save it as the run's
-    model.zip, its fit report as distill.json."""
-    from parallel_eplus.training.train import _new_model
-
-    env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
-    model = _new_model(cfg, env)
+def distill(model, env: VecNormalize, cfg, observations: np.ndarray, actions: np.ndarray) -> Path:
+    """Fit `model`'s policy (a new one, the run's network: TRPO's by default) to the planner's actions; save it as
+    the run's model.zip (`cfg`: the run's TrainConfig), its fit report as distill.json."""
     demos = demonstrations(cfg.building, observations, actions)
     # at least `MIN_UPDATES` gradient steps: the imitation settings' epochs are sized for a year of records
     epochs = max(cfg.imitation.epochs, math.ceil(MIN_UPDATES * cfg.imitation.batch_size / max(len(demos), 1)))

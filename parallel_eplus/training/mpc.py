@@ -1,5 +1,7 @@
 """`train --algorithm mpc`: learn the building from the workers' own data, plan on it, distil the planner.
 
+The model, the planner and their data live in learning/model_based/; this module runs them as a training run.
+
 The Dyna loop (Sutton 1991) over the service's workers and vector env (local or Ray):
 1. record the building's own controls on the training weathers (sources.py) and fit the ensemble;
 2. explore around them for `explore_steps` env steps, then let the planner act (control.py: one batched plan for
@@ -29,15 +31,15 @@ from tqdm import tqdm
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.errors import EnergyPlusError, Interrupts
+from parallel_eplus.learning.lagrangian import Lagrangian
 from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
 from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.distill import distill
 from parallel_eplus.learning.model_based.sources import Explorer, add_baseline
+from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import EpisodeMetrics, tensorboard_logger
 from parallel_eplus.training.config import TrainConfig
-from parallel_eplus.training.lagrangian import Lagrangian
-from parallel_eplus.training.run_status import RunStatus
 
 log = logging.getLogger(__name__)
 
@@ -52,23 +54,24 @@ class _Model:
         return self.env
 
 
-def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool = True) -> Path:
+def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool, make_vec_env, new_model) -> Path:
     """Run (or resume from `checkpoint`) the Dyna loop; returns the distilled policy's model.zip (or the planner's
-    file without distillation). Ctrl-C, SIGTERM or a worker's failure saves a checkpoint first."""
-    from parallel_eplus.training.train import make_vec_env
+    file without distillation). Ctrl-C, SIGTERM or a worker's failure saves a checkpoint first.
 
+    `make_vec_env(cfg)`: the workers, as every algorithm gets them; `new_model(cfg, env)`: the policy to distil
+    into (train.py's, passed in so the two modules do not import each other)."""
     th.set_num_threads(1)
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
         venv = make_vec_env(cfg)
         try:
-            return _Loop(cfg, venv, status, progress).run(checkpoint)
+            return _Loop(cfg, venv, status, progress, new_model).run(checkpoint)
         finally:
             venv.close()
 
 
 class _Loop:
-    def __init__(self, cfg: TrainConfig, venv, status: RunStatus, progress: bool):
-        self.cfg, self.venv, self.s = cfg, venv, cfg.mpc
+    def __init__(self, cfg: TrainConfig, venv, status: RunStatus, progress: bool, new_model):
+        self.cfg, self.venv, self.s, self.new_model = cfg, venv, cfg.mpc, new_model
         self.building = load_building(cfg.building)
         self.mpc = MPC(cfg.building, self.s, cfg.comfort.margin_c, cfg.reward.power_weight, venv.num_envs, cfg.seed)
         self.data = Transitions(self.mpc.layout)
@@ -110,7 +113,11 @@ class _Loop:
         self._save_checkpoint()
         if not self.s.distill or not self.policy_obs:
             return planner
-        return distill(self.cfg, self.venv, np.concatenate(self.policy_obs), np.concatenate(self.policy_act))
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        env = VecNormalize(self.venv, norm_obs=True, norm_reward=False, gamma=self.cfg.trpo.gamma)
+        obs, act = np.concatenate(self.policy_obs), np.concatenate(self.policy_act)
+        return distill(self.new_model(self.cfg, env), env, self.cfg, obs, act)
 
     def _steps(self) -> None:
         venv, n = self.venv, self.venv.num_envs
@@ -178,7 +185,7 @@ class _Loop:
 
     # -- the model, the comfort weight ----------------------------------------------------------
     def _record(self) -> None:
-        from parallel_eplus.training.imitation import record_baseline
+        from parallel_eplus.learning.imitation import record_baseline
 
         days = self.s.record_days or self.cfg.run_days
         demos = record_baseline(self.cfg.building, self.cfg.weathers, days, self.cfg.workers,
