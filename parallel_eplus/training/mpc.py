@@ -206,6 +206,7 @@ class _Loop:
             block = max(block // 4, 1)
             held = self.data.held_out(block)
         loss = self.mpc.model.fit(self.data, np.flatnonzero(~held), epochs)
+        self.mpc.planner.set_support(self.data.array("a"))
         errors = self.mpc.model.errors(self.data, held, self.s.horizon)
         for key, value in errors.items():
             self.logger.record(f"model/{key}", value)
@@ -213,6 +214,9 @@ class _Loop:
         self.logger.record("model/rows", len(self.data))
         self.logger.record("model/fit_s", time.perf_counter() - t0)
         self.logger.record("planner/comfort_weight", self.mpc.comfort_weight)
+        for i, name in enumerate(a.name for a in self.building.actions):
+            self.logger.record(f"planner/support/{name}_low", float(self.mpc.planner.support[0][i]))
+            self.logger.record(f"planner/support/{name}_high", float(self.mpc.planner.support[1][i]))
         self.logger.dump(self.steps)
         io.write_text(self.cfg.run_dir / "model_error.json", __import__("json").dumps(errors, indent=2))
         log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,

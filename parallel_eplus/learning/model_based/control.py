@@ -67,6 +67,7 @@ class MPC:
         return {
             "building": self.building, "ensemble": self.model.state(), "settings": asdict(self.settings),
             "margin_c": self.margin_c, "power_weight": self.power_weight, "comfort_weight": self.comfort_weight,
+            "support_low": self.planner.support[0], "support_high": self.planner.support[1],
             "comfort_seen": th.as_tensor(self.comfort_times.seen),
             "comfort_applied": th.as_tensor(self.comfort_times.applied),
         }  # fmt: skip
@@ -83,6 +84,7 @@ class MPC:
         model = Ensemble.from_state(state["ensemble"])
         mpc = cls(state["building"], settings, state["margin_c"], state["power_weight"], workers, seed, model)
         mpc.comfort_weight = state["comfort_weight"]
+        mpc.planner.support = (state["support_low"], state["support_high"])
         mpc.comfort_times.seen = np.asarray(state["comfort_seen"], float)
         mpc.comfort_times.applied = np.asarray(state["comfort_applied"], float)
         return mpc

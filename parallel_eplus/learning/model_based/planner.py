@@ -35,8 +35,17 @@ class Planner:
         self.n_temps = len(model.layout.temperatures)
         self.gen = th.Generator().manual_seed(seed)
         self.mean = th.zeros(workers, settings.horizon, model.layout.n_actions)
+        self.support = (-th.ones(model.layout.n_actions), th.ones(model.layout.n_actions))  # `set_support`
         self.last_ms = 0.0
         self.last_cost = np.zeros(workers)
+
+    def set_support(self, actions: np.ndarray) -> None:
+        """Keep the actions within the data's range of each action (0.5-99.5 %) widened by `support_margin`."""
+        if len(actions):
+            m = self.settings.support_margin
+            lo, hi = np.quantile(actions, [0.005, 0.995], axis=0)
+            self.support = (th.as_tensor(np.maximum(lo - m, -1.0), dtype=th.float32),
+                            th.as_tensor(np.minimum(hi + m, 1.0), dtype=th.float32))  # fmt: skip
 
     def reset(self, worker: int) -> None:
         """A new episode for `worker`: forget its warm start."""
@@ -57,7 +66,7 @@ class Planner:
             delta = mean[:, None] + std[:, None] * th.randn(w, n, h, a_n, generator=self.gen)
             delta[:, 0] = mean  # the warm start itself is always a candidate
             delta = delta.clamp(-c.max_increment, c.max_increment)
-            actions = (a_t[:, None, None, :] + delta.cumsum(2)).clamp(-1.0, 1.0)
+            actions = th.maximum(th.minimum(a_t[:, None, None, :] + delta.cumsum(2), self.support[1]), self.support[0])
             cost = self._cost(s_t, a_t, actions, exo_t, app_t, comfort_weight)  # [W, N]
             best = cost.argmin(1)
             elite = cost.topk(c.elites, dim=1, largest=False).indices

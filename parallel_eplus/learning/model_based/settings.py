@@ -31,6 +31,11 @@ class MPCSettings:
     elites: int = 32
     max_increment: float = 0.15  # per control step, normalized action units
     init_std: float = 0.1
+    # The planner's actions stay within the range of actions in the data (0.5-99.5 % per action) widened by this
+    # much (normalized units): a model knows nothing beyond its data, and a planner fitted on the building's own
+    # controls alone drove the data center out of EnergyPlus's range within 9 hours. The range grows with the
+    # planner's own steps at each refit (Dyna), by up to this much each time.
+    support_margin: float = 0.1
     comfort_weight: float | None = None  # None: the run's Lagrange multiplier (--comfort-target), else fixed
     disagreement_weight: float = 2.0  # per K of the members' spread in a zone temperature
     noise: float = 0.0  # exploration added to the planner's action in training (normalized units)
