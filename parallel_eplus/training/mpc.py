@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
 from tqdm import tqdm
 
 from parallel_eplus import io
@@ -54,23 +56,25 @@ class _Model:
         return self.env
 
 
-def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool, make_vec_env, new_model) -> Path:
+def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool, make_vec_env, new_model,
+              callbacks: Sequence[BaseCallback] = ()) -> Path:  # fmt: skip
     """Run (or resume from `checkpoint`) the Dyna loop; returns the distilled policy's model.zip (or the planner's
     file without distillation). Ctrl-C, SIGTERM or a worker's failure saves a checkpoint first.
 
     `make_vec_env(cfg)`: the workers, as every algorithm gets them; `new_model(cfg, env)`: the policy to distil
-    into (train.py's, passed in so the two modules do not import each other)."""
+    into (train.py's, passed in so the two modules do not import each other). `callbacks` see every vector step, and
+    each refit as the end of a batch (a sweep's trial reports then: experiments/tune_trial.py)."""
     th.set_num_threads(1)
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
         venv = make_vec_env(cfg)
         try:
-            return _Loop(cfg, venv, status, progress, new_model).run(checkpoint)
+            return _Loop(cfg, venv, status, progress, new_model, callbacks).run(checkpoint)
         finally:
             venv.close()
 
 
 class _Loop:
-    def __init__(self, cfg: TrainConfig, venv, status: RunStatus, progress: bool, new_model):
+    def __init__(self, cfg: TrainConfig, venv, status: RunStatus, progress: bool, new_model, callbacks=()):
         self.cfg, self.venv, self.s, self.new_model = cfg, venv, cfg.mpc, new_model
         self.building = load_building(cfg.building)
         self.mpc = MPC(cfg.building, self.s, cfg.comfort.margin_c, cfg.reward.power_weight, venv.num_envs, cfg.seed)
@@ -82,7 +86,7 @@ class _Loop:
         self.shim = _Model(venv, self.logger)
         self.bar = tqdm(total=cfg.timesteps, unit="step", disable=not progress, desc=f"train {cfg.run_name}")
         self.callbacks = [EpisodeMetrics(cfg.run_dir / "episodes.csv", self.bar, 365 * self.building.steps_per_day),
-                          status]  # fmt: skip
+                          status, *callbacks]  # fmt: skip
         self.checkpoints = Checkpoint(cfg.run_dir / "checkpoints")
 
     # -- the run --------------------------------------------------------------------------------
@@ -99,9 +103,12 @@ class _Loop:
         try:
             with Interrupts():
                 self._steps()
-        except (KeyboardInterrupt, EnergyPlusError) as e:
+        except BaseException as e:  # Ctrl-C, SIGTERM, a worker's failure, a sweep stopping its trial
             path = self._save_checkpoint()
-            cause = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped by the failure below"
+            cause = (
+                "stopped by the failure below" if isinstance(e, EnergyPlusError) else f"stopped ({type(e).__name__})"
+            )
+            cause = "interrupted" if isinstance(e, KeyboardInterrupt) else cause
             log.warning("%s at step %d; checkpoint saved: %s", cause, self.steps, path)
             log.warning("resume with: parallel-eplus train --resume %s", self.cfg.run_dir)
             raise
@@ -117,7 +124,9 @@ class _Loop:
 
         env = VecNormalize(self.venv, norm_obs=True, norm_reward=False, gamma=self.cfg.trpo.gamma)
         obs, act = np.concatenate(self.policy_obs), np.concatenate(self.policy_act)
-        return distill(self.new_model(self.cfg, env), env, self.cfg, obs, act)
+        model = self.new_model(self.cfg, env)
+        model.num_timesteps = self.steps  # what the run took (a sweep reads it from model.zip)
+        return distill(model, env, self.cfg, obs, act)
 
     def _steps(self) -> None:
         venv, n = self.venv, self.venv.num_envs
@@ -167,6 +176,8 @@ class _Loop:
                 self._update_comfort(out, zones)
                 out = zones = 0.0
                 self._refit(self.s.refit_epochs)
+                for cb in self.callbacks:
+                    cb.on_rollout_end()
             if self.steps // self.cfg.checkpoint_every != (self.steps - n) // self.cfg.checkpoint_every:
                 self._save_checkpoint()
             if planning:

@@ -98,7 +98,7 @@ def train(
     if cfg.algorithm == "mpc":  # the model-based learner drives the same workers itself
         from parallel_eplus.training.mpc import train_mpc
 
-        return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model)
+        return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model, callbacks)
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
         return _learn(cfg, checkpoint, progress, timer, status, callbacks)
 
