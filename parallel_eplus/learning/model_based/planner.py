@@ -40,10 +40,11 @@ class Planner:
         self.last_cost = np.zeros(workers)
 
     def set_support(self, actions: np.ndarray) -> None:
-        """Keep the actions within the data's range of each action (0.5-99.5 %) widened by `support_margin`."""
+        """Keep the actions within the range of each action in the data widened by `support_margin`: it can only
+        grow (the data only grow), by up to the margin at each refit where the planner's own steps reach its edge."""
         if len(actions):
             m = self.settings.support_margin
-            lo, hi = np.quantile(actions, [0.005, 0.995], axis=0)
+            lo, hi = actions.min(axis=0), actions.max(axis=0)
             self.support = (th.as_tensor(np.maximum(lo - m, -1.0), dtype=th.float32),
                             th.as_tensor(np.minimum(hi + m, 1.0), dtype=th.float32))  # fmt: skip
 

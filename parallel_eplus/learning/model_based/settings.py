@@ -31,7 +31,7 @@ class MPCSettings:
     elites: int = 32
     max_increment: float = 0.15  # per control step, normalized action units
     init_std: float = 0.1
-    # The planner's actions stay within the range of actions in the data (0.5-99.5 % per action) widened by this
+    # The planner's actions stay within the range of each action in the data widened by this
     # much (normalized units): a model knows nothing beyond its data, and a planner fitted on the building's own
     # controls alone drove the data center out of EnergyPlus's range within 9 hours. The range grows with the
     # planner's own steps at each refit (Dyna), by up to this much each time.
