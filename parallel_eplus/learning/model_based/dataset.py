@@ -91,15 +91,19 @@ class Transitions:
         return block % every == every - 1
 
     def sequences(self, rows: np.ndarray, horizon: int) -> np.ndarray:
-        """Start rows k (among `rows`) with rows k..k+horizon-1 consecutive steps of one episode, all in `rows`."""
+        """[K, horizon] row indices: runs of `horizon` consecutive steps of one episode, every row in `rows` (a mask).
+        Rows of one episode need not be adjacent: workers' steps interleave as they arrive."""
         ep, step = self.array("episode"), self.array("step")
-        n = len(ep)
-        ok = rows.copy()
+        order = np.lexsort((step, ep))
+        ep, step, inside = ep[order], step[order], rows[order]
+        n = len(order)
+        ok = inside.copy()
         for h in range(1, horizon):
             nxt = np.zeros(n, bool)
-            nxt[: n - h] = (ep[h:] == ep[: n - h]) & (step[h:] == step[: n - h] + h) & rows[h:]
+            nxt[: n - h] = (ep[h:] == ep[: n - h]) & (step[h:] == step[: n - h] + h) & inside[h:]
             ok &= nxt
-        return np.flatnonzero(ok)
+        starts = np.flatnonzero(ok)
+        return order[starts[:, None] + np.arange(horizon)[None, :]] if len(starts) else np.zeros((0, horizon), int)
 
     def save(self, path: Path) -> None:
         np.savez_compressed(path, **{name: self.array(name) for name in _FIELDS})

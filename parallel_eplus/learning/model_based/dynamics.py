@@ -93,21 +93,20 @@ class Ensemble(th.nn.Module):
         out: dict[str, float] = {}
         names = self.layout.state_names
         for h in sorted({1, horizon}):
-            starts = data.sequences(rows, h)
-            if not len(starts):
+            runs = data.sequences(rows, h)
+            if not len(runs):
                 continue
-            s0 = th.as_tensor(data.array("s")[starts])
+            s0 = th.as_tensor(data.array("s")[runs[:, 0]])
             s = s0.expand(self.settings.members, -1, -1)
             for k in range(h):
-                r = starts + k
-                s = self.step(s, *(th.as_tensor(data.array(f)[r]) for f in ("a_prev", "a", "x")))
-            truth = data.array("s_next")[starts + h - 1]
+                s = self.step(s, *(th.as_tensor(data.array(f)[runs[:, k]]) for f in ("a_prev", "a", "x")))
+            truth = data.array("s_next")[runs[:, -1]]
             model = ((s.mean(0).numpy() - truth) ** 2).mean(0) ** 0.5
             still = ((s0.numpy() - truth) ** 2).mean(0) ** 0.5
             for i, name in enumerate(names):
                 out[f"{name}/{h}_step_model"] = float(model[i])
                 out[f"{name}/{h}_step_persistence"] = float(still[i])
-            out[f"rows/{h}_step"] = float(len(starts))
+            out[f"rows/{h}_step"] = float(len(runs))
         return out
 
     # -- saving ---------------------------------------------------------------------------------
