@@ -37,7 +37,7 @@ from parallel_eplus.learning.lagrangian import Lagrangian
 from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
 from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
-from parallel_eplus.learning.model_based.distill import distill
+from parallel_eplus.learning.model_based.distill import act, distill, fit
 from parallel_eplus.learning.model_based.sources import Explorer, add_baseline
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import EpisodeMetrics, tensorboard_logger
@@ -82,6 +82,7 @@ class _Loop:
         self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
         self.mpc.comfort_weight = self.s.comfort_weight or cfg.comfort.multiplier_init
         self.steps, self.policy_obs, self.policy_act, self.replay = 0, [], [], {}
+        self.student, self.student_fitted = None, False  # DAgger's phase: the distilled policy acts
         self.logger = tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name))
         self.shim = _Model(venv, self.logger)
         self.bar = tqdm(total=cfg.timesteps, unit="step", disable=not progress, desc=f"train {cfg.run_name}")
@@ -120,13 +121,27 @@ class _Loop:
         self._save_checkpoint()
         if not self.s.distill or not self.policy_obs:
             return planner
-        from stable_baselines3.common.vec_env import VecNormalize
 
-        env = VecNormalize(self.venv, norm_obs=True, norm_reward=False, gamma=self.cfg.trpo.gamma)
-        obs, act = np.concatenate(self.policy_obs), np.concatenate(self.policy_act)
-        model = self.new_model(self.cfg, env)
+        model, env = self._student()
         model.num_timesteps = self.steps  # what the run took (a sweep reads it from model.zip)
+        obs, act = np.concatenate(self.policy_obs), np.concatenate(self.policy_act)
         return distill(model, env, self.cfg, obs, act)
+
+    def _student(self):
+        """The policy the planner is distilled into (made on first use; DAgger's phase and the end refit it)."""
+        if self.student is None:
+            from stable_baselines3.common.vec_env import VecNormalize
+
+            env = VecNormalize(self.venv, norm_obs=True, norm_reward=False, gamma=self.cfg.trpo.gamma)
+            self.student = (self.new_model(self.cfg, env), env)
+        return self.student
+
+    def _refit_student(self) -> None:
+        model, env = self._student()
+        report = fit(model, env, self.cfg, np.concatenate(self.policy_obs), np.concatenate(self.policy_act))
+        for name, value in report["rmse"].items():
+            self.logger.record(f"distill/rmse/{name}", value)
+        self.student_fitted = True
 
     def _steps(self) -> None:
         venv, n = self.venv, self.venv.num_envs
@@ -142,11 +157,19 @@ class _Loop:
         out = zones = 0.0
         while self.steps < self.cfg.timesteps:
             planning = self.steps >= self.s.explore_steps or explorer is None
+            dagger = planning and self.s.distill and self.steps >= (1 - self.s.dagger_share) * self.cfg.timesteps
+            if dagger and not self.student_fitted and self.policy_obs:
+                self._refit_student()
             if planning:
                 planned = self.mpc.act(obs, infos, a_last)
                 self.policy_obs.append(obs.copy())
                 self.policy_act.append(planned)
                 actions = np.clip(planned + self.s.noise * rng.standard_normal(planned.shape), -1, 1).astype(np.float32)
+                if dagger and self.student_fitted:  # the student acts; the planner takes over a worker far out of band
+                    temps = obs[:, [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures]]
+                    low, high = self.building.band
+                    far = np.any((temps < low - 2) | (temps > high + 2), axis=1)
+                    actions = np.where(far[:, None], actions, act(*self._student(), obs))
             else:
                 actions = explorer.act(obs, infos, step_of)
             new_obs, _, dones, new_infos = venv.step(actions)
@@ -176,6 +199,8 @@ class _Loop:
                 self._update_comfort(out, zones)
                 out = zones = 0.0
                 self._refit(self.s.refit_epochs)
+                if self.student_fitted:
+                    self._refit_student()
                 for cb in self.callbacks:
                     cb.on_rollout_end()
             if self.steps // self.cfg.checkpoint_every != (self.steps - n) // self.cfg.checkpoint_every:
@@ -234,7 +259,7 @@ class _Loop:
                  _summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
     def _update_comfort(self, out: float, zones: float) -> None:
-        if self.lagrangian is not None and self.steps > self.s.explore_steps:
+        if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student_fitted:
             self.mpc.comfort_weight = self.lagrangian.update(out, zones)
             self.lagrangian.record(self.logger)
 

@@ -36,15 +36,27 @@ def demonstrations(building: str | None, observations: np.ndarray, actions: np.n
     return Demonstrations(observations, actions, physical, low, high, tuple(a.name for a in b.actions))
 
 
-def distill(model, env: VecNormalize, cfg, observations: np.ndarray, actions: np.ndarray) -> Path:
-    """Fit `model`'s policy (a new one, the run's network: TRPO's by default) to the planner's actions; save it as
-    the run's model.zip (`cfg`: the run's TrainConfig), its fit report as distill.json."""
+def fit(model, env: VecNormalize, cfg, observations: np.ndarray, actions: np.ndarray) -> dict:
+    """Fit `model`'s policy to the planner's actions (`cfg`: the run's TrainConfig); returns the fit's report."""
     demos = demonstrations(cfg.building, observations, actions)
     # at least `MIN_UPDATES` gradient steps: the imitation settings' epochs are sized for a year of records
     epochs = max(cfg.imitation.epochs, math.ceil(MIN_UPDATES * cfg.imitation.batch_size / max(len(demos), 1)))
     report = clone(model, env, demos, replace(cfg.imitation, epochs=epochs), cfg.seed)
     spread = demos.physical.std(axis=0)  # a constant (the mean action) scores this
     report["rmse_of_mean_action"] = dict(zip(demos.names, spread.round(4).tolist(), strict=True))
+    return report
+
+
+def act(model, env: VecNormalize, observations: np.ndarray) -> np.ndarray:
+    """The fitted policy's deterministic actions on raw observations."""
+    action, _ = model.policy.predict(env.normalize_obs(observations), deterministic=True)
+    return np.clip(action, -1, 1).astype(np.float32)
+
+
+def distill(model, env: VecNormalize, cfg, observations: np.ndarray, actions: np.ndarray) -> Path:
+    """Fit `model`'s policy (a new one, the run's network: TRPO's by default) to the planner's actions; save it as
+    the run's model.zip (`cfg`: the run's TrainConfig), its fit report as distill.json."""
+    report = fit(model, env, cfg, observations, actions)
     io.write_text(cfg.run_dir / "distill.json", json.dumps(report, indent=2))
     rmse = ", ".join(f"{k} {v:.3g}" for k, v in report["rmse"].items())
     log.info("distilled the planner from %d steps (RMSE, physical units: %s)", report["samples"], rmse)
