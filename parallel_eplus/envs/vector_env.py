@@ -69,7 +69,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             raise
         n_actions = len(self.sims[0].policy_names)
         self.single_observation_space = observation_space(
-            config.time_features, config.schedule_features, config.building
+            config.time_features, config.schedule_features, config.building, config.forecast_hours
         )
         self.single_action_space = action_space(n_actions)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
