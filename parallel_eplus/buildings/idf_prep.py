@@ -66,14 +66,6 @@ def _line_end(text: str, pos: int) -> int:
     return m.end() if m else pos
 
 
-def run_period_end(run_days: int) -> tuple[int, int]:
-    """(month, day) of the last day of a run starting Jan 1; 2013 stands in for any non-leap year."""
-    if not 1 <= run_days <= 365:
-        raise ValueError(f"run_days must be within 1..365, got {run_days}")
-    end = dt.date(2013, 1, 1) + dt.timedelta(days=run_days - 1)
-    return end.month, end.day
-
-
 def _object(kind: str, fields: list[str], note: str) -> str:
     body = ",\n".join(f"    {f}" for f in fields)
     return f"  {kind},\n{body};  ! {note}"
@@ -82,7 +74,9 @@ def _object(kind: str, fields: list[str], note: str) -> str:
 def _run_period(first: IdfObject | None, run_days: int, start_day: int = 1, weekday: str | None = None) -> str:
     """The episode's RunPeriod: `run_days` from day of year `start_day`; `weekday` that day's (a period cut from a
     year starts on the weekday that date had in the year, so the schedules fall as they did)."""
-    if start_day + run_days - 1 > 365:
+    if not 1 <= run_days <= 365:
+        raise ValueError(f"run_days must be within 1..365, got {run_days}")
+    if start_day < 1 or start_day + run_days - 1 > 365:
         raise ValueError(f"a run from day {start_day} for {run_days} days passes the end of the year")
     first_day = dt.date(2013, 1, 1) + dt.timedelta(days=start_day - 1)
     end = first_day + dt.timedelta(days=run_days - 1)
