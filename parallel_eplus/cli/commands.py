@@ -82,6 +82,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.learning.model_based.settings import MPCSettings
     from parallel_eplus.runs.policy_files import normalization_file
     from parallel_eplus.training.config import (
         ComfortConstraint,
@@ -132,6 +133,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
         ),  # fmt: skip
         sac=SACSettings(gamma=args.gamma),
+        mpc=MPCSettings.from_text(args.mpc),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)
@@ -192,7 +194,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(RBC_LABEL, "rbc"))
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    controllers += [c for p in args.policy or [] for c in policy_controllers(p)]
+    from parallel_eplus.learning.model_based.control import planner_controller
+
+    controllers += [c for p in args.policy or [] for c in ([planner_controller(p)] if planner_controller(p) else
+                                                           policy_controllers(p))]  # fmt: skip
     controllers += [http_controller(url) for url in args.controller_url or []]
     if not controllers:
         raise ValueError(

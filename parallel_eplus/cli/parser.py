@@ -54,10 +54,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--forecast-error", choices=["low", "medium", "high"],
                     help="with --forecast: BOPTEST's AR(1) forecast error at this level (default: exact)")  # fmt: skip
     tr.add_argument(
-        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac"],
+        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac", "mpc"],
         help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting; "
-        "sac: Stable-Baselines3's off-policy SAC (training/config.py SACSettings; --batch-size is unused)",
+        "sac: Stable-Baselines3's off-policy SAC (training/config.py SACSettings; --batch-size is unused); "
+        "mpc: learn a model of the building and plan on it, then distil the planner (docs/model-based.md)",
     )  # fmt: skip
+    tr.add_argument("--mpc", metavar="NAME=VALUE,...", help="with --algorithm mpc: its settings (docs/model-based.md)")
     tr.add_argument(
         "--residual", type=float, default=0.0, metavar="SCALE",
         help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting alone",

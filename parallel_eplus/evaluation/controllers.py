@@ -32,7 +32,9 @@ class Controller:
     """One column of the paper's table: a label and how it acts."""
 
     label: str
-    kind: str  # "baseline", "policy", "rbc" or "http" (a served controller: `url`)
+    # "baseline", "policy", "rbc", "http" (a served controller: `url`) or "planner" (a model-based run's:
+    # learning/model_based/control.py)
+    kind: str
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
     schedule_features: bool = False  # and model.SCHEDULE_FEATURES
@@ -44,6 +46,8 @@ class Controller:
     url: str | None = None  # "http": where `parallel-eplus serve` answers
     forecast_hours: int = 0  # the policy observes the outdoor dry bulb's next hours (train --forecast)
     forecast_error: str | None = None
+    # kind "planner": makes the episode's actor; given by the layer that knows the planner (picklable, for Ray)
+    factory: Callable[[], Callable[[np.ndarray, dict], np.ndarray]] | None = None
 
     @property
     def model(self) -> str:
@@ -65,6 +69,8 @@ class Controller:
             from parallel_eplus.evaluation.http_controller import HttpController
 
             return HttpController(self.url)
+        if self.factory is not None:
+            return self.factory()
         from parallel_eplus.runs.policy_files import load_policy
 
         act = load_policy(self.path)
@@ -148,7 +154,8 @@ def unique_labels(controllers: list[Controller]) -> list[Controller]:
     seen: dict[str, list[Controller]] = {}
     for c in controllers:
         earlier = seen.get(c.label, [])
-        seeds = earlier and c.kind == "policy" and all(e.kind == "policy" and e.run != c.run for e in earlier)
+        learned = c.kind in ("policy", "planner")
+        seeds = earlier and learned and all(e.kind == c.kind and e.run != c.run for e in earlier)
         if earlier and not seeds:
             c.label = f"{c.label} [{c.path.parent.name if c.path else len(earlier) + 1}]"
         seen.setdefault(c.label, []).append(c)

@@ -70,7 +70,7 @@ def run_sweep(
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
     for c in controllers:  # a policy acts only in the building it was trained on
-        acting = c.kind in ("policy", "http")
+        acting = c.kind in ("policy", "http", "planner")
         trained = str(load_building(c.building).spec.path) if acting and c.building else None
         if acting and trained != (building or None):
             raise ValueError(
