@@ -89,6 +89,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         TrainConfig,
         TRPOSettings,
     )
+    from parallel_eplus.training.eval_target import EvalSettings
     from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
@@ -128,6 +129,12 @@ def cmd_train(args: argparse.Namespace) -> int:
             log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
         ),  # fmt: skip
         sac=SACSettings(gamma=args.gamma),
+        evaluation=EvalSettings(
+            every=args.eval_every,
+            weathers=[w.strip() for w in (args.eval_weathers or "").split(",") if w.strip()],
+            days=args.eval_days,
+            target=args.target,
+        ),  # fmt: skip
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)

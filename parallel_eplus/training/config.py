@@ -13,6 +13,7 @@ from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.buildings.reward import RewardConfig
 from parallel_eplus.buildings.weather import parse_weathers
 from parallel_eplus.engine.config import RESIDUAL_SPACES
+from parallel_eplus.training.eval_target import EvalSettings
 
 STEPS_PER_YEAR = 365 * STEPS_PER_DAY
 
@@ -152,6 +153,7 @@ class TrainConfig:
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
     ppo: PPOSettings = field(default_factory=PPOSettings)
     sac: SACSettings = field(default_factory=SACSettings)
+    evaluation: EvalSettings = field(default_factory=EvalSettings)  # --eval-every (training/periodic_eval.py)
 
     def resolved(self) -> TrainConfig:
         """Validate, and fill in the run name."""
@@ -172,6 +174,8 @@ class TrainConfig:
             self.time_features |= spec.time_features  # the spec's opt-in observation features
             self.schedule_features |= spec.schedule_features
         parse_weathers(",".join(self.weathers), known if self.building else None)
+        if self.evaluation.weathers:
+            parse_weathers(",".join(self.evaluation.weathers), known if self.building else None)
         if self.workers < 1:
             raise ValueError("--workers must be at least 1")
         if self.batch_size < self.workers:
@@ -191,6 +195,7 @@ class TrainConfig:
         if self.residual_space != "action" and not self.residual_scale:
             raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE (kg/s of demand per unit)")
         self.comfort.check()
+        self.evaluation.check(self.weathers)
         if self.init_from_baseline and self.init_from is not None:
             raise ValueError("--init-from-baseline and --init-from both give the first policy: pass one of them")
         if self.init_from_baseline and self.residual_scale:
@@ -245,4 +250,5 @@ class TrainConfig:
         raw["imitation"] = ImitationSettings(**raw.get("imitation", {}))
         sac = raw.get("sac", {})
         raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
+        raw["evaluation"] = EvalSettings(**raw.get("evaluation", {}))  # runs from before it have none
         return cls(**raw)

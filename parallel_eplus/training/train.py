@@ -42,9 +42,9 @@ from parallel_eplus.training.sb3_adapter import SB3VecEnv
 log = logging.getLogger(__name__)
 
 
-def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
-    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
-    sim = SimulationConfig(
+def sim_config(cfg: TrainConfig) -> SimulationConfig:
+    """What each training worker simulates (the first weather; the workers' shares cycle the others)."""
+    return SimulationConfig(
         weather=cfg.weathers[0],
         model=cfg.model,
         building=cfg.building,
@@ -61,6 +61,11 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         step_timeout_s=cfg.step_timeout_s,
         comfort_margin_c=cfg.comfort.margin_c if cfg.constrained else None,
     )
+
+
+def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
+    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
+    sim = sim_config(cfg)
     shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
         from parallel_eplus.envs.ray_vector_env import RayVectorEnv
@@ -111,6 +116,8 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
         saved.timesteps = cfg.timesteps or saved.timesteps
         saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
         saved.overlap = cfg.overlap
+        if cfg.evaluation.every:  # evaluation may be added to (or changed for) a resumed run
+            saved.evaluation = cfg.evaluation
         cfg = saved
     cfg = cfg.resolved()
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
@@ -164,6 +171,7 @@ def _learn(
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
             *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.algorithm == "sac" else []),
             status,
+            *_evaluation(cfg, model, env),
             *callbacks,
         ])  # fmt: skip
         try:
@@ -186,6 +194,17 @@ def _learn(
         if bar is not None:
             bar.close()
         venv.close()
+
+
+def _evaluation(cfg: TrainConfig, model, env: VecNormalize) -> list[BaseCallback]:
+    """`--eval-every`: the frozen policy on the validation weathers between batches (training/periodic_eval.py)."""
+    if not cfg.evaluation.every:
+        return []
+    from parallel_eplus.training.periodic_eval import Evaluator, PeriodicEval
+
+    evaluator = Evaluator(cfg.run_dir, cfg.evaluation, sim_config(cfg), cfg.weathers, cfg.workers)
+    return [PeriodicEval(evaluator, (cfg.time_features, cfg.schedule_features),
+                         lambda path: save_checkpoint(model, env, path))]  # fmt: skip
 
 
 def _load_replay_buffer(model, checkpoint: Path) -> None:
