@@ -34,15 +34,12 @@ from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, _job_config, run_local
 from parallel_eplus.training.eval_target import ENERGY, EvalSettings, meets, parse_target, score
-from parallel_eplus.training.run_files import read_status
+from parallel_eplus.training.run_files import ALL_WEATHERS as ALL
+from parallel_eplus.training.run_files import BEST_DIR, EVALUATIONS_FILE, TARGET_FILE, read_status
 
 log = logging.getLogger(__name__)
 
-EVALUATIONS_FILE = "evaluations.csv"
 BASELINE_FILE = "eval_baseline.json"
-TARGET_FILE = "target.json"
-BEST_DIR = "best"
-ALL = "all"  # the row of means over the evaluation weathers
 SKIP = {"episode", "steps", "run_days", "complete"}  # summary numbers that are not KPIs
 
 
