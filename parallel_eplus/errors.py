@@ -50,7 +50,7 @@ class Interrupts:
     runners) inherits SIGINT as ignored, and `kill -INT` would then do nothing at all.
 
     Off the main thread (a Ray Tune trial runs its training in one) signals cannot be caught: there the
-    block changes nothing, and whoever runs the thread stops it (training/tune_trial.py).
+    block changes nothing, and whoever runs the thread stops it (experiments/tune_trial.py).
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -71,7 +71,7 @@ class Interrupts:
 
 
 class RunExistsError(ValueError):
-    """A new training run was given the name of an existing one (training/run_names.py)."""
+    """A new training run was given the name of an existing one (runs/run_names.py)."""
 
 
 class WorkerLostError(EnergyPlusError):

@@ -14,7 +14,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from parallel_eplus.evaluation.compare import compare_figure, compare_table, references, run_comparison
+from parallel_eplus.experiments.compare import compare_figure, compare_table, references, run_comparison
 from parallel_eplus.training.config import TrainConfig
 
 

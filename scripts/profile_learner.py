@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.engine.episode import bridge_counters
-from parallel_eplus.training import numpy_policy, sb3_adapter
+from parallel_eplus.learning import sb3_adapter
+from parallel_eplus.runs import numpy_policy
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import torch as th
 from sb3_contrib import TRPO
 
-from parallel_eplus.training.policy_files import normalization_file
+from parallel_eplus.runs.policy_files import normalization_file
 
 log = logging.getLogger("recentre")
 

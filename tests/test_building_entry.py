@@ -72,7 +72,8 @@ def test_simulate_building(tmp_path, capsys, no_leaks):
 @pytest.mark.slow
 def test_evaluate_building_baseline(tmp_path, no_leaks):
     """`evaluate --building` runs the spec's built-in controls; its summary uses the spec's reward signals."""
-    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
 
     spec = SPECS / "datacenter-2zone.toml"
     df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], 1, 1, tmp_path, progress=False, building=spec)
@@ -82,7 +83,8 @@ def test_evaluate_building_baseline(tmp_path, no_leaks):
 
 
 def test_evaluate_refuses_other_building(tmp_path):
-    from parallel_eplus.evaluation.sweep import Controller, run_sweep
+    from parallel_eplus.evaluation.controllers import Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
 
     policy = Controller("p", "policy", tmp_path / "model.zip", building=None)
     with pytest.raises(ValueError, match="trained on building datacenter-2zone"):

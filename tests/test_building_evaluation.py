@@ -12,8 +12,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from parallel_eplus.evaluation.plots import plot_path
-from parallel_eplus.evaluation.sweep import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller, run_sweep
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller
+from parallel_eplus.evaluation.redraw import plot_path
+from parallel_eplus.evaluation.sweep import run_sweep
 
 CRAC = "datacenter-crac"
 
@@ -28,7 +29,7 @@ def test_sweep_counts_the_buildings_steps(tmp_path, capsys, no_leaks):
 
 def test_online_evaluation_runs_the_buildings_whole_episode(tmp_path, no_leaks):
     """`evaluate --online` learns for one whole episode of the building (144 steps here, not 96)."""
-    from parallel_eplus.evaluation.online import run_online
+    from parallel_eplus.experiments.online import run_online
     from parallel_eplus.training.config import TrainConfig
     from parallel_eplus.training.train import train
 

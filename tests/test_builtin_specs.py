@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from parallel_eplus.buildings import resources
+from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.spec import BuildingSpec, load_spec
 from parallel_eplus.buildings.survey import RUN_PERIOD_WEATHER
-from parallel_eplus.engine.idf_prep import prepare_idf
 
 SPECS = sorted(resources.spec_dir().glob("*.toml"))
 

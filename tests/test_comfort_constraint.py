@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from parallel_eplus.learning.lagrangian import Lagrangian
+from parallel_eplus.learning.rollout import ALGORITHMS
 from parallel_eplus.training.config import ComfortConstraint
-from parallel_eplus.training.lagrangian import Lagrangian
-from parallel_eplus.training.rollout import ALGORITHMS
 from parallel_eplus.training.train import train
 
 from .test_train import scalars, small_config

@@ -7,8 +7,8 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from parallel_eplus.evaluation.compare import compare_figure, compare_table, draw_comparison, references
 from parallel_eplus.evaluation.plots import REFERENCE_COLORS
+from parallel_eplus.experiments.compare import compare_figure, compare_table, draw_comparison, references
 from tests.test_plots import _inside
 
 RESULTS = Path(__file__).parent.parent / "results" / "paper" / "results.csv"

@@ -11,17 +11,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.evaluation.plots import plot_path
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL, RBC_LABEL, Controller, policy_controller
+from parallel_eplus.evaluation.redraw import plot_path
 from parallel_eplus.evaluation.results import write_results
-from parallel_eplus.evaluation.sweep import (
-    BASELINE_LABEL,
-    RBC_LABEL,
-    Controller,
-    policy_controller,
-    run_sweep,
-)
+from parallel_eplus.evaluation.sweep import run_sweep
+from parallel_eplus.runs.policy_files import _saved_policy
 from parallel_eplus.training.config import TrainConfig, TRPOSettings
-from parallel_eplus.training.policy_files import _saved_policy
 from parallel_eplus.training.train import train
 
 

@@ -13,9 +13,9 @@ import torch as th
 from parallel_eplus.buildings import resources
 from parallel_eplus.buildings.check import check_spec
 from parallel_eplus.buildings.spec import load_spec
+from parallel_eplus.learning.imitation import clone, readbacks, record_baseline
+from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ImitationSettings
-from parallel_eplus.training.imitation import clone, readbacks, record_baseline
-from parallel_eplus.training.policy_files import load_policy
 from parallel_eplus.training.train import train
 
 from .test_train import small_config
@@ -67,7 +67,7 @@ def test_the_cloned_policy_tracks_what_the_built_in_controls_chose(tmp_path, no_
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from parallel_eplus.envs.env import action_space, observation_space
-    from parallel_eplus.training.rollout import ALGORITHMS
+    from parallel_eplus.learning.rollout import ALGORITHMS
 
     demos = record_baseline(None, ["CA", "FL"], 2, 2, tmp_path / "record", progress=False)
     assert len(demos) == 2 * 2 * 96 and demos.observations.shape[1] == 6

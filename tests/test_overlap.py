@@ -1,4 +1,4 @@
-"""`train --overlap`: the workers collect batch k+1 while the learner updates on batch k (training/overlap.py).
+"""`train --overlap`: the workers collect batch k+1 while the learner updates on batch k (learning/overlap.py).
 
 Each learner batch is checked against what the workers themselves recorded (every step's reward, temperatures and
 whether comfort applied, in their episodes' step tables): every transition appears once, in its worker's column,
@@ -16,9 +16,9 @@ import pytest
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.engine.episode import read_steps
+from parallel_eplus.learning.rollout import NumpyRollouts
+from parallel_eplus.runs.numpy_policy import NumpyPolicy
 from parallel_eplus.training.config import ComfortConstraint
-from parallel_eplus.training.numpy_policy import NumpyPolicy
-from parallel_eplus.training.rollout import NumpyRollouts
 from parallel_eplus.training.train import train
 
 from .test_train import scalars, small_config

@@ -9,10 +9,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from parallel_eplus.evaluation.sweep import policy_controller, run_sweep
+from parallel_eplus.evaluation.controllers import policy_controller
+from parallel_eplus.evaluation.sweep import run_sweep
+from parallel_eplus.runs.registry import read_run
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.eval_target import EvalSettings, meets, parse_target, score
-from parallel_eplus.training.registry import read_run
 from parallel_eplus.training.train import train
 
 

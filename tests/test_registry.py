@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from parallel_eplus.engine import pipe_sweep
-from parallel_eplus.training import registry
-from parallel_eplus.training.run_files import STATUS_FILE
-from parallel_eplus.training.run_status import TRIAL_VARIABLE, now_iso
+from parallel_eplus.runs import registry
+from parallel_eplus.runs.run_files import STATUS_FILE
+from parallel_eplus.runs.run_status import TRIAL_VARIABLE, now_iso
 from parallel_eplus.training.train import train
 
 from .conftest import our_processes

@@ -14,10 +14,10 @@ from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.env import action_space, observation_space
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
+from parallel_eplus.learning.rollout import FastTRPO, _pipelinable
+from parallel_eplus.learning.sb3_adapter import SB3VecEnv
+from parallel_eplus.runs.numpy_policy import NumpyPolicy
 from parallel_eplus.training.config import TRPOSettings
-from parallel_eplus.training.numpy_policy import NumpyPolicy
-from parallel_eplus.training.rollout import FastTRPO, _pipelinable
-from parallel_eplus.training.sb3_adapter import SB3VecEnv
 
 
 def _policy(time_features: bool) -> ActorCriticPolicy:
@@ -98,7 +98,7 @@ def _one_rollout(out_dir, lockstep: bool, backend: str = "local", stats: list | 
     backend "ray": the same two workers in two Ray actors of one worker each, collecting fragments."""
     sim = SimulationConfig(run_days=1, output_dir=str(out_dir), keep_episodes=0)
     if backend == "ray":
-        from parallel_eplus.envs.ray_vector_env import RayVectorEnv
+        from parallel_eplus.learning.ray_vector_env import RayVectorEnv
 
         venv = RayVectorEnv(sim, [["CA"], ["CO"]], workers_per_actor=1)
     else:

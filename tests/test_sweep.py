@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.cli import main
-from parallel_eplus.training.sweep_spec import load_spec, trial_config, trial_name
+from parallel_eplus.experiments.sweep_spec import load_spec, trial_config, trial_name
 
 from .conftest import our_pipe_dirs, our_processes
 

@@ -18,9 +18,9 @@ import torch as th
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.runs.policy_files import _latest_checkpoint, _saved_policy, load_policy
 from parallel_eplus.training.callbacks import episodes_per_weather
 from parallel_eplus.training.config import TrainConfig
-from parallel_eplus.training.policy_files import _latest_checkpoint, _saved_policy, load_policy
 from parallel_eplus.training.train import train
 
 from .conftest import our_pipe_dirs, our_processes
@@ -136,7 +136,7 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
 
 @pytest.mark.slow
 def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
-    from parallel_eplus.training.norm_stats import read_stats
+    from parallel_eplus.runs.norm_stats import read_stats
 
     base = train(small_config(tmp_path, "base", weathers=["CA"], timesteps=768, time_features=True), progress=False)
     with pytest.raises(ValueError, match="--time-features"):  # fewer observations: refused before EnergyPlus starts
@@ -166,7 +166,7 @@ def test_init_from_starts_a_new_run_from_a_policy(tmp_path, no_leaks):
 
 @pytest.mark.slow
 def test_ppo_trains_the_same_way_and_its_policy_acts(tmp_path, no_leaks):
-    from parallel_eplus.evaluation.sweep import policy_controller
+    from parallel_eplus.evaluation.controllers import policy_controller
 
     final = train(small_config(tmp_path, "ppo", weathers=["CA"], timesteps=768, algorithm="ppo"), progress=False)
     assert TrainConfig.from_json((final.parent / "config.json").read_text()).algorithm == "ppo"
@@ -189,7 +189,8 @@ def test_residual_settings_are_checked_before_anything_runs(tmp_path):
 
 @pytest.mark.slow
 def test_sac_trains_checkpoints_resumes_and_its_policy_evaluates(tmp_path, no_leaks, caplog):
-    from parallel_eplus.evaluation.sweep import policy_controller, run_sweep
+    from parallel_eplus.evaluation.controllers import policy_controller
+    from parallel_eplus.evaluation.sweep import run_sweep
     from parallel_eplus.training.config import SACSettings
 
     sac = SACSettings(learning_starts=100, batch_size=64, buffer_size=5000)

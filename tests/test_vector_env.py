@@ -178,7 +178,7 @@ def test_ray_backend_starts_its_own_ray_despite_a_stale_cluster(tmp_path, no_lea
     ray = pytest.importorskip("ray")
     import tempfile
 
-    from parallel_eplus.envs.ray_vector_env import RayVectorEnv
+    from parallel_eplus.learning.ray_vector_env import RayVectorEnv
 
     root = tempfile.mkdtemp(
         prefix="rt", dir="/tmp"

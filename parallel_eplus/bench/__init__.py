@@ -16,6 +16,8 @@
 
 Random actions in 3 are drawn like an untrained TRPO policy's (N(0, 1) clipped to [-1, 1]), so 3 and
 4 ask EnergyPlus for the same kind of work: control changes EnergyPlus's own cost several-fold.
+
+A top layer beside experiments: it may import training and everything below it; not cli.
 """
 
 from __future__ import annotations

@@ -14,12 +14,12 @@ import numpy as np
 
 from parallel_eplus.bench.config import BenchConfig, bench_building
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.model import control_model
 from parallel_eplus.buildings.weather import resolve_weather
 from parallel_eplus.engine import native
 from parallel_eplus.engine.actions import scale_action
 from parallel_eplus.engine.episode import MODEL_FILE
-from parallel_eplus.engine.idf_prep import prepare_idf
 
 
 def _physical(action, building: str | None = None) -> list[float]:

@@ -202,9 +202,9 @@ def _diagnose(kind: str, names: list[str], listing: list[list[str]]) -> str:
 def _probe(request_file: Path, weather: Path) -> None:
     from pyenergyplus.api import EnergyPlusAPI
 
+    from parallel_eplus.buildings.idf_prep import prepare_idf
     from parallel_eplus.buildings.init import _idf_names
     from parallel_eplus.buildings.survey import api_listing
-    from parallel_eplus.engine.idf_prep import prepare_idf
 
     request = json.loads(request_file.read_text())
     _IDF_NAMES.update(_idf_names(Path(request["idf"])))
@@ -234,7 +234,7 @@ def _probe(request_file: Path, weather: Path) -> None:
         api.runtime.stop_simulation(s)
 
     api.runtime.callback_begin_zone_timestep_after_init_heat_balance(state, on_step)
-    model = request_file.parent / "model.idf"  # the copy every run prepares (engine/idf_prep.py)
+    model = request_file.parent / "model.idf"  # the copy every run prepares (buildings/idf_prep.py)
     prepare_idf(Path(request["idf"]), model, run_days=1)
     api.runtime.run_energyplus(state, ["-d", str(request_file.parent / "out"), "-w", str(weather), str(model)])
     if report:

@@ -78,7 +78,7 @@ class Comfort:
         return n, dist
 
     def cost(self, temps: tuple[float, ...], margin_c: float) -> tuple[float, int]:
-        """A step's comfort cost where the band applies (training/lagrangian.py): per zone 0 inside the band shrunk
+        """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside the band shrunk
         by `margin_c` on each side, rising linearly to 1 at the band's edge and 1 beyond, averaged over the zones;
         and the number of zones outside the band itself."""
         low, high = self.band

@@ -94,7 +94,7 @@ def _zone_air_nodes(idf: Path) -> set[str]:
 
 def occupancy_schedule(idf: Path) -> str | None:
     """The schedule most of the model's People objects follow (their 'Number of People Schedule Name')."""
-    from parallel_eplus.engine.idf_prep import idf_objects
+    from parallel_eplus.buildings.idf_prep import idf_objects
 
     names = [o.fields[2] for o in idf_objects(idf.read_text(encoding="latin-1"))
              if o.kind.lower() == "people" and len(o.fields) > 2 and o.fields[2]]  # fmt: skip

@@ -1,7 +1,7 @@
 """What an EnergyPlus model offers an agent: EnergyPlus's own listing and one simulated day of values.
 
 The model runs through the EnergyPlus API until one day of its weather run period has passed (warm-up is not
-counted), as the engine runs it (engine/idf_prep.py: the weather year, not the design days), with the variables
+counted), as the engine runs it (buildings/idf_prep.py: the weather year, not the design days), with the variables
 a spec usually observes requested for every key: EnergyPlus lists and reads only requested variables.
 `building init` (buildings/init.py) writes a starter spec from the result.
 """
@@ -15,7 +15,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from parallel_eplus.engine.idf_prep import prepare_idf
+from parallel_eplus.buildings.idf_prep import prepare_idf
 
 # Variables requested for every key before the run: EnergyPlus lists (and reads) only requested variables.
 REQUESTS = (

@@ -82,6 +82,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.runs.policy_files import normalization_file
     from parallel_eplus.training.config import (
         ComfortConstraint,
         ImitationSettings,
@@ -90,7 +91,6 @@ def cmd_train(args: argparse.Namespace) -> int:
         TRPOSettings,
     )
     from parallel_eplus.training.eval_target import EvalSettings
-    from parallel_eplus.training.policy_files import normalization_file
     from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
@@ -170,14 +170,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.errors import EnergyPlusError
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, RBC_LABEL, Controller, policy_controllers
     from parallel_eplus.evaluation.results import failures_markdown, write_results
-    from parallel_eplus.evaluation.sweep import (
-        BASELINE_LABEL,
-        RBC_LABEL,
-        Controller,
-        policy_controllers,
-        run_sweep,
-    )
+    from parallel_eplus.evaluation.sweep import run_sweep
 
     # bad input fails here, before anything runs (a spec's own short names: in run_sweep, against the spec)
     weathers = (
@@ -206,7 +201,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.online:
         import pandas as pd
 
-        from parallel_eplus.evaluation.online import run_online
+        from parallel_eplus.experiments.online import run_online
 
         policies = [c for c in controllers if c.kind == "policy"]
         if not policies:
@@ -222,7 +217,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from parallel_eplus.evaluation.plots import plot_path
+    from parallel_eplus.evaluation.redraw import plot_path
 
     written = plot_path(args.path)
     for path in written if isinstance(written, list) else [written]:

@@ -12,7 +12,7 @@ log = logging.getLogger("parallel_eplus")
 
 
 def train_seeds(cfg, args: argparse.Namespace) -> int:
-    from parallel_eplus.training.sweep_spec import seeds_spec
+    from parallel_eplus.experiments.sweep_spec import seeds_spec
 
     if args.resume or args.backend == "ray":
         raise ValueError(
@@ -28,13 +28,13 @@ def train_seeds(cfg, args: argparse.Namespace) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from parallel_eplus.training.sweep_spec import load_spec
+    from parallel_eplus.experiments.sweep_spec import load_spec
 
     return _run_sweep(load_spec(args.spec), args.ray_address, args.overwrite)
 
 
 def _run_sweep(spec, ray_address: str | None, overwrite: bool) -> int:
-    from parallel_eplus.training.sweep import format_outcomes, run_sweep
+    from parallel_eplus.experiments.sweep import format_outcomes, run_sweep
 
     outcomes = run_sweep(spec, ray_address, overwrite)
     print(format_outcomes(outcomes, spec))
@@ -49,7 +49,7 @@ def _run_sweep(spec, ray_address: str | None, overwrite: bool) -> int:
 
 
 def cmd_runs(args: argparse.Namespace) -> int:
-    from parallel_eplus.training import registry, registry_view
+    from parallel_eplus.runs import registry, registry_view
 
     if args.runs_command is None:
         runs = registry.list_runs(args.dir)

@@ -24,7 +24,7 @@ class SimulationConfig:
     output_dir: str | None = None  # None: a temporary directory removed on close
     keep_episodes: int | None = None  # this env's newest full episode directories kept; None keeps all
     # EnergyPlus's own eplusout.csv in each episode (where the model asks for one): training turns it off,
-    # its cost being memory and time (engine/idf_prep.py), its content ours in steps.parquet.
+    # its cost being memory and time (buildings/idf_prep.py), its content ours in steps.parquet.
     energyplus_csv: bool = True
     reward: RewardConfig = field(default_factory=RewardConfig)
     start_timeout_s: float = 180.0  # sizing and warmup come before the first observation
@@ -42,11 +42,11 @@ class SimulationConfig:
     residual_space: str = "action"
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     native_bridge: bool = True  # EnergyPlus's side of each step in C (native.py) where a C compiler works
-    # Set: comfort is a constraint (training/lagrangian.py): the reward pays for energy only and each step reports
+    # Set: comfort is a constraint (learning/lagrangian.py): the reward pays for energy only and each step reports
     # a comfort cost rising over this many kelvin inside the band's edges, and its zones out of band.
     comfort_margin_c: float | None = None
     # Read-back output variables (key, variable) added to the model's EnergyPlus CSV, every timestep: what the
-    # building's own controls chose, for `train --init-from-baseline` (training/imitation.py).
+    # building's own controls chose, for `train --init-from-baseline` (learning/imitation.py).
     extra_outputs: tuple[tuple[str, str], ...] = ()
 
 

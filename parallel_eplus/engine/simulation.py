@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.model import (
     ACTIONS,
     control_model,
@@ -38,7 +39,6 @@ from parallel_eplus.engine.episode import (
     prune_episodes,
     write_records,
 )
-from parallel_eplus.engine.idf_prep import prepare_idf
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 

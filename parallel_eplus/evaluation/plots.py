@@ -22,7 +22,6 @@ from parallel_eplus.buildings.weather import WEATHER_FILES  # noqa: E402
 from parallel_eplus.engine.episode import (  # noqa: E402
     REWARD_PARTS,
     STEP_FLAGS,
-    STEPS_FILE,
     SUMMARY_FILE,
     read_steps,
     summarize,
@@ -276,31 +275,3 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
     text = ";  ".join(parts)
     fig.suptitle(f"{episode_dir.name}\n{textwrap.fill(text, 160)}", fontsize=9)
     return _save(fig, path or episode_dir / "episode.png")
-
-
-def sweep(out_dir: Path) -> list[Path]:
-    """Redraws a saved sweep's temperatures.png and power.png from its results.csv, with the references.
-
-    The built-in and rule-based controllers come from `reference/results.csv` above `out_dir` when
-    the sweep did not run them itself; another building's sweep draws only its own rows, against its band.
-    """
-    from parallel_eplus.evaluation import building_table
-
-    df = pd.read_csv(out_dir / "results.csv")
-    if building_table.is_generic(df):
-        return building_table.figures(df, out_dir)
-    df = with_references(df, find_references(out_dir))
-    return [temperature_comparison(df, out_dir / "temperatures.png"), power_comparison(df, out_dir / "power.png")]
-
-
-def plot_path(path: Path) -> Path | list[Path]:
-    """A run directory draws its convergence; an episode directory its time series; a sweep its figures."""
-    if (path / "episodes.csv").is_file():
-        return convergence(path)
-    if (path / "results.csv").is_file():
-        return sweep(path)
-    if (path / STEPS_FILE).is_file():
-        return episode(path)
-    if (path / SUMMARY_FILE).is_file():
-        raise FileNotFoundError(f"{path} kept only its summary (older episodes are pruned); pick a newer one")
-    raise FileNotFoundError(f"{path} is neither a run directory (episodes.csv) nor an episode directory ({STEPS_FILE})")

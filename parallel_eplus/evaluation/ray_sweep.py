@@ -20,7 +20,7 @@ from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import claim_episode_dir
 from parallel_eplus.envs.ray_session import connect
 from parallel_eplus.errors import EnergyPlusError
-from parallel_eplus.evaluation.sweep import failure_row
+from parallel_eplus.evaluation.controllers import failure_row
 
 log = logging.getLogger(__name__)
 
@@ -29,7 +29,7 @@ RETURNED_FILES = ("steps.parquet", "summary.json", "eplusout.err")
 
 def _policy_files(model_zip: Path) -> dict[str, bytes]:
     """A policy's model and statistics, by the names `load_policy` looks for beside each other."""
-    from parallel_eplus.training.policy_files import MODEL_FILE, NORMALIZE_FILE, normalization_file
+    from parallel_eplus.runs.policy_files import MODEL_FILE, NORMALIZE_FILE, normalization_file
 
     stats = normalization_file(model_zip)
     return {MODEL_FILE: model_zip.read_bytes(), Path(NORMALIZE_FILE).with_suffix(stats.suffix).name: stats.read_bytes()}

@@ -13,7 +13,7 @@ import pandas as pd
 from parallel_eplus import io
 from parallel_eplus.buildings.model import COMFORT_BAND_C
 from parallel_eplus.evaluation.building_table import comparable
-from parallel_eplus.evaluation.sweep import BASELINE_LABEL
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL
 
 log = logging.getLogger(__name__)
 

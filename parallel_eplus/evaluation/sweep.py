@@ -1,144 +1,33 @@
 """The evaluation sweep: controllers x weathers, one full episode each, run in parallel.
 
-Controllers: the built-in one (the baseline model, no agent), trained policies (deterministic, with
+Controllers (controllers.py): the built-in one (the baseline model, no agent), trained policies (deterministic, with
 their saved observation statistics) and the rule-based controller. Every episode's reward comes from
 the same reward function on the same signals, so rewards compare across controllers.
 """
 
 from __future__ import annotations
 
-import json
 import logging
-import re
 from collections import deque
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import RewardConfig
 from parallel_eplus.buildings.weather import parse_weathers, weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.simulation import Simulation, wait_any
 from parallel_eplus.errors import EnergyPlusError
+from parallel_eplus.evaluation.controllers import (
+    Controller,
+    failure_row,
+    slug,
+    unique_labels,
+)
 
 log = logging.getLogger(__name__)
-
-BASELINE_LABEL = "Baseline"
-RBC_LABEL = "Rule-based"
-
-
-@dataclass
-class Controller:
-    """One column of the paper's table: a label and how it acts."""
-
-    label: str
-    kind: str  # "baseline", "policy" or "rbc"
-    path: Path | None = None
-    time_features: bool = False  # the policy observes model.TIME_FEATURES
-    schedule_features: bool = False  # and model.SCHEDULE_FEATURES
-    rbc_target_c: float | None = None  # the rule-based controller's zone target; None: RBCConfig's
-    residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
-    residual_space: str = "action"  # what the correction applies to (SimulationConfig)
-    building: str | None = None  # the spec a policy was trained on (its config.json); None: the data center
-    run: str = ""  # a policy's training run (its folder's name): policies sharing a label are one recipe's runs
-    # A policy in memory, (observation, info) -> action: evaluation during training (training/periodic_eval.py)
-    act: Callable[[np.ndarray, dict], np.ndarray] | None = None
-
-    @property
-    def model(self) -> str:
-        return "baseline" if self.kind == "baseline" else "temp_fan"
-
-    def make(self, building: str | None = None) -> Callable[[np.ndarray, dict], np.ndarray]:
-        """A fresh actor for one episode: (observation, info) -> action. `building`: the swept spec, whose
-        `controller` ("module:Class") is the rule-based one; None: the data center's."""
-        if self.kind == "baseline":
-            empty = np.zeros(0, dtype=np.float32)
-            return lambda obs, info: empty
-        if self.kind == "rbc":
-            target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
-            cls = load_building(building).controller_class() if building else RuleBasedController
-            if cls is RuleBasedController:
-                return RuleBasedController(RBCConfig(**target), building)
-            return cls(**target)  # a user's class: called (observation, info) -> normalized action
-        if self.act is not None:
-            return self.act
-        from parallel_eplus.training.policy_files import load_policy
-
-        act = load_policy(self.path)
-        return lambda obs, info: act(obs[None, :])[0]
-
-
-def policy_controllers(spec: str) -> list[Controller]:
-    """`policy_controller` for a policy, a run folder, or a folder of runs (a sweep's, or any: every run under it
-    that has a model.zip, labelled by the folder's name unless LABEL is given: one recipe's seeds)."""
-    path_text, _, label = spec.partition("=")
-    path = Path(path_text)
-    if path.is_dir() and not (path / "model.zip").is_file():
-        runs = sorted(p.parent for p in path.glob("*/model.zip"))
-        if not runs:
-            raise FileNotFoundError(f"{path}: no model.zip in it or in a run folder below it")
-        return [policy_controller(f"{run}={label or path.name}") for run in runs]
-    return [policy_controller(spec)]
-
-
-def policy_controller(spec: str) -> Controller:
-    """'runs/A/model.zip' or 'runs/A/model.zip=LABEL'; the label defaults to 'TRPO (<training weathers>)'."""
-    path_text, _, label = spec.partition("=")
-    path = Path(path_text)
-    if path.is_dir():
-        path = path / "model.zip"
-    from parallel_eplus.engine.config import policy_action_names
-    from parallel_eplus.training.policy_files import check_actions, policy_features, require_policy_files, run_dir_of
-
-    require_policy_files(path)
-    config = run_dir_of(path) / "config.json"
-    saved = json.loads(config.read_text()) if config.is_file() else {}
-    residual = float(saved.get("residual_scale", 0.0))
-    if not label and saved:
-        algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
-        label = f"{algorithm} ({'-'.join(saved['weathers'])})"
-    space = saved.get("residual_space", "action")
-    building = saved.get("building")
-    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
-        building = Path(building).stem  # a built-in spec, saved by path by another checkout or install
-    time_features, schedule_features = policy_features(path, building)
-    sim = SimulationConfig(
-        model=saved.get("model", "temp_fan"), building=building, residual_scale=residual,
-        residual_space=space,
-    )  # fmt: skip
-    what = f"building {Path(sim.building).stem}" if sim.building else f"model {sim.model}"
-    what += f" with residual space {space}" if residual else ""
-    check_actions(path, len(policy_action_names(sim)), what)
-    if sim.model != "temp_fan":
-        raise ValueError(f"{path}: trained on model {sim.model!r}; the evaluation sweep runs temp_fan")
-    return Controller(
-        label or path.parent.name, "policy", path, time_features, schedule_features,
-        rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
-        residual_space=saved.get("residual_space", "action"), building=building,
-        run=saved.get("run_name") or run_dir_of(path).name,
-    )  # fmt: skip
-
-
-def unique_labels(controllers: list[Controller]) -> list[Controller]:
-    """Policies sharing a label from different runs are one recipe's runs (seeds); any other repeat is renamed."""
-    seen: dict[str, list[Controller]] = {}
-    for c in controllers:
-        earlier = seen.get(c.label, [])
-        seeds = earlier and c.kind == "policy" and all(e.kind == "policy" and e.run != c.run for e in earlier)
-        if earlier and not seeds:
-            c.label = f"{c.label} [{c.path.parent.name if c.path else len(earlier) + 1}]"
-        seen.setdefault(c.label, []).append(c)
-    return controllers
-
-
-def slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9]+", "-", text).strip("-").lower()
 
 
 def run_sweep(
@@ -206,17 +95,6 @@ def run_sweep(
     df = df.reset_index(drop=True)
     df.attrs["failures"] = failures
     return df
-
-
-def failure_row(controller: Controller, cfg: SimulationConfig, error: EnergyPlusError) -> dict:
-    """What a failed episode leaves in the sweep's report: who, where, EnergyPlus's own words, the folder."""
-    log.error("%s on %s failed: %s", controller.label, weather_label(cfg.weather), error)
-    return {
-        "controller": controller.label,
-        "weather": weather_label(cfg.weather),
-        "error": error.headline,
-        "episode_dir": str(getattr(error, "episode_dir", None) or cfg.output_dir),
-    }
 
 
 def _job_config(

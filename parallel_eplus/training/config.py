@@ -13,102 +13,16 @@ from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.buildings.reward import RewardConfig
 from parallel_eplus.buildings.weather import parse_weathers
 from parallel_eplus.engine.config import RESIDUAL_SPACES
+from parallel_eplus.learning.settings import (
+    ComfortConstraint,
+    ImitationSettings,
+    PPOSettings,
+    SACSettings,
+    TRPOSettings,
+)
 from parallel_eplus.training.eval_target import EvalSettings
 
 STEPS_PER_YEAR = 365 * STEPS_PER_DAY
-
-
-@dataclass
-class TRPOSettings:
-    """The paper's TRPO hyperparameters (Section 5.1.4), as sb3-contrib names them."""
-
-    net_arch: tuple[int, ...] = (32, 32)  # tanh MLP
-    target_kl: float = 0.01  # max_KL
-    cg_max_steps: int = 10  # cg_iters
-    cg_damping: float = 0.1
-    gamma: float = 0.99
-    gae_lambda: float = 0.98  # lam
-    n_critic_updates: int = 5  # vf_iters
-    learning_rate: float = 1e-3  # vf_stepsize
-    critic_batch_size: int = 64  # OpenAI Baselines' value-function minibatch
-    # The Gaussian policy's initial log standard deviation (SB3's default, 0, is the paper's too). A residual
-    # policy starts from a working controller, where noise of one action unit would unsettle it.
-    log_std_init: float = 0.0
-    # > 0: gSDE (state-dependent exploration) with a noise matrix held this many steps per worker, so an offset
-    # lasts long enough for the building to respond (96: a day of the data center); 0: independent noise per step.
-    sde_sample_freq: int = 0
-
-
-@dataclass
-class PPOSettings:
-    """Stable-Baselines3's PPO for comparison runs; network, gamma and GAE lambda come from TRPOSettings."""
-
-    learning_rate: float = 3e-4
-    n_epochs: int = 10
-    batch_size: int = 256  # minibatch
-    clip_range: float = 0.2
-
-
-@dataclass
-class SACSettings:
-    """Stable-Baselines3's SAC (off-policy) for comparison runs.
-
-    64x64 ReLU (SB3's activation for SAC): the problem is small (6-10 observations, 4 actions), and on 2 shared
-    cores the gradient steps, not the network's capacity, bound wall time; 256x256 (SB3's default) costs ~10x
-    per step. One gradient step per vector step (0.5 per env step with 2 workers) keeps 1M env steps at a few
-    hours. The replay buffer holds the whole 1M-step budget (~80 MB).
-    """
-
-    net_arch: tuple[int, ...] = (64, 64)
-    learning_rate: float = 3e-4
-    buffer_size: int = 1_000_000
-    learning_starts: int = 10_000  # env steps of random actions first: a week of every worker's weather
-    batch_size: int = 256
-    tau: float = 0.005
-    gamma: float = 0.99
-    train_freq: int = 1  # vector steps between updates
-    gradient_steps: int = 1
-    ent_coef: str = "auto"
-
-
-@dataclass
-class ComfortConstraint:
-    """`--comfort-target` and how the multiplier follows it (training/lagrangian.py)."""
-
-    target_pct: float | None = None  # None: the reward's fixed comfort weights (the paper's reproduction)
-    margin_c: float = 0.5  # the cost rises over this far inside the band's edges
-    multiplier_init: float = 10.0  # energy costs ~1 per step in every built-in spec (power_weight × energy)
-    rate: float = 0.3  # log-multiplier step per e-fold of measured over allowed samples out of band
-    floor_pct: float = 0.05  # added to both shares out of band: a batch with none out lowers it, finitely
-    multiplier_min: float = 0.1
-    multiplier_max: float = 100.0  # there, 1 % of samples out of band costs about what all the energy does
-
-    def check(self) -> None:
-        if self.target_pct is not None and not 0.0 < self.target_pct < 100.0:
-            raise ValueError(
-                f"--comfort-target is a share of samples in band, in percent below 100: got {self.target_pct}"
-            )
-        if self.margin_c <= 0 or self.rate <= 0 or self.floor_pct <= 0:
-            raise ValueError("the comfort constraint's margin, rate and floor must be > 0")
-        if not 0 < self.multiplier_min <= self.multiplier_init <= self.multiplier_max:
-            raise ValueError("the comfort multiplier must start within [multiplier_min, multiplier_max], both > 0")
-
-
-@dataclass
-class ImitationSettings:
-    """How the policy is fitted to the recorded controls."""
-
-    epochs: int = 10  # over the record and its re-drawn copies: 40 passes over the record itself
-    learning_rate: float = 1e-3
-    batch_size: int = 256
-    # The cloned Gaussian's log standard deviation (on-policy): exploration around the built-in behaviour.
-    # -2.0 is 0.135 of each action's half range (the data center's setpoint: ±2 K; its fans: ±0.35 kg/s).
-    log_std: float = -2.0
-    run_days: int | None = None  # days recorded per training weather; None: the run's episode length
-    # Copies of the recorded steps with the spec's comfort temperatures re-drawn across the band ± `redraw_c`
-    # (training/imitation.py): the controls hold them still, so the clone must not learn to act on them.
-    redraw_copies: int = 3
-    redraw_c: float = 5.0
 
 
 @dataclass
@@ -137,7 +51,7 @@ class TrainConfig:
     # False: each local worker gets its next action as soon as its observation arrives (rollout.py).
     lockstep: bool = False
     # True (TRPO, PPO): the workers collect batch k+1 with the policy before the update on batch k, while the
-    # learner runs that update; each update then learns from data one policy old (training/overlap.py).
+    # learner runs that update; each update then learns from data one policy old (learning/overlap.py).
     overlap: bool = False
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     schedule_features: bool = False  # opt-in IT-load schedule features (model.SCHEDULE_FEATURES)
@@ -147,8 +61,8 @@ class TrainConfig:
     residual_space: str = "action"  # what it corrects: each action, or each zone's flow demand (SimulationConfig)
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
-    comfort: ComfortConstraint = field(default_factory=ComfortConstraint)  # --comfort-target (training/lagrangian.py)
-    init_from_baseline: bool = False  # imitate the building's own controls first (training/imitation.py)
+    comfort: ComfortConstraint = field(default_factory=ComfortConstraint)  # --comfort-target (learning/lagrangian.py)
+    init_from_baseline: bool = False  # imitate the building's own controls first (learning/imitation.py)
     imitation: ImitationSettings = field(default_factory=ImitationSettings)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
     ppo: PPOSettings = field(default_factory=PPOSettings)
@@ -252,3 +166,14 @@ class TrainConfig:
         raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
         raw["evaluation"] = EvalSettings(**raw.get("evaluation", {}))  # runs from before it have none
         return cls(**raw)
+
+
+__all__ = [
+    "STEPS_PER_YEAR",
+    "ComfortConstraint",
+    "ImitationSettings",
+    "PPOSettings",
+    "SACSettings",
+    "TRPOSettings",
+    "TrainConfig",
+]

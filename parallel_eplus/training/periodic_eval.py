@@ -32,10 +32,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 from parallel_eplus import io
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, _job_config, run_local
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+from parallel_eplus.evaluation.sweep import _job_config, run_local
+from parallel_eplus.runs.run_files import ALL_WEATHERS as ALL
+from parallel_eplus.runs.run_files import BEST_DIR, EVALUATIONS_FILE, TARGET_FILE, read_status
 from parallel_eplus.training.eval_target import ENERGY, EvalSettings, meets, parse_target, score
-from parallel_eplus.training.run_files import ALL_WEATHERS as ALL
-from parallel_eplus.training.run_files import BEST_DIR, EVALUATIONS_FILE, TARGET_FILE, read_status
 
 log = logging.getLogger(__name__)
 
@@ -194,7 +195,7 @@ class PeriodicEval(BaseCallback):
 
     def run_now(self) -> EvalResult:
         policy, env = self.model.policy, self.model.get_vec_normalize_env()
-        from parallel_eplus.training.norm_stats import NormStats
+        from parallel_eplus.runs.norm_stats import NormStats
 
         stats = NormStats.of(env) if env is not None else None
 

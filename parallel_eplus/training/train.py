@@ -22,12 +22,11 @@ from parallel_eplus.buildings.building import load_building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError, Interrupts
-from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather, tensorboard_logger
-from parallel_eplus.training.checkpoints import AtomicCheckpoint, resume_point, save_checkpoint
-from parallel_eplus.training.config import TrainConfig
-from parallel_eplus.training.lagrangian import ConstrainedRolloutBuffer, CostReplayBuffer, Lagrangian, SACComfort
-from parallel_eplus.training.norm_stats import read_stats
-from parallel_eplus.training.policy_files import (
+from parallel_eplus.learning.lagrangian import ConstrainedRolloutBuffer, CostReplayBuffer, Lagrangian, SACComfort
+from parallel_eplus.learning.sb3_adapter import SB3VecEnv
+from parallel_eplus.runs.checkpoints import AtomicCheckpoint, resume_point, save_checkpoint
+from parallel_eplus.runs.norm_stats import read_stats
+from parallel_eplus.runs.policy_files import (
     MODEL_FILE,
     _check_init_from,
     _warm_start,
@@ -35,9 +34,10 @@ from parallel_eplus.training.policy_files import (
     replay_buffer_file,
     run_dir_of,
 )
-from parallel_eplus.training.run_names import claim_run_name
-from parallel_eplus.training.run_status import RunStatus
-from parallel_eplus.training.sb3_adapter import SB3VecEnv
+from parallel_eplus.runs.run_names import claim_run_name
+from parallel_eplus.runs.run_status import RunStatus
+from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather, tensorboard_logger
+from parallel_eplus.training.config import TrainConfig
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
     sim = sim_config(cfg)
     shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
-        from parallel_eplus.envs.ray_vector_env import RayVectorEnv
+        from parallel_eplus.learning.ray_vector_env import RayVectorEnv
 
         per_actor = cfg.workers_per_actor or cfg.workers
         venv = RayVectorEnv(sim, shares, per_actor, cfg.ray_address, cfg.max_restarts)
@@ -96,7 +96,7 @@ def train(
     """Train (or resume) and return the final model's path. Ctrl-C/SIGTERM saves a checkpoint first.
 
     A new run whose name is taken is refused, or with `overwrite` the old one is moved aside (run_names.py).
-    `callbacks` run after ours (a sweep's trial reports each batch to Ray Tune with one: training/tune_trial.py).
+    `callbacks` run after ours (a sweep's trial reports each batch to Ray Tune with one: experiments/tune_trial.py).
     runs/<name>/status.json says how far it got and how it ended (run_status.py; `parallel-eplus runs`).
     """
     cfg, checkpoint = _prepare(cfg, resume, overwrite)
@@ -124,7 +124,7 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
         _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
     if checkpoint is None:
         cfg.check_new_run()
-        claim_run_name(cfg, overwrite)
+        claim_run_name(cfg.run_dir, Path(cfg.tensorboard_dir) / str(cfg.run_name), overwrite)
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     io.write_text(run_dir / "config.json", cfg.to_json())
@@ -135,7 +135,7 @@ def _learn(
     cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus,
     callbacks: Sequence[BaseCallback] = (),
 ) -> Path:  # fmt: skip
-    from parallel_eplus.training.rollout import ALGORITHMS
+    from parallel_eplus.learning.rollout import ALGORITHMS
 
     run_dir = cfg.run_dir
     th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
@@ -225,7 +225,7 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
     import json
     import shutil
 
-    from parallel_eplus.training.imitation import clone, record_baseline
+    from parallel_eplus.learning.imitation import clone, record_baseline
 
     days = cfg.imitation.run_days or cfg.run_days
     work = cfg.run_dir / "baseline-record"
@@ -253,7 +253,7 @@ def _new_model(cfg: TrainConfig, env: VecNormalize):
 
 
 def _algorithm(cfg: TrainConfig, env: VecNormalize):
-    from parallel_eplus.training.rollout import ALGORITHMS
+    from parallel_eplus.learning.rollout import ALGORITHMS
 
     if cfg.algorithm == "sac":
         s = cfg.sac

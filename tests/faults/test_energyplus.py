@@ -113,7 +113,8 @@ def test_a_failed_episode_leaves_the_evaluation_standing(tmp_path, no_leaks, cap
 
 def test_a_failed_episode_stops_a_sweep_that_averages(tmp_path, no_leaks, broken_weather):
     """Without `keep_going` (the algorithm comparison averages over weathers) the failure is raised."""
-    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
 
     with pytest.raises(EnergyPlusError, match="Broken"):
         run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA", str(broken_weather)], 1, 2,

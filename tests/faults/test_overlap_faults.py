@@ -14,8 +14,8 @@ import pytest
 
 from parallel_eplus.engine import pipe_sweep
 from parallel_eplus.errors import EnergyPlusError, WorkerLostError
+from parallel_eplus.learning.rollout import FastTRPO
 from parallel_eplus.training.config import TrainConfig
-from parallel_eplus.training.rollout import FastTRPO
 from parallel_eplus.training.train import train
 
 from ..conftest import _started_by_us, our_processes

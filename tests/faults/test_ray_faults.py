@@ -14,8 +14,8 @@ import time
 import pytest
 
 from parallel_eplus.engine import pipe_sweep
-from parallel_eplus.envs.ray_vector_env import RayVectorEnv
 from parallel_eplus.errors import WorkerLostError
+from parallel_eplus.learning.ray_vector_env import RayVectorEnv
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
 
@@ -131,7 +131,8 @@ def test_ctrl_c_during_ray_training_saves_a_checkpoint_and_leaves_no_ray_energyp
 
 def test_a_failed_ray_episode_leaves_the_evaluation_standing(tmp_path, no_leaks, broken_weather):
     """The Ray sweep keeps going past a failed episode as the local one does, naming it and why."""
-    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_sweep
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
 
     df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA", str(broken_weather)], 1, 2, tmp_path / "eval",
                    progress=False, backend="ray", keep_going=True)  # fmt: skip

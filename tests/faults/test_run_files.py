@@ -15,8 +15,8 @@ import pytest
 
 from parallel_eplus import io
 from parallel_eplus.errors import RunExistsError
-from parallel_eplus.training.norm_stats import read_stats
-from parallel_eplus.training.policy_files import load_policy, normalization_file, policy_features
+from parallel_eplus.runs.norm_stats import read_stats
+from parallel_eplus.runs.policy_files import load_policy, normalization_file, policy_features
 from parallel_eplus.training.train import train
 
 from ..test_train import small_config
@@ -107,7 +107,7 @@ def test_pickled_statistics_still_load_with_a_warning(legacy, caplog):
 def test_statistics_round_trip_as_data_only(legacy, tmp_path):
     with open(normalization_file(legacy / "model.zip"), "rb") as f:
         norm = pickle.load(f)
-    from parallel_eplus.training.norm_stats import save_stats
+    from parallel_eplus.runs.norm_stats import save_stats
 
     path = save_stats(norm, tmp_path / "vecnormalize.npz")
     with np.load(path, allow_pickle=False) as data:  # numbers only: no object arrays
@@ -135,8 +135,8 @@ def test_an_atomic_write_that_fails_leaves_the_previous_file_and_no_temporary(tm
     "name, algorithm", [("paper-ca", "trpo"), ("ppo-ca-co-fl-time", "ppo"), ("residual-demand", "trpo")]
 )
 def test_a_policy_loads_without_unpickling_and_acts_as_sb3s_own_load(name, algorithm):
-    from parallel_eplus.training.policy_files import _saved_policy
-    from parallel_eplus.training.rollout import ALGORITHMS
+    from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.runs.policy_files import _saved_policy
 
     model_zip = COMMITTED.parent / name / "model.zip"
     safe, full = _saved_policy(model_zip), ALGORITHMS[algorithm].load(model_zip, device="cpu").policy

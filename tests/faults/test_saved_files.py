@@ -14,9 +14,9 @@ import pytest
 from sb3_contrib import TRPO
 
 from parallel_eplus.io import DiskFullError
-from parallel_eplus.training.checkpoints import save_checkpoint
+from parallel_eplus.runs.checkpoints import save_checkpoint
+from parallel_eplus.runs.norm_stats import read_stats
 from parallel_eplus.training.config import TrainConfig
-from parallel_eplus.training.norm_stats import read_stats
 from parallel_eplus.training.train import train
 
 from ..conftest import our_processes

@@ -9,8 +9,8 @@ import torch as th
 from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus.buildings.model import observation_names
-from parallel_eplus.training.norm_stats import read_stats
-from parallel_eplus.training.run_files import MODEL_FILE, saves_newest_first
+from parallel_eplus.runs.norm_stats import read_stats
+from parallel_eplus.runs.run_files import MODEL_FILE, saves_newest_first
 
 __all__ = ["MODEL_FILE", "saves_newest_first"]  # and the rest; these two live in run_files.py (no torch there)
 NORMALIZE_FILE = "vecnormalize.npz"  # data only (norm_stats.py)
@@ -56,7 +56,7 @@ def run_dir_of(checkpoint: Path) -> Path:
 def _saved_policy(model_zip: Path):
     """The policy network of a saved model, whichever algorithm trained it (SAC's includes its critics), built
     without unpickling anything from the file (safe_load.py): a shared policy cannot run code."""
-    from parallel_eplus.training.safe_load import load_policy_network
+    from parallel_eplus.runs.safe_load import load_policy_network
 
     return load_policy_network(model_zip)
 
@@ -156,7 +156,7 @@ def load_policy(model_zip: str | Path):
     model_zip = Path(model_zip)
     stats = require_policy_files(model_zip)
     saved = _saved_policy(model_zip)
-    from parallel_eplus.training.numpy_policy import NumpyPolicy
+    from parallel_eplus.runs.numpy_policy import NumpyPolicy
 
     norm = read_stats(stats)
     low, high = saved.action_space.low, saved.action_space.high

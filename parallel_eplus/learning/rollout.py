@@ -31,11 +31,11 @@ from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from parallel_eplus.training import fragments
-from parallel_eplus.training.numpy_policy import NumpyPolicy
-from parallel_eplus.training.overlap import IdleClock, LocalCollector, TimedReady
-from parallel_eplus.training.pipeline import run_pipeline
-from parallel_eplus.training.sb3_adapter import SB3VecEnv
+from parallel_eplus.learning import fragments
+from parallel_eplus.learning.overlap import IdleClock, LocalCollector, TimedReady
+from parallel_eplus.learning.pipeline import run_pipeline
+from parallel_eplus.learning.sb3_adapter import SB3VecEnv
+from parallel_eplus.runs.numpy_policy import NumpyPolicy
 
 
 def _pipelinable(env: VecEnv) -> tuple[SB3VecEnv | None, VecNormalize | None]:

@@ -23,7 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from parallel_eplus.engine import pipe_sweep
-from parallel_eplus.training.run_files import (
+from parallel_eplus.runs.run_files import (
     MODEL_FILE,
     TARGET_FILE,
     latest_evaluation,
@@ -180,7 +180,7 @@ def list_runs(folder: Path) -> list[RunInfo]:
 def stop_run(info: RunInfo, timeout_s: float = 300.0) -> tuple[RunInfo, list[str]]:
     """Stop a running training as Ctrl-C does (SIGINT: it saves a checkpoint and stops every EnergyPlus process),
     wait for it to exit, and return the run as it ended with whatever of its processes or pipes is left. A sweep's
-    trial stops alone the same way (training/tune_trial.py), and its process ends with it."""
+    trial stops alone the same way (experiments/tune_trial.py), and its process ends with it."""
     status = info.status or {}
     if info.state != "running":
         raise ValueError(f"run {info.name} is not running ({info.state})")

@@ -31,8 +31,8 @@ from pathlib import Path
 
 from parallel_eplus import io
 from parallel_eplus.errors import RunExistsError
-from parallel_eplus.training.policy_files import MODEL_FILE, saves_newest_first
-from parallel_eplus.training.sweep_spec import SweepSpec, trial_name
+from parallel_eplus.experiments.sweep_spec import SweepSpec, trial_name
+from parallel_eplus.runs.policy_files import MODEL_FILE, saves_newest_first
 
 log = logging.getLogger(__name__)
 
@@ -105,7 +105,7 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
     from ray.tune.logger import CSVLoggerCallback, JsonLoggerCallback
 
     from parallel_eplus.envs.ray_session import connect
-    from parallel_eplus.training.tune_trial import TrialRun
+    from parallel_eplus.experiments.tune_trial import TrialRun
 
     root = Path(spec.runs_dir).resolve() / spec.name
     tb_root = Path(spec.tensorboard_dir).resolve() / spec.name

@@ -13,7 +13,7 @@ batch k starts from, and reaches the learner one update later. What that changes
   critic before the advantages are computed, as if it had collected the batch.
 
 Locally the workers collect in a thread of the learner's process (`LocalCollector`), with the loop a Ray actor
-runs (fragments.collect_fragment); with `--backend ray` the actors do (envs/ray_vector_env.py). Both offer
+runs (fragments.collect_fragment); with `--backend ray` the actors do (learning/ray_vector_env.py). Both offer
 `send(order, rngs)` (returns at once), `receive()` (the fragments; raises what the collection raised) and
 `cancel()` (drop the batch on order: its workers are then mid-step and must start afresh).
 """
@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from parallel_eplus.training.fragments import BatchOrder, Fragment, collect_fragment
+from parallel_eplus.learning.fragments import BatchOrder, Fragment, collect_fragment
 
 
 class LocalCollector:

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from parallel_eplus.training.numpy_policy import NumpyPolicy
-from parallel_eplus.training.pipeline import SIDE_ARRAYS, SINK_ARRAYS, run_pipeline
+from parallel_eplus.learning.pipeline import SIDE_ARRAYS, SINK_ARRAYS, run_pipeline
+from parallel_eplus.runs.numpy_policy import NumpyPolicy
 
 
 @dataclass(frozen=True)

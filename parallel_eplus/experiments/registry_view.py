@@ -6,7 +6,7 @@ import json
 import os
 from pathlib import Path
 
-from parallel_eplus.training.registry import CONFIG_FILE, RunInfo
+from parallel_eplus.runs.registry import CONFIG_FILE, RunInfo
 
 COLUMNS = (
     "NAME",

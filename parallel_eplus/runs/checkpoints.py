@@ -15,8 +15,8 @@ from pathlib import Path
 from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus import io
-from parallel_eplus.training.norm_stats import read_stats, save_stats
-from parallel_eplus.training.policy_files import (
+from parallel_eplus.runs.norm_stats import read_stats, save_stats
+from parallel_eplus.runs.policy_files import (
     normalization_file,
     replay_buffer_file,
     run_dir_of,

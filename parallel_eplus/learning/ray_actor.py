@@ -2,7 +2,7 @@
 
 Per batch it receives one order (the policy, the observation statistics, its workers' random
 streams), collects its share of the batch with the pipelined loop and no call to the learner per
-step, and returns one trajectory fragment (training/fragments.py). The actor runs two threads, so
+step, and returns one trajectory fragment (learning/fragments.py). The actor runs two threads, so
 the learner can ask how far a collection has come (its deadline check) and stop it while it runs:
 one batch's collection (`stop(batch)`, when the learner drops a batch it ordered ahead: `train --overlap`),
 or every collection for good (`stop()`, closing).
@@ -25,8 +25,8 @@ def actor_class(max_concurrency: int = 2):
     import ray
 
     from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
-    from parallel_eplus.training.fragments import BatchOrder, Fragment, collect_fragment
-    from parallel_eplus.training.sb3_adapter import SB3VecEnv
+    from parallel_eplus.learning.fragments import BatchOrder, Fragment, collect_fragment
+    from parallel_eplus.learning.sb3_adapter import SB3VecEnv
 
     @ray.remote(max_concurrency=max_concurrency)
     class WorkerGroup:

@@ -14,7 +14,6 @@ import time
 from pathlib import Path
 
 from parallel_eplus.errors import RunExistsError
-from parallel_eplus.training.config import TrainConfig
 
 log = logging.getLogger(__name__)
 
@@ -25,15 +24,17 @@ def _shown(path: Path) -> str:
     return path.as_posix() if rel.startswith("..") else rel
 
 
-def claim_run_name(cfg: TrainConfig, overwrite: bool = False) -> list[Path]:
-    """Refuse (or with `overwrite`, move aside) an existing run of the same name; returns what was moved."""
-    folders = [cfg.run_dir, Path(cfg.tensorboard_dir) / str(cfg.run_name)]
+def claim_run_name(run_dir: Path, tensorboard_dir: Path, overwrite: bool = False) -> list[Path]:
+    """Refuse (or with `overwrite`, move aside) an existing run of the same name; returns what was moved.
+
+    `run_dir` is runs/<name>, `tensorboard_dir` the run's own TensorBoard folder (tensorboard_logs/<name>)."""
+    folders = [run_dir, tensorboard_dir]
     taken = [p for p in folders if p.exists() and (not p.is_dir() or any(p.iterdir()))]
     if not taken:
         return []
     if not overwrite:
         raise RunExistsError(
-            f"run {cfg.run_name!r} exists ({_shown(taken[0])}): continue it with --resume {_shown(cfg.run_dir)}, "
+            f"run {run_dir.name!r} exists ({_shown(taken[0])}): continue it with --resume {_shown(run_dir)}, "
             "or start fresh with another --run-name or --overwrite (moves the old run aside, deletes nothing)"
         )
     stamp = time.strftime("%Y%m%d-%H%M%S")

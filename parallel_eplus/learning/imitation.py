@@ -36,7 +36,7 @@ from tqdm import tqdm
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.training.config import ImitationSettings
+from parallel_eplus.learning.settings import ImitationSettings
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +99,8 @@ def record_baseline(
 ) -> Demonstrations:
     """Run the building's own controls on each weather (`workers` at a time) and pair every observation with what
     those controls set next. `features`: the policy's (time, schedule) observation features."""
-    from parallel_eplus.evaluation.sweep import BASELINE_LABEL, Controller, run_local, slug
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller, slug
+    from parallel_eplus.evaluation.sweep import run_local
 
     wanted = readbacks(building)
     spec = load_building(building)

@@ -18,9 +18,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL, RBC_LABEL, policy_controller
 from parallel_eplus.evaluation.plots import controller_colors  # noqa: E402
 from parallel_eplus.evaluation.seeds import interval  # noqa: E402
-from parallel_eplus.evaluation.sweep import BASELINE_LABEL, RBC_LABEL, policy_controller, run_sweep  # noqa: E402
+from parallel_eplus.evaluation.sweep import run_sweep  # noqa: E402
 from parallel_eplus.training.config import TrainConfig  # noqa: E402
 from parallel_eplus.training.train import train  # noqa: E402
 

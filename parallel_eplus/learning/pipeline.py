@@ -13,12 +13,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from parallel_eplus.training.numpy_policy import NumpyPolicy
+from parallel_eplus.runs.numpy_policy import NumpyPolicy
 
 # What the loop writes per transition: the rollout buffer's own array names.
 SINK_ARRAYS = ("observations", "actions", "rewards", "episode_starts", "values", "log_probs")
 # Arrays a sink may also have, filled from each step's info (array, info key): the comfort constraint's cost and
-# counts (training/lagrangian.py), reported by the env when comfort is a constraint.
+# counts (learning/lagrangian.py), reported by the env when comfort is a constraint.
 SIDE_ARRAYS = (("costs", "comfort_cost"), ("comfort_out", "comfort_out"), ("comfort_zones", "comfort_zones"))
 
 

@@ -20,7 +20,7 @@ from stable_baselines3.common.logger import Logger
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.weather import parse_weathers, weather_label
-from parallel_eplus.evaluation.sweep import Controller, slug
+from parallel_eplus.evaluation.controllers import Controller, slug
 
 log = logging.getLogger(__name__)
 
@@ -48,10 +48,10 @@ def run_online_episode(
     """One episode of `weather` while a copy of the controller's model keeps training; returns its results row."""
     import torch as th
 
+    from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.runs.norm_stats import read_stats
+    from parallel_eplus.runs.policy_files import normalization_file, run_dir_of
     from parallel_eplus.training.config import TrainConfig
-    from parallel_eplus.training.norm_stats import read_stats
-    from parallel_eplus.training.policy_files import normalization_file, run_dir_of
-    from parallel_eplus.training.rollout import ALGORITHMS
     from parallel_eplus.training.train import make_vec_env
 
     saved = TrainConfig.from_json((run_dir_of(controller.path) / "config.json").read_text())

@@ -1,7 +1,7 @@
 """Ray backend, the learner's side: groups of EnergyPlus workers in Ray actors, one group per actor.
 
 Training collects a batch with one call per actor (`send`: the policy out; `receive`: a trajectory
-fragment back; envs/ray_actor.py, training/fragments.py), so no Ray call is made per control step.
+fragment back; learning/ray_actor.py, learning/fragments.py), so no Ray call is made per control step.
 With `train --overlap` the next batch is sent before the learner updates on the last one. The vector
 env API (`start_all`, `step_lists`) remains for what steps the workers one step at a time: SAC's
 off-policy loop and a `lockstep` run.
@@ -22,9 +22,9 @@ import numpy as np
 
 from parallel_eplus.engine.config import SimulationConfig, policy_action_names
 from parallel_eplus.envs.env import action_space, observation_space
-from parallel_eplus.envs.ray_actor import actor_class
 from parallel_eplus.envs.ray_session import connect
 from parallel_eplus.errors import EnergyPlusError, WorkerLostError
+from parallel_eplus.learning.ray_actor import actor_class
 
 log = logging.getLogger(__name__)
 

@@ -24,10 +24,10 @@ import pandas as pd
 from ray import tune
 from stable_baselines3.common.callbacks import BaseCallback
 
+from parallel_eplus.experiments.sweep_spec import trial_config
+from parallel_eplus.runs.policy_files import MODEL_FILE, saves_newest_first
+from parallel_eplus.runs.run_status import TRIAL_VARIABLE
 from parallel_eplus.training.callbacks import episodes_per_weather
-from parallel_eplus.training.policy_files import MODEL_FILE, saves_newest_first
-from parallel_eplus.training.run_status import TRIAL_VARIABLE
-from parallel_eplus.training.sweep_spec import trial_config
 
 log = logging.getLogger(__name__)
 
