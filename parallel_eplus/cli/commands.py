@@ -219,6 +219,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_plot(args: argparse.Namespace) -> int:
     from parallel_eplus.evaluation.redraw import plot_path
 
+    if (args.path / "sweep.json").is_file():  # a training sweep's folder: its learning curves over seeds
+        from parallel_eplus.experiments.sweep_curves import plot_sweep
+
+        print(f"written: {plot_sweep(args.path)}")
+        return 0
     written = plot_path(args.path)
     for path in written if isinstance(written, list) else [written]:
         print(f"written: {path}")

@@ -24,6 +24,7 @@ import pandas as pd
 from ray import tune
 from stable_baselines3.common.callbacks import BaseCallback
 
+from parallel_eplus.experiments.sweep_rank import trial_evaluation
 from parallel_eplus.experiments.sweep_spec import trial_config
 from parallel_eplus.runs.policy_files import MODEL_FILE, saves_newest_first
 from parallel_eplus.runs.run_status import TRIAL_VARIABLE
@@ -40,11 +41,12 @@ class TrialStopped(KeyboardInterrupt):
 
 class TuneReport(BaseCallback):
     """Each batch's end: steps done and the mean share in band, power and reward of the episodes that ended
-    in it (the latest known when none did), handed to `put`; raises TrialStopped once `stop` is set."""
+    in it (the latest known when none did) with the run's best evaluation so far (sweep_rank.trial_evaluation),
+    handed to `put`; raises TrialStopped once `stop` is set."""
 
-    def __init__(self, put, stop: threading.Event, min_interval_s: float = 2.0):
+    def __init__(self, put, stop: threading.Event, run_dir: Path | None = None, min_interval_s: float = 2.0):
         super().__init__()
-        self.put, self.stop, self.min_interval_s = put, stop, min_interval_s
+        self.put, self.stop, self.min_interval_s, self.run_dir = put, stop, min_interval_s, run_dir
         self.latest = {"in_band_pct": math.nan, "power_kw": math.nan, "reward": math.nan}
         self.episodes = 0
         self._batch: list[dict] = []
@@ -59,7 +61,15 @@ class TuneReport(BaseCallback):
                 self._batch.append(final["episode_summary"])
         return True
 
-    def _on_rollout_end(self) -> None:  # on-policy: once a batch; SAC: every step, so at most every 2 s
+    def _on_training_start(self) -> None:
+        self._start = self.num_timesteps
+
+    def _on_rollout_start(self) -> None:
+        """After the previous batch's update and its evaluation if one was due (PeriodicEval runs before this),
+        so a scheduler sees each evaluation at the step it was taken. On-policy: once a batch; SAC: every
+        step, so at most every 2 s."""
+        if self.num_timesteps == getattr(self, "_start", 0):
+            return
         if not self._batch and time.monotonic() - self._last < self.min_interval_s:
             return
         if self._batch:
@@ -73,7 +83,8 @@ class TuneReport(BaseCallback):
         self.put(("result", self.result()))
 
     def result(self) -> dict:
-        return {"timesteps": int(self.num_timesteps), "episodes": self.episodes, **self.latest}
+        evaluation = trial_evaluation(self.run_dir) if self.run_dir is not None else {}
+        return {"timesteps": int(self.num_timesteps), "episodes": self.episodes, **self.latest, **evaluation}
 
 
 def _finished(cfg) -> dict | None:
@@ -88,7 +99,8 @@ def _finished(cfg) -> dict | None:
     episodes = pd.read_csv(cfg.run_dir / "episodes.csv")
     last = episodes[episodes["timesteps"] > steps - cfg.batch_size]  # the last batch's episodes
     means = {"in_band_pct": "in_band_pct", "power_kw": "power_kw", "reward": "reward_mean"}
-    return {"timesteps": steps, "episodes": len(episodes), **{k: float(last[c].mean()) for k, c in means.items()}}
+    return {"timesteps": steps, "episodes": len(episodes), **{k: float(last[c].mean()) for k, c in means.items()},
+            **trial_evaluation(cfg.run_dir)}  # fmt: skip
 
 
 class TrialRun(tune.Trainable):
@@ -114,13 +126,16 @@ class TrialRun(tune.Trainable):
     def _on_signal(self, signum, frame) -> None:
         """SIGINT or SIGTERM to the trial's process (`kill`, a run registry's stop) stops this trial as Ctrl-C
         stops `train`: a checkpoint, its workers gone; the sweep goes on with the others."""
+        if not self._thread.is_alive():  # Ray Tune ends a finished trial's process so: nothing left to stop
+            log.info("trial %s: finished; its process ends (signal %d)", self.trial_name, signum)
+            return
         log.warning("trial %s: signal %d; stopping with a checkpoint", self.trial_name, signum)
         self._stop.set()
 
     def _train(self, settings: dict, runs_dir: str, tensorboard_dir: str) -> None:
         from parallel_eplus.training.train import train
 
-        report = TuneReport(self._results.put, self._stop)
+        report = TuneReport(self._results.put, self._stop, self._run_dir)
         try:
             cfg = trial_config(settings, runs_dir, tensorboard_dir, self.trial_name)
             done = _finished(cfg)
@@ -144,6 +159,8 @@ class TrialRun(tune.Trainable):
         kind, payload = self._results.get()
         if kind == "error":
             raise payload
+        if kind == "done":
+            log.info("trial %s: finished at step %d", self.trial_name, payload.get("timesteps", 0))
         return {**payload, "done": kind != "result", "stopped": kind == "stopped"}
 
     def save_checkpoint(self, checkpoint_dir: str) -> dict:
