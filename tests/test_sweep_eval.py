@@ -17,6 +17,7 @@ from parallel_eplus.training.config import TrainConfig
 
 BASE = """
 [train]
+timesteps = {timesteps}
 workers = 1
 weathers = "CA"
 run_days = 1
@@ -66,14 +67,14 @@ def test_a_search_chooses_by_evaluation_and_prints_the_winning_configuration(tmp
     spec = write_spec(
         tmp_path,
         f"""name = "search"
-{BASE}timesteps = 192
+{BASE.format(timesteps=192)}
 [search]
 samples = 3
 metric = "eval_score"
 [search.space]
 residual_scale = {{ choice = [0.0, 0.1, 0.3] }}
 "trpo.log_std_init" = {{ uniform = [-1.0, 0.0] }}
-""".replace("timesteps = 192\n[search]", "[search]").replace("[train]\n", "[train]\ntimesteps = 192\n"),
+""",
     )
     assert main(["sweep", str(spec)]) == 0
     out = capsys.readouterr().out
@@ -106,3 +107,52 @@ residual_scale = {{ choice = [0.0, 0.1, 0.3] }}
     # and its learning curves
     assert main(["plot", str(root)]) == 0
     assert (root / "learning-curves.png").is_file()
+
+
+@pytest.mark.slow
+def test_asha_stops_a_trailing_trial_early_and_seeds_draw_one_curve_with_its_band(tmp_path, monkeypatch, capsys,
+                                                                                   no_leaks):  # fmt: skip
+    """A residual policy starts as the rule-based controller; a policy of its own starts far from it: at the
+    first rung (96 steps) ASHA stops whichever of those trails the trials that reached the rung before it."""
+    monkeypatch.chdir(tmp_path)
+    spec = write_spec(
+        tmp_path,
+        f"""name = "asha"
+seeds = [0, 1]
+{BASE.format(timesteps=384)}
+[grid]
+residual_scale = [0.0, 0.2]
+[scheduler]
+type = "asha"
+grace_period = 96
+reduction_factor = 2
+""",
+    )
+    assert main(["sweep", str(spec)]) == 0  # an early stop is not a stopped sweep
+    out = capsys.readouterr().out
+    states = {ln[2:].split()[0]: ln for ln in out.splitlines() if ln[2:].startswith("residual_scale-")}
+    early = [name for name, line in states.items() if " early-stopped " in line]
+    assert early, out
+    root = tmp_path / "runs" / "asha"
+    for name in early:  # stopped before the planned steps, with a checkpoint, not trained on
+        status = json.loads((root / name / "status.json").read_text())
+        assert status["state"] == "stopped" and status["steps"] < 384
+    finished = [p for p in root.iterdir() if (p / "model.zip").is_file()]
+    view_lines = [ln for ln in _show(capsys, "asha") if " early-stopped " in ln]
+    assert len(view_lines) == len(early)  # `runs show` says so too (from Tune's record)
+    assert finished and all(
+        json.loads((p / "status.json").read_text())["steps"] == 384 for p in finished
+    )  # the others ran to the end
+
+    assert main(["plot", str(root)]) == 0
+    assert (root / "learning-curves.png").is_file()
+    from parallel_eplus.experiments.sweep_curves import curves
+
+    data, source = curves(root)
+    assert source == "evaluations" and set(data["recipe"]) == {"residual_scale=0", "residual_scale=0.2"}
+    assert data.groupby("recipe")["seed"].nunique().to_dict() == {"residual_scale=0": 2, "residual_scale=0.2": 2}
+
+
+def _show(capsys, name: str) -> list[str]:
+    assert main(["runs", "show", name]) == 0
+    return capsys.readouterr().out.splitlines()

@@ -143,7 +143,6 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
         logging.getLogger(name).addFilter(_quiet_tune_hints)
     started = connect(ray_address, os.cpu_count() or 1)
     old_term = signal.signal(signal.SIGTERM, lambda *_: os.kill(os.getpid(), signal.SIGINT))  # Tune's graceful stop
-    early: set[str] = set()
     try:
         at_once = concurrency(spec, int(ray.cluster_resources().get("CPU", os.cpu_count() or 1)))
         log.info("sweep %s: up to %d trial(s) at once", spec.name, at_once)
@@ -156,7 +155,7 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
                 param_space=_param_space(spec),
                 tune_config=tune.TuneConfig(
                     num_samples=spec.search.samples if spec.search else 1, search_alg=search_alg,
-                    scheduler=make_scheduler(spec, early), max_concurrent_trials=at_once,
+                    scheduler=make_scheduler(spec), max_concurrent_trials=at_once,
                     trial_name_creator=name_of, trial_dirname_creator=name_of, reuse_actors=False,
                 ),
                 run_config=tune.RunConfig(
@@ -171,10 +170,10 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
         signal.signal(signal.SIGTERM, old_term)
         if started:
             ray.shutdown()
-    return [_outcome(result, root, early) for result in grid]
+    return [_outcome(result, root) for result in grid]
 
 
-def _outcome(result, root: Path, early: set[str] = frozenset()) -> TrialOutcome:
+def _outcome(result, root: Path) -> TrialOutcome:
     metrics = result.metrics or {}
     name = Path(result.path).name
     outcome = TrialOutcome(name=name, state="pending", run_dir=root / name, evaluation=trial_evaluation(root / name))
@@ -185,10 +184,12 @@ def _outcome(result, root: Path, early: set[str] = frozenset()) -> TrialOutcome:
         text = str(result.error).strip().splitlines()
         cause = next((ln for ln in text if ln.startswith("RuntimeError: ")), text[-1] if text else "")
         outcome.state, outcome.error = "failed", cause.removeprefix("RuntimeError: ")
-    elif metrics.get("done") and not metrics.get("stopped"):
+    elif metrics.get("done") and not metrics.get("stopped") and metrics.get("finished", True):
         outcome.state = "finished"
-    elif metrics.get("training_iteration"):  # stopped by the sweep's stop, its own process's signal, or ASHA
-        outcome.state = "early-stopped" if name in early else "stopped"
+    elif metrics.get("done") and not metrics.get("stopped"):  # Tune marks done the result its scheduler stops at
+        outcome.state = "early-stopped"
+    elif metrics.get("training_iteration"):  # stopped by the sweep's stop, or its own process's signal
+        outcome.state = "stopped"
         saves = saves_newest_first(outcome.run_dir)  # the stop's checkpoint, after the last reported batch
         if saves and saves[0].name != MODEL_FILE:
             outcome.timesteps = max(outcome.timesteps, int(saves[0].stem.split("_")[1]))

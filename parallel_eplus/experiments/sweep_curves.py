@@ -93,7 +93,7 @@ def plot_sweep(sweep_dir: Path) -> Path:
     weathers = list(dict.fromkeys(data["weather"]))
     metrics = list(dict.fromkeys(data["metric"]))
     names = EVAL_METRICS if source == "evaluations" else EPISODE_METRICS
-    fig, axes = plt.subplots(len(metrics), len(weathers), figsize=(4.5 * len(weathers), 2.8 * len(metrics)),
+    fig, axes = plt.subplots(len(metrics), len(weathers), figsize=(max(7.0, 4.5 * len(weathers)), 2.8 * len(metrics)),
                              squeeze=False, sharex=True, layout="constrained")  # fmt: skip
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, (recipe, group) in enumerate(data.groupby("recipe", sort=False)):
@@ -117,7 +117,7 @@ def plot_sweep(sweep_dir: Path) -> Path:
                              fontsize=9)  # fmt: skip
         axes[-1][j].set_xlabel("timesteps")
     title = "mean over seeds; band: 95 % percentile bootstrap (n=3: the seeds' min-max)"
-    fig.legend(loc="outside lower center", fontsize=8, ncols=2, title=title, title_fontsize=8)
+    fig.legend(loc="outside lower center", fontsize=8, ncols=1, title=title, title_fontsize=8)
     fig.suptitle(f"sweep {sweep_dir.name}", fontsize=10)
     path = sweep_dir / FIGURE
     fig.savefig(path, dpi=120)

@@ -47,6 +47,21 @@ def _number(x: float, fmt: str) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
 
+def _state(info, sweep_dir: Path) -> str:
+    """The registry's state, or "early-stopped" for a trial Ray Tune's scheduler stopped (its last result in
+    _tune/experiment/<trial>/result.json is marked done without the trial having finished)."""
+    if info.state != "stopped":
+        return info.state
+    try:
+        lines = (sweep_dir / "_tune" / "experiment" / info.path.name / "result.json").read_text().splitlines()
+        last = json.loads(lines[-1]) if lines else {}
+    except (OSError, ValueError):
+        return info.state
+    return (
+        "early-stopped" if last.get("done") and last.get("finished") is False and not last.get("stopped") else "stopped"
+    )
+
+
 def sweep_rows(sweep_dir: Path) -> tuple[dict, list[dict]]:
     """(the sweep's spec, one row per trial: its run info, settings, evaluation, target and `best` flag)."""
     spec = json.loads((sweep_dir / SWEEP_FILE).read_text())
@@ -73,7 +88,8 @@ def sweep_table(sweep_dir: Path) -> str:
         info = r["info"]
         met = r["target"]
         table.append([
-            "*" if r["best"] else "", info.path.name, *[_shown(r["settings"][k]) for k in keys], info.state,
+            "*" if r["best"] else "", info.path.name, *[_shown(r["settings"][k]) for k in keys],
+            _state(info, sweep_dir),
             f"{info.steps}/{info.planned}" if info.planned else str(info.steps), duration(info.wall_s),
             _number(r["eval_in_band_pct"], ".2f"), _number(r["eval_energy_change_pct"], "+.2f"),
             _number(r["eval_score"], ".3f"), str(r["eval_timesteps"]) if r["eval_timesteps"] >= 0 else "-",
@@ -83,7 +99,8 @@ def sweep_table(sweep_dir: Path) -> str:
     lines = [f"sweep {spec['name']}  ({sweep_dir})  {len(rows)} trials"]
     if target:
         lines.append(f"target {target}: best = meets it, then lowest energy against the built-in controller")
-    lines += ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip() for row in table]
+    lines += [(row[0] or " ") + " " + "  ".join(c.ljust(w) for c, w in zip(row[1:], widths[1:], strict=True)).rstrip()
+              for row in table]  # fmt: skip
     if not any(r["eval_score"] == r["eval_score"] for r in rows):
         lines.append("no evaluations: set [train.evaluation] every = STEPS in the sweep to rank its trials")
     elif any(r["best"] for r in rows):

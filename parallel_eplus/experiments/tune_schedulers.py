@@ -22,8 +22,8 @@ def concurrency(spec: SweepSpec, cpus: int) -> int:
     return max(1, cpus // max(1, max(workers)))
 
 
-def make_scheduler(spec: SweepSpec, early: set[str]):
-    """The spec's scheduler, recording in `early` the trials it stops before their planned steps; None without."""
+def make_scheduler(spec: SweepSpec):
+    """The spec's scheduler (logging the trials it stops before their planned steps); None without."""
     s = spec.scheduler
     if s is None:
         return None
@@ -36,7 +36,6 @@ def make_scheduler(spec: SweepSpec, early: set[str]):
             def on_trial_result(self, tune_controller, trial, result):
                 decision = super().on_trial_result(tune_controller, trial, result)
                 if decision == TrialScheduler.STOP and not result.get("done") and result.get("timesteps", 0) < planned:
-                    early.add(str(trial))
                     log.info("%s stops trial %s at step %d (%s %.3g)", s.kind.upper(), trial, result["timesteps"],
                              s.metric, result.get(s.metric, float("nan")))  # fmt: skip
                 return decision

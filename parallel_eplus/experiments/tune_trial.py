@@ -161,7 +161,8 @@ class TrialRun(tune.Trainable):
             raise payload
         if kind == "done":
             log.info("trial %s: finished at step %d", self.trial_name, payload.get("timesteps", 0))
-        return {**payload, "done": kind != "result", "stopped": kind == "stopped"}
+        # "finished": ended by itself (Tune also marks done the last result of a trial its scheduler stops)
+        return {**payload, "done": kind != "result", "stopped": kind == "stopped", "finished": kind == "done"}
 
     def save_checkpoint(self, checkpoint_dir: str) -> dict:
         """Tune's own checkpoint only points at the run: its checkpoints are the run folder's."""
