@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import filecmp
 import json
 import re
 import tomllib
@@ -156,3 +157,35 @@ reduction_factor = 2
 def _show(capsys, name: str) -> list[str]:
     assert main(["runs", "show", name]) == 0
     return capsys.readouterr().out.splitlines()
+
+
+@pytest.mark.slow
+def test_pbt_continues_the_trailing_trial_from_the_leaders_weights_with_perturbed_settings(tmp_path, monkeypatch,
+                                                                                         capsys, no_leaks):  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    spec = write_spec(
+        tmp_path,
+        f"""name = "pbt"
+seeds = [0, 1]
+{BASE.format(timesteps=288)}
+[scheduler]
+type = "pbt"
+interval = 96
+quantile_fraction = 0.5
+[scheduler.mutations]
+"trpo.target_kl" = [0.005, 0.02]
+""",
+    )
+    assert main(["sweep", str(spec)]) == 0
+    root = tmp_path / "runs" / "pbt"
+    exploited = [p for p in root.glob("seed-*") if (p / "pbt.json").is_file()]
+    assert exploited, capsys.readouterr().out
+    for run in exploited:  # it continued from the leader's save, with a target_kl PBT drew, to the planned steps
+        last = json.loads((run / "pbt.json").read_text())[-1]
+        donor_save = Path(last["from"])
+        assert donor_save.parent.parent != run
+        copy = run / "checkpoints" / f"model_{last['steps']}_steps.zip"
+        assert filecmp.cmp(copy, donor_save, shallow=False) and last["steps"] < 288  # its save when PBT chose it
+        config = json.loads((run / "config.json").read_text())
+        assert config["trpo"]["target_kl"] in (0.005, 0.02) and last["settings"]["trpo"] == config["trpo"]
+        assert json.loads((run / "status.json").read_text())["steps"] >= 288

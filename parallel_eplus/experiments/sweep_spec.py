@@ -42,6 +42,7 @@ class SchedulerSpec:
     reduction_factor: int = 2  # ASHA: 1/this of the trials go on at each rung
     interval: int = 0  # PBT: env steps between exploits; 0: evaluation.every
     mutations: dict[str, list] = field(default_factory=dict)  # PBT: key -> values to choose from
+    quantile_fraction: float = 0.25  # PBT: the bottom share of trials copies the top share
 
 
 @dataclass
@@ -150,7 +151,7 @@ def load_spec(path: str | Path) -> SweepSpec:
         s = dict(raw["scheduler"])
         kind = s.pop("type", None)
         mutations = _flatten(s.pop("mutations", {}))
-        fields = {"metric", "mode", "grace_period", "reduction_factor", "interval"}
+        fields = {"metric", "mode", "grace_period", "reduction_factor", "interval", "quantile_fraction"}
         if kind not in SCHEDULERS or set(s) - fields:
             raise ValueError(f"{path}: [scheduler] takes type (asha or pbt), metric, mode, grace_period, "
                              "reduction_factor (ASHA), interval and a [scheduler.mutations] table (PBT)")  # fmt: skip
@@ -226,6 +227,17 @@ def _check_scheduler(spec: SweepSpec, where: str) -> None:
             raise ValueError(f"{where} [scheduler]: PBT takes interval >= 1 env steps and a [scheduler.mutations] "
                              'table, e.g. "trpo.target_kl" = [0.005, 0.01, 0.02]')  # fmt: skip
         _check_keys(s.mutations, f"{where} [scheduler.mutations]")
+        from parallel_eplus.training.resume_settings import MUTABLE_KEYS
+
+        fixed = sorted(set(s.mutations) - set(MUTABLE_KEYS))
+        if fixed:
+            raise ValueError(f"{where} [scheduler.mutations]: PBT can change {', '.join(MUTABLE_KEYS)} mid-run, not "
+                             f"{', '.join(fixed)} (they change the network or the buffers)")  # fmt: skip
+        if spec.grid or spec.search:
+            raise ValueError(f"{where}: PBT copies weights between trials of one configuration: give it seeds and "
+                             "[scheduler.mutations], not a [grid] or [search]")  # fmt: skip
+        if not 0 < s.quantile_fraction <= 0.5:
+            raise ValueError(f"{where} [scheduler]: quantile_fraction is within (0, 0.5]")
         for key, values in s.mutations.items():
             if not isinstance(values, list) or not values:
                 raise ValueError(f"{where} [scheduler.mutations]: {key} takes a list of values")

@@ -46,5 +46,5 @@ def make_scheduler(spec: SweepSpec):
     if s.kind == "asha":
         return recording(ASHAScheduler)(max_t=max(planned, s.grace_period), grace_period=s.grace_period,
                                         reduction_factor=s.reduction_factor, **common)  # fmt: skip
-    return recording(PopulationBasedTraining)(perturbation_interval=s.interval,
+    return recording(PopulationBasedTraining)(perturbation_interval=s.interval, quantile_fraction=s.quantile_fraction,
                                               hyperparam_mutations=dict(s.mutations), **common)  # fmt: skip

@@ -14,6 +14,7 @@ import logging
 import math
 import os
 import queue
+import shutil
 import signal
 import threading
 import time
@@ -33,6 +34,7 @@ from parallel_eplus.training.callbacks import episodes_per_weather
 log = logging.getLogger(__name__)
 
 STOP_WAIT_S = 300.0  # how long a stopping trial waits for its checkpoint and workers to close
+PBT_FILE = "pbt.json"  # each exploit: which save the trial continued from, at what step, with which settings
 
 
 class TrialStopped(KeyboardInterrupt):
@@ -103,6 +105,52 @@ def _finished(cfg) -> dict | None:
             **trial_evaluation(cfg.run_dir)}  # fmt: skip
 
 
+def _wait_for_predecessor(run_dir: Path) -> None:
+    """A trial Tune restarts (PBT's exploit, a restored sweep) may start before its previous process has saved
+    its stop's checkpoint: wait for that process to end, so the newest save is the one meant."""
+    from parallel_eplus.runs.registry import process_alive
+    from parallel_eplus.runs.run_files import read_status
+
+    deadline = time.monotonic() + STOP_WAIT_S
+    while (status := read_status(run_dir)) and status["state"] == "running" and status.get("pid") != os.getpid():
+        if not process_alive(status) or time.monotonic() > deadline:
+            return
+        time.sleep(0.5)
+
+
+def _steps_of(save: Path) -> int:
+    with zipfile.ZipFile(save) as z:
+        return int(json.loads(z.read("data"))["num_timesteps"])
+
+
+def exploit(donor: Path, cfg, at_steps: int) -> None:
+    """PBT: this trial continues from `donor`'s newest save with its own (perturbed) settings: the save and its
+    statistics are copied into this run's checkpoints/ and its config.json rewritten, so `train --resume` takes
+    both (training/resume_settings.py: the settings a resumed run takes from its config)."""
+    from parallel_eplus import io
+    from parallel_eplus.runs.policy_files import normalization_file, stats_target
+
+    saves = [p for p in saves_newest_first(donor) if _steps_of(p) <= at_steps] or saves_newest_first(donor)
+    if not saves:
+        log.warning("trial %s: PBT's donor %s has no save yet; continuing from its own", cfg.run_name, donor)
+        return
+    steps = _steps_of(saves[0])
+    target = cfg.run_dir / "checkpoints" / f"model_{steps}_steps.zip"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(normalization_file(saves[0]), stats_target(target))
+    shutil.copyfile(saves[0], target)
+    for newer in (p for p in saves_newest_first(cfg.run_dir) if p != target):  # the donor's save is the newest
+        if newer.name == MODEL_FILE or int(newer.stem.split("_")[1]) >= steps:
+            newer.rename(newer.with_name(f"superseded-{newer.name}"))
+    io.write_text(cfg.resolved().run_dir / "config.json", cfg.to_json())
+    history = cfg.run_dir / PBT_FILE
+    earlier = json.loads(history.read_text()) if history.is_file() else []
+    settings = {k: v for k, v in json.loads(cfg.to_json()).items() if k in ("trpo", "ppo", "sac")}
+    io.write_text(history, json.dumps([*earlier, {"from": str(saves[0]), "steps": steps, "settings": settings}],
+                                      indent=2))  # fmt: skip
+    log.info("trial %s: PBT: continues from %s (step %d) with its perturbed settings", cfg.run_name, saves[0], steps)
+
+
 class TrialRun(tune.Trainable):
     """A sweep's trial: `setup` starts the run in a thread, `step` hands Tune its next batch's result,
     `cleanup` stops it with a checkpoint. A trial whose run folder holds a checkpoint continues from it."""
@@ -117,16 +165,19 @@ class TrialRun(tune.Trainable):
         self._results: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self._run_dir = Path(runs_dir) / self.trial_name
+        self._donor: Path | None = None  # PBT: the better trial whose weights this one continues from
+        self._donor_steps = 0  # its step when PBT chose it: its newest save up to there is copied
+        self._last_steps = 0  # the latest step reported to Tune
         self._thread = threading.Thread(
             target=self._train, args=({**(base or {}), **config}, runs_dir, tensorboard_dir),
             name=f"train {self.trial_name}", daemon=True,
         )  # fmt: skip
-        self._thread.start()
+        # started by the first `step`: Tune restores a checkpoint (`load_checkpoint`, PBT's exploit) in between
 
     def _on_signal(self, signum, frame) -> None:
         """SIGINT or SIGTERM to the trial's process (`kill`, a run registry's stop) stops this trial as Ctrl-C
         stops `train`: a checkpoint, its workers gone; the sweep goes on with the others."""
-        if not self._thread.is_alive():  # Ray Tune ends a finished trial's process so: nothing left to stop
+        if self._thread.ident is not None and not self._thread.is_alive():  # Tune ends a finished trial's process so
             log.info("trial %s: finished; its process ends (signal %d)", self.trial_name, signum)
             return
         log.warning("trial %s: signal %d; stopping with a checkpoint", self.trial_name, signum)
@@ -142,6 +193,9 @@ class TrialRun(tune.Trainable):
             if done is not None:  # a sweep run again: this trial had finished
                 self._results.put(("done", done))
                 return
+            _wait_for_predecessor(cfg.run_dir)
+            if self._donor is not None:
+                exploit(self._donor, cfg, self._donor_steps)
             resume = cfg.run_dir if saves_newest_first(cfg.run_dir) else None
             report.episodes = sum(episodes_per_weather(cfg.run_dir / "episodes.csv").values()) if resume else 0
             # a folder without a checkpoint (a trial killed early) is moved aside, not trained into
@@ -156,9 +210,12 @@ class TrialRun(tune.Trainable):
             self._results.put(("error", RuntimeError(f"{type(e).__name__}: {headline}{detail}")))
 
     def step(self) -> dict:
+        if self._thread.ident is None:
+            self._thread.start()
         kind, payload = self._results.get()
         if kind == "error":
             raise payload
+        self._last_steps = int(payload.get("timesteps", self._last_steps)) if isinstance(payload, dict) else 0
         if kind == "done":
             log.info("trial %s: finished at step %d", self.trial_name, payload.get("timesteps", 0))
         # "finished": ended by itself (Tune also marks done the last result of a trial its scheduler stops)
@@ -166,10 +223,14 @@ class TrialRun(tune.Trainable):
 
     def save_checkpoint(self, checkpoint_dir: str) -> dict:
         """Tune's own checkpoint only points at the run: its checkpoints are the run folder's."""
-        return {"run_dir": str(self._run_dir)}
+        return {"run_dir": str(self._run_dir), "timesteps": self._last_steps}
 
     def load_checkpoint(self, checkpoint: dict) -> None:
-        """Nothing to load: the run continues from its folder's last checkpoint (`setup`)."""
+        """Its own checkpoint: nothing to load (the run continues from its folder's last save). Another trial's
+        (PBT's exploit): that trial's newest save is copied in and this run continues from it (`exploit`)."""
+        donor = Path(checkpoint.get("run_dir", "")) if isinstance(checkpoint, dict) else None
+        if donor is not None and donor.resolve() != self._run_dir.resolve():
+            self._donor, self._donor_steps = donor, int(checkpoint.get("timesteps", 1 << 62))
 
     def cleanup(self) -> None:
         self._stop.set()

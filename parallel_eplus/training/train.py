@@ -38,6 +38,7 @@ from parallel_eplus.runs.run_names import claim_run_name
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather, tensorboard_logger
 from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.resume_settings import load_kwargs
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +145,7 @@ def _learn(
     try:
         if checkpoint is not None:
             env = read_stats(normalization_file(checkpoint)).wrap(venv)
-            model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu")
+            model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu", **load_kwargs(cfg))
             _load_replay_buffer(model, checkpoint)
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
         else:
