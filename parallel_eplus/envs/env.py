@@ -77,7 +77,8 @@ class EnergyPlusEnv(gym.Env):
     model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the spec's);
     `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
-    not apply; its reward parameters are the default `reward`; it is checked against its model first).
+    not apply; its reward parameters are the default `reward`; it is checked against its model first);
+    `name`: the `worker` its episodes' summaries name (`rllib_env` names RLlib's env runners).
     """
 
     metadata = {"render_modes": []}
@@ -100,6 +101,7 @@ class EnergyPlusEnv(gym.Env):
         rbc_target_c: float | None = None,
         building: str | Path | None = None,
         energyplus_csv: bool = True,
+        name: str = "0",
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
         if building is not None:  # a typo costs seconds and a message naming it, not a hung worker
@@ -127,7 +129,7 @@ class EnergyPlusEnv(gym.Env):
             building=None if building is None else str(building),
             energyplus_csv=energyplus_csv,
         )
-        self.sim = Simulation(self.config, weathers)
+        self.sim = Simulation(self.config, weathers, name=name)  # its episodes' summaries' `worker`
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
         self.observation_space = observation_space(time_features, schedule_features, building)
@@ -150,3 +152,13 @@ class EnergyPlusEnv(gym.Env):
 
     def close(self) -> None:
         self.sim.close()
+
+
+def rllib_env(context) -> EnergyPlusEnv:
+    """RLlib's env creator (`config.environment(rllib_env, env_config={...})`): the env of one env runner, its
+    episodes' `worker` named `runner-<worker_index>` (and `-env-<vector_index>` for a runner's further envs), so
+    the summaries of runners sharing one output folder say whose they are. `context` is RLlib's EnvContext: the
+    env_config dict with `worker_index` and `vector_index` (0 for the local runner)."""
+    worker, vector = int(getattr(context, "worker_index", 0)), int(getattr(context, "vector_index", 0))
+    kwargs = {k: v for k, v in dict(context).items() if k != "num_envs"}
+    return EnergyPlusEnv(**kwargs, name=f"runner-{worker}" + (f"-env-{vector}" if vector else ""))
