@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from parallel_eplus.evaluation.controllers import policy_controller
 from parallel_eplus.evaluation.sweep import run_sweep
@@ -71,6 +72,11 @@ def test_eval_every_writes_evaluations_at_batch_boundaries_and_keeps_the_best(tm
     means = table[table["weather"] == "all"].set_index("timesteps")
     per_weather = table[table["weather"] != "all"].groupby("timesteps")["in_band_pct"].mean()
     assert (means["in_band_pct"] - per_weather).abs().max() < 1e-9  # the means row is over the weathers
+    events = EventAccumulator(str(tmp_path / "tb" / "ev"), size_guidance={"scalars": 0})
+    events.Reload()
+    assert [e.step for e in events.Scalars("eval/in_band_pct")] == [384, 576]  # TensorBoard, at the same steps
+    assert [e.value for e in events.Scalars("eval/in_band_pct")] == pytest.approx(list(means["in_band_pct"]))
+    assert "eval/FL/energy_change_pct" in events.Tags()["scalars"]
     base = json.loads((run / "eval_baseline.json").read_text())
     assert set(base) == {"CA|1", "FL|1"}  # the built-in controller ran once per weather, cached
 

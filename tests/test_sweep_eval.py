@@ -88,7 +88,7 @@ residual_scale = {{ choice = [0.0, 0.1, 0.3] }}
         assert sorted(set(table["timesteps"])) == [96, 192] and (p / "best" / "model.zip").is_file()
     winner = max(scores, key=scores.get)
     assert f"best by evaluation (mean reward): {winner}" in out
-    assert re.search(rf"^\* {re.escape(winner)} ", out, re.M)  # marked in the table
+    assert re.search(rf"^{re.escape(winner)} .*<- best$", out, re.M)  # marked in the table
     saved = json.loads((root / winner / "config.json").read_text())
     command = (root / "best-command.txt").read_text()
     assert command.splitlines()[1].strip() in out and "parallel-eplus train" in command
@@ -131,7 +131,7 @@ reduction_factor = 2
     )
     assert main(["sweep", str(spec)]) == 0  # an early stop is not a stopped sweep
     out = capsys.readouterr().out
-    states = {ln[2:].split()[0]: ln for ln in out.splitlines() if ln[2:].startswith("residual_scale-")}
+    states = {ln.split()[0]: ln for ln in out.splitlines() if ln.startswith("residual_scale-")}
     early = [name for name, line in states.items() if " early-stopped " in line]
     assert early, out
     root = tmp_path / "runs" / "asha"

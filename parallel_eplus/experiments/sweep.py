@@ -146,6 +146,9 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
     try:
         at_once = concurrency(spec, int(ray.cluster_resources().get("CPU", os.cpu_count() or 1)))
         log.info("sweep %s: up to %d trial(s) at once", spec.name, at_once)
+        # A grid's trials all exist from the start and queue for cores (the closing table lists those that never
+        # started as pending); a search draws its next trial only when one may start.
+        limit = at_once if spec.search is not None else None
         experiment = root / "_tune" / EXPERIMENT
         if same and tune.Tuner.can_restore(experiment):  # the same sweep again: its one Tune experiment goes on
             tuner = tune.Tuner.restore(str(experiment), trainable, resume_unfinished=True, resume_errored=True)
@@ -155,7 +158,7 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
                 param_space=_param_space(spec),
                 tune_config=tune.TuneConfig(
                     num_samples=spec.search.samples if spec.search else 1, search_alg=search_alg,
-                    scheduler=make_scheduler(spec), max_concurrent_trials=at_once,
+                    scheduler=make_scheduler(spec), max_concurrent_trials=limit,
                     trial_name_creator=name_of, trial_dirname_creator=name_of, reuse_actors=False,
                 ),
                 run_config=tune.RunConfig(
@@ -197,21 +200,21 @@ def _outcome(result, root: Path) -> TrialOutcome:
 
 
 def format_outcomes(outcomes: list[TrialOutcome], spec: SweepSpec | None = None) -> str:
-    """The sweep's closing table: one line per trial (the best marked *), each failure's cause, and the best
+    """The sweep's closing table: one line per trial (the best marked `<- best`), each failure's cause, and the best
     trial's configuration as a ready command (written to the sweep's folder too: sweep_rank.write_choice)."""
     evaluated = spec is not None and evaluates(spec)
     w = max([28] + [len(o.name) for o in outcomes])
-    head = f"  {'trial':<{w}} {'state':<13} {'steps':>8} {'in band %':>9} {'power kW':>9} {'reward':>7}"
+    head = f"{'trial':<{w}} {'state':<13} {'steps':>8} {'in band %':>9} {'power kW':>9} {'reward':>7}"
     lines = [head + (f" {'eval: in band %':>15} {'energy %':>8} {'score':>8} {'at step':>8}" if evaluated else "")]
     best, how = _best(outcomes, spec)
     for o in outcomes:
-        line = (f"{'*' if o is best else ' '} {o.name:<{w}} {o.state:<13} {o.timesteps:>8} {o.in_band_pct:>9.2f} "
+        line = (f"{o.name:<{w}} {o.state:<13} {o.timesteps:>8} {o.in_band_pct:>9.2f} "
                 f"{o.power_kw:>9.1f} {o.reward:>7.3f}")  # fmt: skip
         if evaluated:
             e = o.evaluation or trial_evaluation(o.run_dir)
             line += (f" {e['eval_in_band_pct']:>15.2f} {e['eval_energy_change_pct']:>+8.2f} {e['eval_score']:>8.2f} "
                      f"{e['eval_timesteps']:>8}")  # fmt: skip
-        lines.append(line)
+        lines.append(line + ("  <- best" if o is best else ""))
     lines += [f"{o.name} failed: {o.error}" for o in outcomes if o.state == "failed"]
     if best is not None:
         lines.append(f"best by {how}: {best.name}")

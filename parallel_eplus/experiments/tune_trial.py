@@ -28,6 +28,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from parallel_eplus.experiments.sweep_rank import trial_evaluation
 from parallel_eplus.experiments.sweep_spec import trial_config
 from parallel_eplus.runs.policy_files import MODEL_FILE, saves_newest_first
+from parallel_eplus.runs.run_files import latest_evaluation
 from parallel_eplus.runs.run_status import TRIAL_VARIABLE
 from parallel_eplus.training.callbacks import episodes_per_weather
 
@@ -44,15 +45,23 @@ class TrialStopped(KeyboardInterrupt):
 class TuneReport(BaseCallback):
     """Each batch's end: steps done and the mean share in band, power and reward of the episodes that ended
     in it (the latest known when none did) with the run's best evaluation so far (sweep_rank.trial_evaluation),
-    handed to `put`; raises TrialStopped once `stop` is set."""
+    handed to `put`; raises TrialStopped once `stop` is set.
 
-    def __init__(self, put, stop: threading.Event, run_dir: Path | None = None, min_interval_s: float = 2.0):
+    With evaluation during training (`eval_every`), a batch whose end makes an evaluation due is reported after
+    it instead (at the next batch's start: PeriodicEval runs before this callback), so a scheduler judges each
+    rung by the evaluation taken there."""
+
+    def __init__(self, put, stop: threading.Event, run_dir: Path | None = None, eval_every: int = 0,
+                 min_interval_s: float = 2.0):  # fmt: skip
         super().__init__()
         self.put, self.stop, self.min_interval_s, self.run_dir = put, stop, min_interval_s, run_dir
+        self.eval_every = eval_every
         self.latest = {"in_band_pct": math.nan, "power_kw": math.nan, "reward": math.nan}
         self.episodes = 0
         self._batch: list[dict] = []
         self._last = 0.0
+        evaluated = latest_evaluation(run_dir) if run_dir is not None and eval_every else None
+        self._evaluated = int(evaluated["timesteps"]) if evaluated else -1  # the newest evaluation's step
 
     def _on_step(self) -> bool:
         if self.stop.is_set():
@@ -63,17 +72,23 @@ class TuneReport(BaseCallback):
                 self._batch.append(final["episode_summary"])
         return True
 
-    def _on_training_start(self) -> None:
-        self._start = self.num_timesteps
+    def _eval_due(self) -> bool:
+        every = self.eval_every
+        return bool(every) and self.num_timesteps // every > max(self._evaluated, 0) // every
 
-    def _on_rollout_start(self) -> None:
-        """After the previous batch's update and its evaluation if one was due (PeriodicEval runs before this),
-        so a scheduler sees each evaluation at the step it was taken. On-policy: once a batch; SAC: every
-        step, so at most every 2 s."""
-        if self.num_timesteps == getattr(self, "_start", 0):
-            return
+    def _on_rollout_end(self) -> None:  # on-policy: once a batch; SAC: every step, so at most every 2 s
+        if self._eval_due():
+            return  # reported at the next batch's start, with the evaluation
         if not self._batch and time.monotonic() - self._last < self.min_interval_s:
             return
+        self._report()
+
+    def _on_rollout_start(self) -> None:
+        if self._eval_due():  # PeriodicEval has just evaluated
+            self._evaluated = self.num_timesteps
+            self._report()
+
+    def _report(self) -> None:
         if self._batch:
             for key, source in (("in_band_pct", "in_band_pct"), ("power_kw", "power_kw"), ("reward", "reward_mean")):
                 values = [s[source] for s in self._batch if source in s]
@@ -186,9 +201,10 @@ class TrialRun(tune.Trainable):
     def _train(self, settings: dict, runs_dir: str, tensorboard_dir: str) -> None:
         from parallel_eplus.training.train import train
 
-        report = TuneReport(self._results.put, self._stop, self._run_dir)
+        report = TuneReport(self._results.put, self._stop)
         try:
             cfg = trial_config(settings, runs_dir, tensorboard_dir, self.trial_name)
+            report = TuneReport(self._results.put, self._stop, cfg.run_dir, cfg.evaluation.every)
             done = _finished(cfg)
             if done is not None:  # a sweep run again: this trial had finished
                 self._results.put(("done", done))

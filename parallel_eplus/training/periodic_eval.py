@@ -74,6 +74,7 @@ class Evaluator:
         self.terms = parse_target(settings.target)
         self.csv = self.run_dir / EVALUATIONS_FILE
         self.best_score, self.target = -math.inf, self._read_json(TARGET_FILE)
+        self._last_step: int | None = None
         if self.csv.is_file():  # a resumed run keeps its evaluations, its best and its target's step
             done = pd.read_csv(self.csv)
             means = done[done["weather"] == ALL]
@@ -86,9 +87,11 @@ class Evaluator:
 
     @property
     def last_step(self) -> int:
-        if not self.csv.is_file():
-            return -1
-        return int(pd.read_csv(self.csv, usecols=["timesteps"])["timesteps"].max())
+        """The step of the newest evaluation (-1: none), read once (SAC asks every vector step)."""
+        if self._last_step is None:
+            done = self.csv.is_file() and pd.read_csv(self.csv, usecols=["timesteps"])["timesteps"]
+            self._last_step = int(done.max()) if done is not False and len(done) else -1
+        return self._last_step
 
     def _config(self, controller: Controller, weather: str, out: Path) -> SimulationConfig:
         cfg = _job_config(controller, weather, self.sim.building, self.days, self.sim.reward, out)
@@ -153,6 +156,7 @@ class Evaluator:
         if self.csv.is_file():
             table = pd.concat([pd.read_csv(self.csv), table], ignore_index=True)
         io.write_text(self.csv, table.to_csv(index=False))
+        self._last_step = steps
         log.info("evaluation at step %d: %s%s", steps, ", ".join(f"{k} {means[k]:.2f}" for k in
                  ("in_band_pct", ENERGY, "reward_mean") if k in means), " (best so far)" if best else "")  # fmt: skip
         return EvalResult(steps, means, per_weather, best, first)
