@@ -5,7 +5,7 @@ A B raw...: the medians of per-pair ratios cancel the drift of a shared machine 
 
 A tree is a checkout's root (`git archive COMMIT | tar -x -C DIR`; add links to idf/ and weather/); each run is a
 fresh interpreter with that tree first on PYTHONPATH, started from a neutral directory. `--spins ENV,EP` forces both
-sides' spin (seconds) instead of `pipe.auto_spins`.
+sides' spin (seconds) instead of `spin.auto_spins`.
 """
 
 from __future__ import annotations

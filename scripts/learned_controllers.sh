@@ -8,6 +8,7 @@
 #   bash scripts/learned_controllers.sh stop                   # SIGINT: the running trainer checkpoints and exits
 #   bash scripts/learned_controllers.sh save                   # copy finished models into results/learned/ (commit)
 #   bash scripts/learned_controllers.sh evaluate BUILDING      # the seeds against the built-in controls, 5 weathers
+#   bash scripts/learned_controllers.sh recipe BUILDING        # print the building's recipe (train options)
 #
 # A run resumes from its newest checkpoint (every 100k steps; a new machine from the checkpoint `save` put in
 # results/learned/), so `start` is safe to repeat after a session ends. Runs use a copy of the package at a fixed
@@ -122,5 +123,8 @@ evaluate)
     "$REPO/.venv/bin/parallel-eplus" evaluate --building "$b" --baseline "${policies[@]}" --weathers CA,CO,FL,IL,VA \
         --workers 2 --out "$SAVED/$b" --quiet $days
     ;;
-*) echo "usage: $0 start|status|stop|save|evaluate BUILDING" >&2; exit 2 ;;
+recipe)  # the recipe's options, for other studies of it (scripts/weather_study.sh)
+    recipe "$2"
+    ;;
+*) echo "usage: $0 start|status|stop|save|evaluate BUILDING|recipe BUILDING" >&2; exit 2 ;;
 esac

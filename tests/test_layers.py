@@ -22,7 +22,7 @@ def test_every_folder_says_what_it_owns_and_may_import():
 
 
 def test_a_checkpoint_pickled_before_the_move_still_loads():
-    """Checkpoints saved before 0.3 name `parallel_eplus.training.lagrangian` in their pickles (`--resume` reads them)."""
+    """Checkpoints saved before 0.3 name `parallel_eplus.training.lagrangian` in their pickles (`--resume`)."""
     import warnings
 
     from sb3_contrib import TRPO

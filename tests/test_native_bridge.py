@@ -21,7 +21,7 @@ def _bridges() -> list:
 @pytest.mark.slow
 def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
     """The C bridge is the Python one's steady state moved to C: same actions, same physics, bit for bit, whether
-    its side spins for actions or blocks in one read per action (pipe.auto_spins picks by the machine's load), and
+    its side spins for actions or blocks in one read per action (spin.auto_spins picks by the machine's load), and
     whether each action arrives while EnergyPlus still computes the next timestep's start or long after it needs
     it (an env slower than EnergyPlus's work before the actuators: it then waits at them)."""
     import time

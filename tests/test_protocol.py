@@ -9,7 +9,7 @@ import struct
 import numpy as np
 import pytest
 
-from parallel_eplus.engine import pipe
+from parallel_eplus.engine import pipe, spin
 from parallel_eplus.errors import ProtocolError
 
 
@@ -81,10 +81,10 @@ def test_pipe_pair_times_out_and_reads_truncation():
 
 
 def test_both_sides_spin_only_where_a_core_is_free(monkeypatch):
-    """pipe.auto_spins: one worker on 2 idle cores spins on both sides; 2 workers, EnergyPlus only (the learner
+    """spin.auto_spins: one worker on 2 idle cores spins on both sides; 2 workers, EnergyPlus only (the learner
     would take a core from them); on a machine busy with other runs both block."""
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
-    for load, workers, spins in ((2.0, 1, (pipe.SPIN_S, pipe.SPIN_S)), (2.6, 2, (0.0, pipe.SPIN_S)),
+    for load, workers, spins in ((2.0, 1, (spin.SPIN_S, spin.SPIN_S)), (2.6, 2, (0.0, spin.SPIN_S)),
                                  (14.0, 1, (0.0, 0.0)), (4.0, 2, (0.0, 0.0))):  # fmt: skip
         monkeypatch.setattr(os, "getloadavg", lambda load=load: (load, load, load))
-        assert pipe.auto_spins(workers) == spins, (load, workers)
+        assert spin.auto_spins(workers) == spins, (load, workers)

@@ -23,8 +23,16 @@ class Building:
     """A spec resolved for the engine; loaded once per spec file (`load_building` caches it)."""
 
     spec: BuildingSpec
-    sensors: tuple[Sensor, ...]
+    sensors: tuple[Sensor, ...]  # the observations, then the signals read for the figures only (`hidden`)
     actions: tuple[ActionElement, ...]
+    hidden: int = 0  # the last `hidden` sensors are not observed: thermostat schedules, HVAC meters
+    zone_bounds: tuple[tuple[str, str], ...] | None = None  # per zone: the sensors of its lower and upper bound
+    hvac: tuple[tuple[str, str], ...] = ()  # (fuel, sensor in W): HVAC energy, BOPTEST's `ener_tot`
+
+    @property
+    def observed(self) -> tuple[Sensor, ...]:
+        """The sensors the agent observes (the spec's observations)."""
+        return self.sensors[: len(self.sensors) - self.hidden]
 
     @property
     def sensor_names(self) -> tuple[str, ...]:
@@ -49,10 +57,11 @@ class Building:
     @functools.cached_property
     def comfort(self) -> Comfort:
         """Its reward signals: zones, band, when the band applies, power and energy (buildings/comfort.py)."""
-        return Comfort.of(self.spec, self.steps_per_day // 24)
+        return Comfort.of(self.spec, self.steps_per_day // 24, self.zone_bounds, self.hvac)
 
     def bounds(self) -> tuple[list[float], list[float]]:
-        return [s.low for s in self.sensors], [s.high for s in self.sensors]
+        """The observation's bounds (the observed sensors')."""
+        return [s.low for s in self.observed], [s.high for s in self.observed]
 
     def controller_class(self) -> type:
         """The class the spec's `controller = "module:Class"` names: its rule-based controller (`--rbc`)."""
@@ -87,7 +96,64 @@ def _load(path: Path) -> Building:
         Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high, o.meter is not None, o.scale)
         for o in spec.observations
     )
-    return Building(spec, sensors, action_elements(spec))
+    hidden: list[Sensor] = []
+    bounds = _thermostat_bounds(spec, hidden) if spec.reward.thermostat else None
+    hvac = _hvac_signals(spec, hidden)
+    return Building(spec, sensors + tuple(hidden), action_elements(spec), len(hidden), bounds, hvac)
+
+
+HVAC_ELECTRICITY = "Facility Total HVAC Electricity Demand Rate"  # W: every HVAC electric end use, no lights/plugs
+
+
+def _hidden(hidden: list[Sensor], name: str, variable: str, key: str, meter: bool = False) -> str:
+    if all(h.name != name for h in hidden):
+        hidden.append(Sensor(name, variable, key, -1e12, 1e12, meter))
+    return name
+
+
+def _thermostat_bounds(spec: BuildingSpec, hidden: list[Sensor]) -> tuple[tuple[str, str], ...]:
+    """Each reward zone's bounds: its thermostat's heating and cooling setpoint schedules, read each step."""
+    from parallel_eplus.buildings.spec import SpecError
+    from parallel_eplus.buildings.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
+
+    setpoints = zone_setpoints(spec.idf)
+    by_name = {o.name: o for o in spec.observations}
+    out, missing = [], []
+    for t in spec.reward.temperatures:
+        o = by_name[t]
+        sp = setpoints.get((o.key or "").upper()) if o.variable == "Zone Mean Air Temperature" else None
+        if sp is None or sp.heating is None or sp.cooling is None:
+            missing.append(t)
+            continue
+        low = _hidden(hidden, sensor_name(sp.heating), SCHEDULE_VARIABLE, sp.heating)
+        high = _hidden(hidden, sensor_name(sp.cooling), SCHEDULE_VARIABLE, sp.cooling)
+        out.append((low, high))
+    if missing:
+        raise SpecError(
+            f'{spec.path}: reward.band = "thermostat", but {missing} read no zone whose thermostat has both a heating '
+            f"and a cooling setpoint schedule in {spec.idf.name}; give those zones a band (band = {{ zone = [low, "
+            "high], ... }})"
+        )
+    return tuple(out)
+
+
+def _hvac_signals(spec: BuildingSpec, hidden: list[Sensor]) -> tuple[tuple[str, str], ...]:
+    """(fuel, sensor) for HVAC energy: the spec's `[kpis] hvac` (an observation, else a meter read for the figures),
+    by default electricity from the facility's HVAC demand (an observation reading it, else a hidden sensor)."""
+    names = {o.name for o in spec.observations}
+    if not spec.kpis.hvac:
+        seen = [o.name for o in spec.observations if o.variable == HVAC_ELECTRICITY]
+        return (("Electricity", seen[0] if seen else _hidden(hidden, "hvac_electricity_w", HVAC_ELECTRICITY,
+                                                            "Whole Building")),)  # fmt: skip
+    out = []
+    for fuel, source in spec.kpis.hvac:
+        if source in names:
+            out.append((fuel, source))
+        elif ":" in source:  # a meter: EnergyPlus names them Fuel:Group (Electricity:HVAC, NaturalGas:HVAC)
+            out.append((fuel, _hidden(hidden, f"hvac_{fuel.lower()}_w", source, "", meter=True)))
+        else:
+            out.append((fuel, _hidden(hidden, f"hvac_{fuel.lower()}_w", source, "Whole Building")))
+    return tuple(out)
 
 
 def load_building(path: str | Path | None = None) -> Building:

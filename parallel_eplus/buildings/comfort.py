@@ -1,11 +1,15 @@
 """How a building's comfort and energy are scored, per step and per episode: one object for the env, the reward,
 the episode summaries, TensorBoard and the evaluation tables.
 
-Comfort is the share of zone samples inside the band, counted only where the band applies (an occupied
-building; a data center always). Beside it, the figures BOPTEST reports (Blum et al. 2021, "Building
+Comfort is the share of zone samples inside their bounds, counted only where the band applies (an occupied
+building; a data center always). The bounds are one band for every zone, a band per zone, or each zone's own
+thermostat setpoint schedules read each step (`band = "thermostat"`, buildings/thermostat.py: the occupied and
+unoccupied setpoints, as BOPTEST scores). Beside it, the figures BOPTEST reports (Blum et al. 2021, "Building
 optimization testing framework (BOPTEST) for simulation-based benchmarking of control strategies"):
-- thermal discomfort, K·h per zone: the integral over time of each zone's distance outside the band while it
-  applies, averaged over the zones (BOPTEST's `tdis_tot`); each zone's own integral beside it;
+- thermal discomfort, K·h per zone: the integral over time of each zone's distance outside its bounds, averaged
+  over the zones (BOPTEST's `tdis_tot`); each zone's own integral beside it. Counted while the band applies; with
+  thermostat bounds at every step, as BOPTEST does (the bounds are then the setbacks while unoccupied);
+- HVAC energy, cost, emissions and peak per fuel (buildings/kpis.py);
 - energy, kWh over the period: every fuel the spec's `energy` observations meter (BOPTEST's `ener_tot`, here
   not divided by floor area);
 - peak electric power, kW: the highest control-step mean of the `power` observation (BOPTEST's `pele_tot`
@@ -22,6 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from parallel_eplus.buildings.kpis import Kpis
 from parallel_eplus.buildings.spec import BuildingSpec, Occupancy
 
 if TYPE_CHECKING:  # the EnergyPlus-side process imports this module: pandas would cost it 0.2 s and 60 MB
@@ -40,15 +45,42 @@ class Comfort:
     energy: tuple[str, ...]  # every fuel (W): the reward's energy term and the energy figure
     occupied: Occupancy | None
     step_minutes: float
+    zone_bands: tuple[tuple[float, float], ...] = ()  # fixed bounds per zone (`band` for each if the spec gives one)
+    bound_names: tuple[tuple[str, str], ...] | None = None  # per zone: the sensors holding its bounds each step
+    kpis: Kpis | None = None
+    objective: str = "energy"  # what `energy_w` counts: energy (the spec's `energy`), hvac, cost, emissions
+    tolerance: float = 0.0  # K outside the bounds still counted in band (the share only; discomfort is exact)
 
     @classmethod
-    def of(cls, spec: BuildingSpec, steps_per_hour: int) -> Comfort:
+    def of(
+        cls,
+        spec: BuildingSpec,
+        steps_per_hour: int,
+        bound_names: tuple[tuple[str, str], ...] | None = None,
+        hvac: tuple[tuple[str, str], ...] = (),
+    ) -> Comfort:
         r = spec.reward
-        return cls(r.temperatures, r.band, r.power, r.energy_terms, r.occupied, 60.0 / steps_per_hour)
+        bands = r.zone_bands or tuple(r.band for _ in r.temperatures)
+        kpis = Kpis.of(spec, hvac) if hvac else None
+        return cls(
+            r.temperatures, r.band, r.power, r.energy_terms, r.occupied, 60.0 / steps_per_hour, bands, bound_names,
+            kpis, r.objective, r.tolerance,
+        )  # fmt: skip
 
     @property
     def always(self) -> bool:
         return self.occupied is None
+
+    @property
+    def per_step(self) -> bool:
+        """Whether the bounds change from step to step (read from the model's thermostat schedules)."""
+        return self.bound_names is not None
+
+    def bounds(self, values: Mapping[str, float]) -> tuple[tuple[float, float], ...]:
+        """Each zone's (lower, upper) bound at the step whose observations are `values`."""
+        if self.bound_names is None:
+            return self.zone_bands
+        return tuple((values[lo], values[hi]) for lo, hi in self.bound_names)
 
     def applies(self, time: dt.datetime, values: Mapping[str, float]) -> bool:
         """Whether the band applies to the step that ended at `time` (values: the step's observations by name)."""
@@ -62,28 +94,30 @@ class Comfort:
         return start.weekday() in o.weekdays and o.hours[0] <= hour < o.hours[1]
 
     def energy_w(self, values: Mapping[str, float]) -> float:
+        """The reward's energy signal (W) under the objective; `values` holds the step's `time` for a tariff."""
+        if self.objective != "energy" and self.kpis is not None:
+            start = values["time"] - dt.timedelta(minutes=self.step_minutes)
+            return self.kpis.weighted_w(values, start, self.objective)
         if len(self.energy) == 1:
             return values[self.energy[0]]
         return math.fsum(values[e] for e in self.energy)
 
-    def out_of_band(self, temps: tuple[float, ...]) -> tuple[int, float]:
-        """(zones outside the band, their summed distance outside it in K)."""
-        low, high = self.band
+    def out_of_band(self, temps: tuple[float, ...], bounds=None) -> tuple[int, float]:
+        """(zones outside their bounds, their summed distance outside them in K)."""
         n, dist = 0, 0.0
-        for t in temps:
+        for t, (low, high) in zip(temps, bounds or self.zone_bands, strict=True):
             if t < low:
                 n, dist = n + 1, dist + low - t
             elif t > high:
                 n, dist = n + 1, dist + t - high
         return n, dist
 
-    def cost(self, temps: tuple[float, ...], margin_c: float) -> tuple[float, int]:
-        """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside the band shrunk
-        by `margin_c` on each side, rising linearly to 1 at the band's edge and 1 beyond, averaged over the zones;
-        and the number of zones outside the band itself."""
-        low, high = self.band
+    def cost(self, temps: tuple[float, ...], margin_c: float, bounds=None) -> tuple[float, int]:
+        """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside its bounds
+        shrunk by `margin_c` on each side, rising linearly to 1 at their edge and 1 beyond, averaged over the zones;
+        and the number of zones outside the bounds themselves. `bounds`: this step's (`bounds`); None: fixed."""
         total, out = 0.0, 0
-        for t in temps:
+        for t, (low, high) in zip(temps, bounds or self.zone_bands, strict=True):
             d = max(low + margin_c - t, t - high + margin_c, 0.0) / margin_c
             total += d if d < 1.0 else 1.0
             out += t < low or t > high
@@ -98,19 +132,26 @@ class Comfort:
         energy = sum(steps[e].to_numpy(float) for e in self.energy)
         out["energy_kwh"] = float(np.sum(energy) * hours / 1000)
         out["peak_power_kw"] = float(steps[self.power].max() / 1000)
-        low, high = self.band
+        if self.kpis is not None and all(c in steps for _, c in self.kpis.hvac):
+            out.update(self.kpis.summarize(steps, self.step_minutes))
         in_band, discomfort = [], []
-        for col in self.temperatures:
+        for k, col in enumerate(self.temperatures):
             zone = col.removesuffix("_temp_c")
-            t = steps[col].to_numpy(float)[applies]
+            low, high = self._bound_columns(steps, k)
+            every = steps[col].to_numpy(float)
+            t = every[applies]
             if t.size:
                 out[f"{zone}_temp_mean"] = float(t.mean())
                 out[f"{zone}_temp_std"] = float(t.std())
                 out[f"{zone}_temp_min"] = float(t.min())
                 out[f"{zone}_temp_max"] = float(t.max())
-            ok = (t >= low) & (t <= high)
+            lo, hi = (low[applies], high[applies]) if np.ndim(low) else (low, high)
+            ok = (t >= lo - self.tolerance) & (t <= hi + self.tolerance)
             out[f"{zone}_in_band_pct"] = float(100 * ok.mean()) if t.size else float("nan")
-            kh = float(np.sum(np.maximum(low - t, 0) + np.maximum(t - high, 0)) * hours)
+            if self.per_step:  # BOPTEST's tdis: every step, against the occupied and unoccupied setpoints
+                kh = float(np.sum(np.maximum(low - every, 0) + np.maximum(every - high, 0)) * hours)
+            else:
+                kh = float(np.sum(np.maximum(lo - t, 0) + np.maximum(t - hi, 0)) * hours)
             out[f"{zone}_discomfort_kh"] = kh
             in_band.append(ok)
             discomfort.append(kh)
@@ -118,3 +159,10 @@ class Comfort:
         out["in_band_pct"] = float(100 * both.mean()) if both.size else float("nan")
         out["discomfort_kh"] = float(np.mean(discomfort)) if discomfort else 0.0  # per zone, as BOPTEST's tdis_tot
         return out
+
+    def _bound_columns(self, steps: pd.DataFrame, k: int):
+        """Zone k's bounds over the step table: two arrays (read each step) or two numbers."""
+        if self.bound_names is None:
+            return self.zone_bands[k]
+        lo, hi = self.bound_names[k]
+        return steps[lo].to_numpy(float), steps[hi].to_numpy(float)

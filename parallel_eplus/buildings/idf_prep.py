@@ -66,25 +66,26 @@ def _line_end(text: str, pos: int) -> int:
     return m.end() if m else pos
 
 
-def run_period_end(run_days: int) -> tuple[int, int]:
-    """(month, day) of the last day of a run starting Jan 1; 2013 stands in for any non-leap year."""
-    if not 1 <= run_days <= 365:
-        raise ValueError(f"run_days must be within 1..365, got {run_days}")
-    end = dt.date(2013, 1, 1) + dt.timedelta(days=run_days - 1)
-    return end.month, end.day
-
-
 def _object(kind: str, fields: list[str], note: str) -> str:
     body = ",\n".join(f"    {f}" for f in fields)
     return f"  {kind},\n{body};  ! {note}"
 
 
-def _run_period(first: IdfObject | None, run_days: int) -> str:
-    month, day = run_period_end(run_days)
+def _run_period(first: IdfObject | None, run_days: int, start_day: int = 1, weekday: str | None = None) -> str:
+    """The episode's RunPeriod: `run_days` from day of year `start_day`; `weekday` that day's (a period cut from a
+    year starts on the weekday that date had in the year, so the schedules fall as they did)."""
+    if not 1 <= run_days <= 365:
+        raise ValueError(f"run_days must be within 1..365, got {run_days}")
+    if start_day < 1 or start_day + run_days - 1 > 365:
+        raise ValueError(f"a run from day {start_day} for {run_days} days passes the end of the year")
+    first_day = dt.date(2013, 1, 1) + dt.timedelta(days=start_day - 1)
+    end = first_day + dt.timedelta(days=run_days - 1)
     # Name, begin month/day/year, end month/day/year, then the model's own flags (day of week, holidays, ...).
     flags = first.fields[7:] if first is not None else []
-    return _object("RunPeriod", ["Episode", "1", "1", "", str(month), str(day), "", *flags],
-                   "the episode's, set by parallel-eplus")  # fmt: skip
+    if weekday is not None:
+        flags = [weekday, *flags[1:]]
+    fields = ["Episode", str(first_day.month), str(first_day.day), "", str(end.month), str(end.day), "", *flags]
+    return _object("RunPeriod", fields, "the episode's, set by parallel-eplus")
 
 
 def _set_fields(text: str, o: IdfObject, values: dict[int, str]) -> str:
@@ -111,11 +112,18 @@ def _simulation_control(kinds: set[str]) -> str:
 
 
 def prepare_idf(
-    source: Path, target: Path, run_days: int, energyplus_csv: bool = True, outputs: tuple[tuple[str, str], ...] = ()
+    source: Path,
+    target: Path,
+    run_days: int,
+    energyplus_csv: bool = True,
+    outputs: tuple[tuple[str, str], ...] = (),
+    start_day: int = 1,
+    weekday: str | None = None,
 ) -> None:
     """Write the episode's copy of `source` to `target` (see the module's docstring for what changes).
 
-    `outputs`: (key, variable) pairs reported every timestep in EnergyPlus's CSV (which they turn on)."""
+    `outputs`: (key, variable) pairs reported every timestep in EnergyPlus's CSV (which they turn on).
+    `start_day`, `weekday`: the run period's first day of the year and its weekday (test scenarios)."""
     text = source.read_text(encoding="latin-1")
     objects = idf_objects(text)
     kinds = {o.kind.lower() for o in objects}
@@ -126,7 +134,10 @@ def prepare_idf(
     control = by_kind.get("simulationcontrol", [None])[0]
     replace: dict[int, tuple[int, str]] = {}  # start -> (end, new text)
     for k, o in enumerate(periods):  # exactly one run period, the episode's, where the model's first one was
-        replace[o.start] = (_line_end(text, o.end), _run_period(o, run_days).lstrip() + "\n" if k == 0 else "")
+        replace[o.start] = (
+            _line_end(text, o.end),
+            _run_period(o, run_days, start_day, weekday).lstrip() + "\n" if k == 0 else "",
+        )
     if control is not None:
         replace[control.start] = (control.end, _set_fields(text, control, _WEATHER_YEAR))
     files = by_kind.get("outputcontrol:files", [])
@@ -139,7 +150,7 @@ def prepare_idf(
         out += [text[pos:start], new]
         pos = end
     out.append(text[pos:])
-    added = [] if periods else [_run_period(None, run_days)]
+    added = [] if periods else [_run_period(None, run_days, start_day, weekday)]
     if control is None:
         added.append(_simulation_control(kinds))
     added += [_object("Output:Variable", [key, variable, "Timestep"], "read back by parallel-eplus")

@@ -144,8 +144,10 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
     ]
     controlled = set(s.keys("Actuator", "Zone Temperature Control", "Cooling Setpoint"))
     temps = []
+    obs_keys: dict[str, str] = {}  # observation -> its zone
     for key in zone_keys:
         n = _snake(o(key)) + "_temp_c"
+        obs_keys[n] = key
         lines += _observation(
             n, "Zone Mean Air Temperature", o(key), -20.0, 50.0, "" if key in controlled else "no thermostat"
         )
@@ -240,15 +242,42 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         lines.append(f"occupied = {{ schedule = {_str(occupancy)} }}  # the band applies where its value is above 0")
     else:
         lines.append('# occupied = { hours = [8, 18], weekdays = ["Mon", "Tue", "Wed", "Thu", "Fri"] }  # else always')
+    if temps != ite and _thermostats_cover(idf, temps, obs_keys):
+        lines += [
+            'band = "thermostat"  # each zone\'s own heating and cooling setpoint schedules, read each step (BOPTEST)',
+            "# band = [22.0, 25.0]  # or one band for every zone, or { zone_temp_c = [low, high], ... }",
+        ]
+    else:
+        lines.append("band = [22.0, 25.0]  # reported as % in band; also set center/lower/upper to your comfort range")
     lines += [
-        "band = [22.0, 25.0]  # reported as % in band; also set center/lower/upper to your comfort range",
+        '# objective = "energy"  # what the reward\'s energy term counts: energy (above), hvac, cost or emissions',
         "# center = 23.5",
         "# lower = 23.0",
         "# upper = 24.0",
         "# power_weight = 1e-5  # per W: scale to the building's power",
         "",
+        "[kpis]  # BOPTEST's figures (docs/kpis.md): HVAC energy per fuel; tariff and emission factors per fuel",
+    ]
+    hvac = [f"Electricity = {_str('hvac_power_w')}"] if "hvac_power_w" in obs else []
+    hvac += [f'{fuel} = "{fuel}:HVAC"' for fuel in FUELS if f"{fuel}:HVAC".upper() in s.meters()]
+    if hvac:
+        lines.append(f"hvac = {{ {', '.join(hvac)} }}")
+    lines += [
+        "# tariff = { Electricity = { day = 0.20, night = 0.08, day_hours = [7, 22] }, NaturalGas = 0.04 }  # per kWh",
+        "# emissions = { Electricity = 0.37, NaturalGas = 0.18 }  # kg CO2e per kWh",
+        "# floor_area_m2 = 500.0  # default: the model's own",
+        "",
     ]
     return "\n".join(lines)
+
+
+def _thermostats_cover(idf: Path, temps: list[str], keys: dict[str, str]) -> bool:
+    """Whether every zone the reward counts has a thermostat with heating and cooling setpoint schedules."""
+    from parallel_eplus.buildings.thermostat import zone_setpoints
+
+    setpoints = zone_setpoints(idf)
+    found = [setpoints.get(keys.get(t, "").upper()) for t in temps]
+    return bool(temps) and all(sp and sp.heating and sp.cooling for sp in found)
 
 
 def init_spec(

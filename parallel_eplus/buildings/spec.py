@@ -13,8 +13,12 @@ from pathlib import Path
 from typing import Any
 
 from parallel_eplus.buildings import resources
+from parallel_eplus.buildings.forecast import ForecastSpec
 
 REWARD_KEYS = ("center", "lower", "upper", "gaussian_weight", "band_weight", "power_weight")
+OBJECTIVES = ("energy", "hvac", "cost", "emissions")  # what the reward's energy term counts (buildings/kpis.py)
+THERMOSTAT = "thermostat"  # `band = "thermostat"`: each zone's bounds are its own setpoint schedules' values
+THERMOSTAT_TOLERANCE = 0.2  # K: the default `reward.tolerance` with thermostat bounds (docs/kpis.md)
 WEEKDAYS = ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")
 OCCUPANCY_OBSERVATION = "occupancy"  # the observation `occupied = { schedule = ... }` adds
 
@@ -103,10 +107,33 @@ class RewardSpec:
     # Empty: `power` alone (electricity).
     energy: tuple[str, ...] = ()
     occupied: Occupancy | None = None  # None: the band applies at every step
+    # Per zone (in `temperatures` order): a fixed band each, or None: `band` for every zone. With `thermostat`
+    # each zone's bounds are read each step from its thermostat's schedules (buildings/thermostat.py).
+    zone_bands: tuple[tuple[float, float], ...] | None = None
+    thermostat: bool = False
+    objective: str = "energy"  # what the reward's energy term and the comfort constraint trade against
+    # K a sample may lie outside its bounds and still count in the share in band (not in discomfort, K·h): a
+    # thermostat holds its setpoint to a few hundredths of a kelvin, not exactly (docs/kpis.md)
+    tolerance: float = 0.0
 
     @property
     def energy_terms(self) -> tuple[str, ...]:
         return self.energy or (self.power,)
+
+
+@dataclass(frozen=True)
+class KpiSpec:
+    """`[kpis]`: how BOPTEST's figures are counted (buildings/kpis.py). Fuels are EnergyPlus's resource names.
+
+    `hvac`: fuel -> an observation name, or a meter or output variable read for the figures only (not observed);
+    empty: electricity from `Facility Total HVAC Electricity Demand Rate`. `tariff`: fuel -> a constant price per
+    kWh, {day, night, day_hours} or {csv} (a price series, read at the episode's end). `emissions`: fuel -> kg
+    CO2e per kWh. `floor_area_m2`: None takes it from the model (its zones as EnergyPlus reports them)."""
+
+    hvac: tuple[tuple[str, str], ...] = ()
+    tariff: tuple[tuple[str, Any], ...] = ()
+    emissions: tuple[tuple[str, float], ...] = ()
+    floor_area_m2: float | None = None
 
 
 @dataclass(frozen=True)
@@ -125,6 +152,10 @@ class BuildingSpec:
     schedule_features: bool = False
     timesteps_per_hour: int | None = None  # None: the IDF's Timestep
     baseline_idf: Path | None = None  # the model with its own controls, for evaluation; None: `idf` itself
+    kpis: KpiSpec = field(default_factory=lambda: KpiSpec())  # `[kpis]`: HVAC energy, tariff, emissions
+    # Observations that are forecasts of the episode's weather file (`forecast = "drybulb"` entries), computed on
+    # the learner's side after the sensors and the opt-in features (buildings/forecast.py).
+    forecasts: tuple[ForecastSpec, ...] = ()
 
 
 def _close(value: str, names) -> str:
@@ -191,8 +222,12 @@ def load_spec(path: str | Path) -> BuildingSpec:
     baseline_idf = _resolve(path, data["baseline_idf"], "baseline_idf", errors) if "baseline_idf" in data else None
 
     observations = []
+    forecasts = []
     for i, t in enumerate(data.get("observations", [])):
         where = f"observations[{i}]."
+        if "forecast" in t:
+            forecasts += _forecast(t, where, errors)
+            continue
         n = need(t, "name", where)
         low, high = bounds(t, where)
         if ("meter" in t) == ("variable" in t):
@@ -251,20 +286,41 @@ def load_spec(path: str | Path) -> BuildingSpec:
         power = need(r, "power", "reward.") or ""
         if power and power not in obs_names:
             errors.append(f'reward.power: "{power}" is not an observation name{_close(power, obs_names)}')
-        band = need(r, "band", "reward.", list) or [0.0, 0.0]
-        if len(band) != 2 or band[0] >= band[1]:
-            errors.append(f"reward.band: {band} is not [low, high] with low below high")
+        band, zone_bands, thermostat = _band(r.get("band"), temps, errors)
         energy = need(r, "energy", "reward.", list) if "energy" in r else []
         for k, e in enumerate(energy or []):
             if e not in obs_names:
                 errors.append(f'reward.energy[{k}]: "{e}" is not an observation name{_close(e, obs_names)}')
-        extra = {k: v for k, v in r.items() if k not in ("temperatures", "power", "band", "energy", "occupied")}
+        objective = r.get("objective", "energy")
+        if objective not in OBJECTIVES:
+            errors.append(f"reward.objective: {objective!r} is not one of {list(OBJECTIVES)}")
+            objective = "energy"
+        tolerance = r.get("tolerance", THERMOSTAT_TOLERANCE if thermostat else 0.0)
+        if not isinstance(tolerance, (int, float)) or isinstance(tolerance, bool) or tolerance < 0:
+            errors.append(f"reward.tolerance: {tolerance!r} is not a number of kelvin >= 0")
+            tolerance = 0.0
+        own = ("temperatures", "power", "band", "energy", "occupied", "objective", "tolerance")
+        extra = {k: v for k, v in r.items() if k not in own}
         for k in extra:
             if k not in REWARD_KEYS:
                 errors.append(f"reward.{k}: unknown reward parameter{_close(k, REWARD_KEYS)}")
         params = {k: float(v) for k, v in extra.items() if k in REWARD_KEYS}
+        if thermostat:  # the figures' own bounds come from the model; the reward's band, where one is shown
+            band = [params.get("lower", band[0]), params.get("upper", band[1])]
         band_c = (float(band[0]), float(band[-1]))
-        reward = RewardSpec(tuple(temps), power, band_c, params, tuple(energy or ()), occupied)
+        reward = RewardSpec(
+            tuple(temps),
+            power,
+            band_c,
+            params,
+            tuple(energy or ()),
+            occupied,
+            zone_bands,
+            thermostat,
+            objective,
+            float(tolerance),
+        )
+    kpis = _kpis(data.get("kpis", {}), [o.name for o in observations], errors)
 
     if errors:
         raise SpecError(f"{path}: {len(errors)} problem(s):\n  " + "\n  ".join(errors))
@@ -281,7 +337,32 @@ def load_spec(path: str | Path) -> BuildingSpec:
         bool(data.get("schedule_features", False)),
         data.get("timesteps_per_hour"),
         baseline_idf,
+        kpis=kpis,
+        forecasts=tuple(forecasts),
     )
+
+
+FORECAST_KEYS = {"name", "forecast", "hours", "steps", "stride", "error", "low", "high"}
+
+
+def _forecast(t: dict[str, Any], where: str, errors: list[str]) -> list[ForecastSpec]:
+    """`{ name = "outdoor_next", forecast = "drybulb", hours = 6 }`: the next 6 hours of the EPW's dry bulb;
+    `steps = 8` instead counts control steps; `stride` (default 1, in the same unit); `error = "low"`, "medium"
+    or "high" adds BOPTEST's forecast error; `low`/`high`: the bounds (default the EPW's, -70 and 70)."""
+    unknown = sorted(set(t) - FORECAST_KEYS)
+    if unknown:
+        errors.append(f"{where[:-1]}: unknown key(s) {unknown}; a forecast takes {sorted(FORECAST_KEYS)}")
+    if ("hours" in t) == ("steps" in t):
+        errors.append(f"{where[:-1]}: a forecast gives either hours or steps (how many values)")
+        return []
+    count = t.get("hours", t.get("steps"))
+    try:
+        return [ForecastSpec(str(t.get("name", t["forecast"])), str(t["forecast"]), int(count),
+                             float(t.get("stride", 1)), "steps" in t, t.get("error"),
+                             float(t.get("low", -70.0)), float(t.get("high", 70.0)))]  # fmt: skip
+    except (ValueError, TypeError) as e:
+        errors.append(f"{where}forecast: {e}")
+        return []
 
 
 def _occupancy(table: Any, observations: list[Observation], errors: list[str]) -> Occupancy | None:
@@ -335,6 +416,83 @@ def _occupancy(table: Any, observations: list[Observation], errors: list[str]) -
     high = float(table.get("high", 1.0))  # a fraction schedule; a head-count one gives its maximum
     observations.append(Observation(OCCUPANCY_OBSERVATION, 0.0, high, "Schedule Value", schedule))
     return Occupancy(observation=OCCUPANCY_OBSERVATION, above=float(above))
+
+
+def _band(value: Any, temps: list[str], errors: list[str]):
+    """`reward.band`: [low, high] for every zone, { zone = [low, high], ... } per zone (every temperature named),
+    or "thermostat". Returns (band, zone bands or None, thermostat)."""
+    where = "reward.band"
+
+    def pair(v, at) -> list[float]:
+        if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, (int, float)) for x in v) and v[0] < v[1]):
+            errors.append(f"{at}: {v!r} is not [low, high] with low below high")
+            return [0.0, 1.0]
+        return [float(v[0]), float(v[1])]
+
+    if value is None:
+        errors.append(f'{where}: missing ([low, high], {{ zone = [low, high], ... }} or "{THERMOSTAT}")')
+        return [0.0, 1.0], None, False
+    if value == THERMOSTAT:
+        return [20.0, 25.0], None, True
+    if isinstance(value, dict):
+        unknown = [k for k in value if k not in temps]
+        for k in unknown:
+            errors.append(f"{where}.{k}: not among reward.temperatures{_close(k, temps)}")
+        missing = [t for t in temps if t not in value]
+        if missing:
+            errors.append(f"{where}: no band for {missing}")
+        zones = tuple(tuple(pair(value[t], f"{where}.{t}")) for t in temps if t in value)
+        if not zones:
+            return [0.0, 1.0], None, False
+        return [min(z[0] for z in zones), max(z[1] for z in zones)], zones, False
+    if isinstance(value, str):
+        errors.append(f'{where}: {value!r} is not "{THERMOSTAT}", [low, high] or a table of zones')
+        return [0.0, 1.0], None, False
+    return pair(value, where), None, False
+
+
+def _kpis(table: Any, obs_names: list[str], errors: list[str]) -> KpiSpec:
+    """`[kpis]` (all optional): hvac, tariff, emissions per fuel; floor_area_m2."""
+    if not isinstance(table, dict):
+        errors.append(f"kpis: {table!r} is not a table")
+        return KpiSpec()
+    unknown = set(table) - {"hvac", "tariff", "emissions", "floor_area_m2"}
+    if unknown:
+        errors.append(f"kpis: unknown key(s) {sorted(unknown)}; use hvac, tariff, emissions, floor_area_m2")
+    tables = {}
+    for key in ("hvac", "tariff", "emissions"):
+        t = table.get(key, {})
+        if not isinstance(t, dict):
+            errors.append(f"kpis.{key}: {t!r} is not a table of fuels, e.g. {{ Electricity = ..., NaturalGas = ... }}")
+            t = {}
+        tables[key] = t
+    for fuel, source in tables["hvac"].items():
+        if not isinstance(source, str) or not source:
+            errors.append(f"kpis.hvac.{fuel}: {source!r} is not an observation, meter or variable name")
+    for fuel, factor in tables["emissions"].items():
+        if not isinstance(factor, (int, float)) or isinstance(factor, bool) or factor < 0:
+            errors.append(f"kpis.emissions.{fuel}: {factor!r} is not kg CO2e per kWh (a number >= 0)")
+    for fuel, price in tables["tariff"].items():
+        ok = isinstance(price, (int, float)) and not isinstance(price, bool)
+        if isinstance(price, dict):
+            keys = set(price)
+            ok = keys <= {"day", "night", "day_hours", "weekdays_only"} and {"day", "night"} <= keys
+            ok = ok or keys == {"csv"} and isinstance(price["csv"], str)
+        if not ok:
+            errors.append(
+                f"kpis.tariff.{fuel}: {price!r} is not a price per kWh, {{ day = .., night = .., day_hours = [7, 22] }}"
+                ' or { csv = "prices.csv" }'
+            )
+    area = table.get("floor_area_m2")
+    if area is not None and not (isinstance(area, (int, float)) and area > 0):
+        errors.append(f"kpis.floor_area_m2: {area!r} is not a positive number")
+        area = None
+    return KpiSpec(
+        tuple((f, str(v)) for f, v in tables["hvac"].items()),
+        tuple(tables["tariff"].items()),
+        tuple((f, float(v)) for f, v in tables["emissions"].items() if isinstance(v, (int, float))),
+        float(area) if area else None,
+    )
 
 
 def reward_config(spec: BuildingSpec):

@@ -124,7 +124,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         algorithm=args.algorithm,
         reward=RewardConfig.from_any(args.reward),
         comfort=ComfortConstraint(target_pct=args.comfort_target, margin_c=args.comfort_margin),
+        objective=args.objective,
         init_from_baseline=args.init_from_baseline,
+        weather_noise=args.weather_noise,
+        forecast_hours=args.forecast,
+        forecast_error=args.forecast_error,
         trpo=TRPOSettings(
             log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
         ),  # fmt: skip
@@ -178,6 +182,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     weathers = (
         [w.strip() for w in args.weathers.split(",") if w.strip()] if args.building else parse_weathers(args.weathers)
     )
+    if args.building and args.weathers.strip().lower() == "all":
+        weathers = parse_weathers("all")
     if args.workers < 1 or not 1 <= args.run_days <= 365:
         raise ValueError("--workers must be at least 1 and --run-days within 1..365")
     controllers = []
@@ -191,9 +197,15 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if not controllers:
         raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
+    periods = None
+    if args.scenario != "year":  # each weather's two weeks, from a year of the built-in controls (kept in --out)
+        from parallel_eplus.evaluation.scenarios import find_periods
+
+        periods = find_periods(args.scenario, weathers, args.building, args.out, args.workers, not args.quiet)
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
-        not args.quiet, args.building, args.backend, args.ray_address, keep_going=True,
+        not args.quiet, args.building, args.backend, args.ray_address, keep_going=True, periods=periods,
+        weather_noise=args.weather_noise, noisy_years=args.noisy_years,
     )  # fmt: skip
     failures = df.attrs.get("failures", [])
     if df.empty:
@@ -209,6 +221,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         online = run_online(policies, weathers, args.run_days, args.workers, args.out, args.online_batch)
         df = pd.concat([df, online], ignore_index=True)
     files = write_results(df, args.out, histogram)
+    if periods:  # the dates each weather's figures count, beside them
+        from parallel_eplus.evaluation.scenarios import periods_markdown
+
+        io.write_text(args.out / "results.md", (args.out / "results.md").read_text() + periods_markdown(periods))
     if failures:  # the finished episodes are written; the report says which did not and why
         io.write_text(args.out / "results.md", (args.out / "results.md").read_text() + failures_markdown(failures))
     print((args.out / "results.md").read_text())

@@ -46,6 +46,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--schedule-features", action="store_true",
         help="add the IT-load schedule: the coming step's load, its last and next change, and how far away",
     )  # fmt: skip
+    _weather_options(tr)
+    tr.add_argument(
+        "--forecast", type=int, default=0, metavar="HOURS",
+        help="add the outdoor temperature's next HOURS hours (from the episode's weather file) to the observation",
+    )  # fmt: skip
+    tr.add_argument("--forecast-error", choices=["low", "medium", "high"],
+                    help="with --forecast: BOPTEST's AR(1) forecast error at this level (default: exact)")  # fmt: skip
     tr.add_argument(
         "--algorithm", default="trpo", choices=["trpo", "ppo", "sac"],
         help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting; "
@@ -69,6 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--comfort-target", type=float, metavar="PCT",
         help="comfort as a constraint: minimise energy keeping this share (%%) of zone samples in band where the band "
         "applies, by a Lagrange multiplier adapted each batch (default: the reward's fixed comfort weights)",
+    )  # fmt: skip
+    tr.add_argument(
+        "--objective", choices=("energy", "hvac", "cost", "emissions"),
+        help="what the reward's energy term (and the comfort constraint) trades against: the spec's energy signals, "
+        "HVAC energy, its cost or its emissions (docs/kpis.md; default: the spec's reward.objective)",
     )  # fmt: skip
     tr.add_argument(
         "--comfort-margin", type=float, default=0.5, metavar="K",
@@ -157,11 +169,24 @@ def build_parser() -> argparse.ArgumentParser:
         "--rbc-targets", metavar="C,C,...",
         help="the rule-based controller once per zone target (°C), e.g. 22.7,23.5: what the reward pays for each",
     )  # fmt: skip
-    ev.add_argument("--weathers", default="CA,CO,FL,IL,VA")
+    ev.add_argument(
+        "--weathers", default="CA,CO,FL,IL,VA",
+        help="short names or .epw paths; 'all': the 16 files EnergyPlus ships (docs/weather.md)",
+    )  # fmt: skip
+    _weather_options(ev)
+    ev.add_argument(
+        "--noisy-years", type=int, default=3, metavar="N",
+        help="with --weather-noise: N noisy years (seeds 0..N-1) per weather; mean and interval",
+    )  # fmt: skip
     ev.add_argument(
         "--building", help="a building spec (TOML path or built-in name), checked first; default: the data center"
     )
     ev.add_argument("--run-days", type=int, default=365)
+    ev.add_argument(
+        "--scenario", default="year", choices=("year", "peak_heat", "typical_heat", "peak_cool", "typical_cool"),
+        help="BOPTEST's test periods: two weeks around each weather's peak or typical heating or cooling day of the "
+        "built-in controls, after a one-week warm-up (evaluation/scenarios.py); default: the year (--run-days)",
+    )  # fmt: skip
     ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
     ev.add_argument("--out", type=Path, default=Path("results") / "latest")
     ev.add_argument("--histogram", help="CONTROLLER,WEATHER for the West-zone histogram (default: last, VA)")
@@ -236,3 +261,11 @@ def build_parser() -> argparse.ArgumentParser:
     cl.add_argument("--kill", action="store_true", help="also stop leftover EnergyPlus processes (SIGKILL)")
     cl.set_defaults(func=c.cmd_clean)
     return parser
+
+
+def _weather_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--weather-noise", nargs="?", const="default", metavar="COL=SIGMA:MU:TAU,...",
+        help="Ornstein-Uhlenbeck noise on each episode's weather (Sinergym's); alone: dry bulb 1:0:24 (sigma K, "
+        "mu K, tau h); columns drybulb, relhum, dirnorrad, difhorrad; a value LOW..HIGH is drawn per episode",
+    )  # fmt: skip

@@ -31,7 +31,7 @@ class SimulationConfig:
     step_timeout_s: float = 60.0
     idf: str | None = None  # override the model's IDF (same sensors and actuators)
     initial_action: tuple[float, ...] | None = None  # physical units; default: the model's
-    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see pipe.default_spin_s
+    spin_s: float | None = None  # busy-wait before blocking on a pipe; None: see spin.default_spin_s
     time_features: bool = False  # append model.TIME_FEATURES to the observation
     schedule_features: bool = False  # then model.SCHEDULE_FEATURES (the IT-load schedule in the IDF)
     # > 0: the action, times this, corrects the rule-based controller's (rbc.py) instead of acting
@@ -48,9 +48,33 @@ class SimulationConfig:
     # Read-back output variables (key, variable) added to the model's EnergyPlus CSV, every timestep: what the
     # building's own controls chose, for `train --init-from-baseline` (learning/imitation.py).
     extra_outputs: tuple[tuple[str, str], ...] = ()
+    # What the reward's energy term counts (energy, hvac, cost, emissions; buildings/kpis.py). None: the spec's.
+    objective: str | None = None
+    # A test period (evaluation/scenarios.py): the run starts on this day of the year, on this weekday (None: the
+    # model's own), and its first `warmup_days` are simulated but left out of the episode's figures.
+    start_day: int = 1
+    start_weekday: str | None = None
+    warmup_days: int = 0
+    # Weather that varies per episode (buildings/weather_noise.py's `parse_noise` form, e.g. "drybulb=1:0:24"):
+    # each episode runs a perturbed copy of its EPW, written into its folder. None: the file as it is.
+    weather_noise: str | None = None
+    # Seeds each episode's noise and forecast error with (seed, worker, episode number); `reset(seed=)` sets one.
+    seed: int = 0
+    fixed_seed: bool = False  # every episode's seed is `seed` itself (evaluate's noisy year N: the same for all)
+    forecast_hours: int = 0  # > 0: the outdoor dry bulb's next N hours end the observation (buildings/forecast.py)
+    forecast_error: str | None = None  # BOPTEST's "low", "medium" or "high" error on that forecast; None: exact
 
 
 RESIDUAL_SPACES = ("action", "demand")
+
+
+def forecast_specs(config: SimulationConfig):
+    """The forecasts ending the observation: the building spec's own, then `forecast_hours`' outdoor one."""
+    from parallel_eplus.buildings.building import load_building
+    from parallel_eplus.buildings.forecast import outdoor_forecast
+
+    extra = (outdoor_forecast(config.forecast_hours, config.forecast_error),) if config.forecast_hours else ()
+    return load_building(config.building).spec.forecasts + extra
 
 
 def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from parallel_eplus.buildings.comfort import APPLIES, Comfort
+from parallel_eplus.buildings.kpis import floor_area, per_area
 from parallel_eplus.buildings.model import SENSOR_NAMES
 
 STEPS_FILE = "steps.parquet"  # binary: a year writes in ~0.1 s where CSV takes ~0.8 s
@@ -110,10 +111,21 @@ def summarize(steps: pd.DataFrame, comfort: Comfort | None = None) -> dict[str, 
     return out
 
 
-def write_records(episode_dir: Path, steps: pd.DataFrame, extra: dict, comfort: Comfort | None = None) -> dict:
-    """Write the step table and summary.json; returns the summary."""
+def write_records(
+    episode_dir: Path,
+    steps: pd.DataFrame,
+    extra: dict,
+    comfort: Comfort | None = None,
+    scored: pd.DataFrame | None = None,
+) -> dict:
+    """Write the step table and summary.json; returns the summary. Per-m² figures divide by the spec's floor area,
+    else the model's own (its eplusout.eio, written before the first step). `scored`: the steps the figures count
+    (a test period without its warm-up); None: all."""
     steps.to_parquet(episode_dir / STEPS_FILE, index=False)
-    summary = {**extra, **summarize(steps, comfort)}
+    summary = {**extra, **summarize(steps if scored is None else scored, comfort)}
+    if comfort is not None and comfort.kpis is not None:
+        area = comfort.kpis.floor_area_m2 or floor_area(episode_dir / "eplusout.eio")
+        summary |= per_area(summary, area)
     (episode_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str))
     return summary
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.engine import pipe
+from parallel_eplus.engine import pipe, spin
 
 log = logging.getLogger(__name__)
 
@@ -29,7 +29,7 @@ class EnergyPlusProcess:
     """The EnergyPlus side of one worker, episode after episode, over one pipe pair kept between episodes."""
 
     def __init__(self, spin_s: float | None, native_bridge: str | None, siblings: int = 1):
-        """`spin_s`: how long both sides' reads spin before blocking; None: `pipe.auto_spins` for `siblings`
+        """`spin_s`: how long both sides' reads spin before blocking; None: `spin.auto_spins` for `siblings`
         EnergyPlus processes stepped by this process, decided again at each spawn."""
         self.auto_spin = spin_s is None
         self.siblings = siblings
@@ -46,7 +46,7 @@ class EnergyPlusProcess:
             self.pipes = pipe.PipePair()
         self.pipes.drain()
         if self.auto_spin:
-            self.spin_s, self.child_spin_s = pipe.auto_spins(self.siblings)
+            self.spin_s, self.child_spin_s = spin.auto_spins(self.siblings)
         cmd = [
             sys.executable, "-m", "parallel_eplus.engine.eplus_callback",
             "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path), *args,
@@ -107,7 +107,7 @@ def wait_any(procs: Sequence, indices: Iterable[int], due: Container[int] = ()) 
 
     For pipelining: serve each simulation as soon as it answers instead of waiting for the slowest. Like
     a single read, it polls for the simulations' spin time first (none when they and this process have
-    no spare core: see `pipe.default_spin_s`).
+    no spare core: see `spin.default_spin_s`).
     """
     indices = list(indices)
     if not indices:

@@ -8,14 +8,17 @@ drives several, writing every action before reading any observation.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import shutil
 import tempfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.forecast import Forecaster
 from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.model import (
     ACTIONS,
@@ -26,10 +29,12 @@ from parallel_eplus.buildings.model import (
 )
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.reward import reward
+from parallel_eplus.buildings.spec import OBJECTIVES
 from parallel_eplus.buildings.weather import resolve_weather, weather_label
+from parallel_eplus.buildings.weather_noise import parse_noise, perturb_epw
 from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
-from parallel_eplus.engine.config import SimulationConfig, policy_action_names
+from parallel_eplus.engine.config import SimulationConfig, forecast_specs, policy_action_names
 from parallel_eplus.engine.episode import (
     MODEL_FILE,
     StepRecorder,
@@ -61,16 +66,30 @@ class Simulation:
         self.obs_low, self.obs_high = (np.array(b, dtype=np.float32) for b in self.building.bounds())
         self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
         self.comfort = self.building.comfort  # zones, band, when it applies, energy (buildings/comfort.py)
+        if config.objective and config.objective != self.comfort.objective:
+            if config.objective not in OBJECTIVES:
+                raise ValueError(f"objective {config.objective!r} is not one of {list(OBJECTIVES)}")
+            if self.comfort.kpis is None and config.objective != "energy":
+                raise ValueError(f"objective {config.objective!r} needs the building's HVAC signals ([kpis] hvac)")
+            self.comfort = dataclasses.replace(self.comfort, objective=config.objective)
+        self._observed = len(self.building.observed)  # the sensors after these are read for the figures only
+        self._hidden = self.building.hidden
         self._temps = self.comfort.temperatures
         self.elements = self.model.actions
         self.idf = Path(config.idf) if config.idf else self.model.idf
         if not self.idf.is_file():
             raise FileNotFoundError(f"model file not found: {self.idf}")
         self._schedule = it_load_schedule(self.idf) if config.schedule_features else None
+        self.noise = parse_noise(config.weather_noise)  # a malformed option fails before anything is spawned
+        self.forecasts = forecast_specs(config)
+        self._forecaster: Forecaster | None = None
+        self.weather_params: dict = {}  # this episode's seed and noise parameters, for its records
         self.weathers = weathers or [config.weather]
         named = self.building.spec.weathers  # the spec's short names, then codes and .epw paths
         self.weather_paths = [named.get(w) or resolve_weather(w) for w in self.weathers]  # fail before spawning
         self.steps_per_episode = config.run_days * self.building.steps_per_day
+        if config.warmup_days >= config.run_days and config.warmup_days:
+            raise ValueError(f"warmup_days ({config.warmup_days}) must be fewer than run_days ({config.run_days})")
         self.low = tuple(e.low for e in self.elements)
         self.high = tuple(e.high for e in self.elements)
         self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
@@ -129,15 +148,16 @@ class Simulation:
         return self.process.running()
 
     # -- episode lifecycle --------------------------------------------------------------------
-    def start(self, weather_index: int | None = None) -> tuple[np.ndarray, dict]:
+    def start(self, weather_index: int | None = None, seed: int | None = None) -> tuple[np.ndarray, dict]:
         """Stop any running process, start the next episode and return observation 0."""
-        self.launch(weather_index)
+        self.launch(weather_index, seed)
         return self.first_observation()
 
-    def launch(self, weather_index: int | None = None) -> None:
+    def launch(self, weather_index: int | None = None, seed: int | None = None) -> None:
         """Start the next episode's process without waiting for it (the vector env starts many at once).
 
-        Weathers cycle episode by episode unless `weather_index` picks one.
+        Weathers cycle episode by episode unless `weather_index` picks one. `seed`: the episode's weather noise and
+        forecast error (None: drawn from the config's seed, this worker's name and the episode's number).
         """
         self.stop()
         i = self.episode % len(self.weathers) if weather_index is None else weather_index
@@ -148,10 +168,13 @@ class Simulation:
         label = weather_label(self.weather)
         self.episode_dir, self._number = claim_episode_dir(self.output_dir, label, self._number + 1)
         cfg = self.config
-        prepare_idf(self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs)
-        link_or_copy(epw, self.episode_dir / epw.name)
+        prepare_idf(
+            self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
+            cfg.start_day, cfg.start_weekday,
+        )  # fmt: skip
+        epw = self._episode_weather(epw, seed)
         args = [
-            "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(self.episode_dir / epw.name),
+            "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(epw),
             "--output-dir", str(self.episode_dir), "--model", self.model.name,
             *(["--building", str(self.building.spec.path)] if self.config.building else []),
             "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
@@ -204,7 +227,8 @@ class Simulation:
         info.update(parts)
         info["comfort_applies"] = applies
         if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward
-            cost, out = comfort.cost(temps, margin) if applies else (0.0, 0)
+            bounds = comfort.bounds(info) if comfort.per_step else None
+            cost, out = comfort.cost(temps, margin, bounds) if applies else (0.0, 0)
             info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
         self.records.add(info["time"], (*self._sensed, *self._action, r, *parts.values(), float(applies)))
         terminated = code == pipe.END
@@ -215,6 +239,26 @@ class Simulation:
         return obs, r, terminated, info
 
     # -- internals ----------------------------------------------------------------------------
+    def _episode_weather(self, epw: Path, seed: int | None) -> Path:
+        """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file) and its
+        forecasts, which read that same file."""
+        if seed is None and self.config.fixed_seed:
+            seed = self.config.seed
+        if seed is None:
+            seed = int(np.random.SeedSequence([self.config.seed, zlib.crc32(self.name.encode()), self._number])
+                       .generate_state(1)[0])  # fmt: skip
+        target = self.episode_dir / epw.name
+        if self.noise is None:
+            link_or_copy(epw, target)
+            self.weather_params = {}
+        else:
+            self.weather_params = {"weather_seed": seed, **perturb_epw(epw, target, self.noise, seed)}
+        if self.forecasts and any(f.error for f in self.forecasts):
+            self.weather_params.setdefault("weather_seed", seed)
+        per_hour, days = self.building.steps_per_day // 24, self.config.run_days
+        self._forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
+        return target
+
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
         if len(values) != pipe.TIME_FIELDS + len(self.sensor_names):
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
@@ -224,17 +268,23 @@ class Simulation:
         info = dict(zip(self.sensor_names, sensed, strict=True))
         info["time"] = pipe.frame_time(fields)
         info["weather"] = self.weather
-        raw = values[pipe.TIME_FIELDS :]
+        if self._hidden:  # thermostat schedules, HVAC meters: in `info` and the step table, not the observation
+            raw = values[pipe.TIME_FIELDS : pipe.TIME_FIELDS + self._observed]
+            observed = sensed[: self._observed]
+        else:
+            raw, observed = values[pipe.TIME_FIELDS :], sensed
         obs = raw.astype(np.float32)
-        for lo, v, hi in zip(self._lows, sensed, self._highs, strict=True):
+        for lo, v, hi in zip(self._lows, observed, self._highs, strict=True):
             if not lo <= v <= hi:  # (NaN too)
                 info["raw_observation"] = raw.copy()
                 obs = np.clip(obs, self.obs_low, self.obs_high)
                 break
-        if self.config.time_features or self._schedule:
+        if self.config.time_features or self._schedule or self._forecaster:
             extra = time_features(info["time"]) if self.config.time_features else ()
             if self._schedule:
                 extra += schedule_features(info["time"], self._schedule)
+            if self._forecaster:  # the spec's forecasts, then --forecast's
+                extra += self._forecaster(info["time"])
             obs = np.concatenate([obs, np.array(extra, np.float32)])
         self._info, self._sensed = info, sensed
         return obs, info
@@ -280,10 +330,18 @@ class Simulation:
             "model": self.model.name,
             "run_days": self.config.run_days,
             "complete": complete,
+            **self.weather_params,
         }
         if self.config.building:  # what `plot` reads the episode's signals from (none: the data center)
             extra["building"] = str(self.building.spec.path)
-        self.last_summary = write_records(self.episode_dir, self.records.frame(), extra, self.comfort)
+        steps = self.records.frame()
+        scored = None
+        if self.config.warmup_days:  # a test period: its figures leave out the warm-up before it
+            scored = steps.iloc[self.config.warmup_days * self.building.steps_per_day :]
+            if len(scored):
+                extra |= {"warmup_days": self.config.warmup_days, "period_start": str(scored["time"].iloc[0]),
+                          "period_end": str(scored["time"].iloc[-1])}  # fmt: skip
+        self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored)
         self.records = None
         if prune:
             self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)

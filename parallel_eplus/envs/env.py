@@ -18,12 +18,21 @@ from parallel_eplus.engine.simulation import Simulation
 
 
 def observation_space(
-    time_features: bool = False, schedule_features: bool = False, building: str | Path | None = None
+    time_features: bool = False,
+    schedule_features: bool = False,
+    building: str | Path | None = None,
+    forecast_hours: int = 0,
 ) -> gym.spaces.Box:
-    """The building's sensors (None: the data center) and the opt-in features, which lie in [-1, 1]."""
+    """The building's sensors (None: the data center), the opt-in features, which lie in [-1, 1], then its
+    forecasts and `forecast_hours` of the outdoor dry bulb (buildings/forecast.py; the EPW's bounds)."""
+    from parallel_eplus.buildings.forecast import outdoor_forecast
+
+    spec = load_building(building).spec
     low, high = load_building(building).bounds()
     extra = len(TIME_FEATURES) * time_features + len(SCHEDULE_FEATURES) * schedule_features
     low, high = low + [-1.0] * extra, high + [1.0] * extra
+    for f in spec.forecasts + ((outdoor_forecast(forecast_hours),) if forecast_hours else ()):
+        low, high = low + [f.low] * f.count, high + [f.high] * f.count
     return gym.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
 
 
@@ -79,6 +88,10 @@ class EnergyPlusEnv(gym.Env):
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
     not apply; its reward parameters are the default `reward`; it is checked against its model first);
     `name`: the `worker` its episodes' summaries name (`rllib_env` names RLlib's env runners).
+    `weather_noise` ("drybulb=1:0:24", buildings/weather_noise.py): each episode runs a perturbed copy of its
+    weather file, seeded by `reset(seed=)` (same seed, same year) or else by `seed`, the worker and the episode;
+    `forecast_hours`: the outdoor dry bulb's next N hours end the observation, with BOPTEST's `forecast_error`
+    ("low", "medium", "high"; None: exact) (docs/weather.md).
     """
 
     metadata = {"render_modes": []}
@@ -102,6 +115,10 @@ class EnergyPlusEnv(gym.Env):
         building: str | Path | None = None,
         energyplus_csv: bool = True,
         name: str = "0",
+        weather_noise: str | None = None,
+        forecast_hours: int = 0,
+        forecast_error: str | None = None,
+        seed: int = 0,
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
         if building is not None:  # a typo costs seconds and a message naming it, not a hung worker
@@ -128,17 +145,21 @@ class EnergyPlusEnv(gym.Env):
             rbc_target_c=rbc_target_c,
             building=None if building is None else str(building),
             energyplus_csv=energyplus_csv,
+            weather_noise=weather_noise,
+            forecast_hours=forecast_hours,
+            forecast_error=forecast_error,
+            seed=seed,
         )
         self.sim = Simulation(self.config, weathers, name=name)  # its episodes' summaries' `worker`
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
-        self.observation_space = observation_space(time_features, schedule_features, building)
+        self.observation_space = observation_space(time_features, schedule_features, building, forecast_hours)
         self.action_space = action_space(len(self.sim.policy_names))
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         weather_index = (options or {}).get("weather_index")
-        return self.sim.start(weather_index)
+        return self.sim.start(weather_index, seed)
 
     def step(self, action):
         self.sim.send(action)

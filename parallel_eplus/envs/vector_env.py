@@ -69,7 +69,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             raise
         n_actions = len(self.sims[0].policy_names)
         self.single_observation_space = observation_space(
-            config.time_features, config.schedule_features, config.building
+            config.time_features, config.schedule_features, config.building, config.forecast_hours
         )
         self.single_action_space = action_space(n_actions)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
@@ -142,7 +142,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         starting an episode), a failure, or a deadline passed.
 
         Blocks until there is at least one. Like a single worker's read, it polls for the workers' spin
-        time first (none when the workers and the learner have no spare core: see `pipe.default_spin_s`).
+        time first (none when the workers and the learner have no spare core: see `spin.default_spin_s`).
         """
         return wait_any(self.sims, indices, self._send_errors)
 

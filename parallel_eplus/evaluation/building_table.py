@@ -81,6 +81,84 @@ def table_markdown(df: pd.DataFrame, baseline: str) -> str:
         share = df["comfort_steps_pct"].mean()
         lines += ["", f"Comfort figures count the samples where the band applies ({share:.1f} % of steps); "
                   "energy and power count every step."]  # fmt: skip
+    if "hvac_energy_kwh" in df.columns:
+        lines += ["", boptest_markdown(df, baseline)]
+    return "\n".join(lines) + "\n"
+
+
+# (summary key, header, format): BOPTEST's figures (docs/kpis.md); those with a ratio get "× built-in" beside them
+BOPTEST = (
+    ("hvac_energy_kwh_m2", "HVAC energy (kWh/m²)", "{:.2f}", True),
+    ("energy_kwh_m2", "facility energy (kWh/m²)", "{:.2f}", True),
+    ("cost_m2", "cost (/m²)", "{:.3f}", True),
+    ("emissions_kg_m2", "emissions (kg CO2e/m²)", "{:.3f}", True),
+    ("discomfort_kh", "discomfort (K·h/zone)", "{:.1f}", False),
+    ("in_band_pct", "in own bounds", "{:.2f} %", False),
+)
+
+
+RATIOS = ("hvac_energy_kwh", "energy_kwh", "cost", "emissions_kg", "discomfort_kh")
+
+
+def with_ratios(df: pd.DataFrame, baseline: str) -> pd.DataFrame:
+    """`<figure>_vs_builtin` columns: each BOPTEST figure over the built-in controls' mean on the same weather."""
+    if baseline not in set(df["controller"]):
+        return df
+    df = df.copy()
+    base = df[df.controller == baseline].groupby("weather")
+    for key in (k for k in RATIOS if k in df.columns):
+        df[f"{key}_vs_builtin"] = df[key] / df["weather"].map(base[key].mean())
+    return df
+
+
+def boptest_markdown(df: pd.DataFrame, baseline: str) -> str:
+    """BOPTEST's figures per controller and weather, each beside its ratio to the built-in controls (CityLearn's
+    normalization: 1.00 is the built-in's own), then averaged over the weathers every controller finished."""
+    df = df.copy()
+    if "floor_area_m2" not in df.columns:  # summaries without the model's floor area: totals, not per m²
+        for key, *_ in BOPTEST:
+            if key.endswith("_m2") and key.removesuffix("_m2") in df.columns:
+                df[key] = df[key.removesuffix("_m2")]
+    peaks = [c for c in df.columns if c.startswith("hvac_") and c.endswith("_peak_kw_m2")]
+    cols = [b for b in BOPTEST if b[0] in df.columns]
+    head = ["Controller", "Weather"]
+    for _key, name, _, ratio in cols:
+        head += [name, "× built-in"] if ratio else [name]
+    head += [f"HVAC peak {c.removeprefix('hvac_').removesuffix('_peak_kw_m2')} (W/m²)" for c in peaks]
+    area = (
+        df["floor_area_m2"].dropna().iloc[0]
+        if "floor_area_m2" in df.columns and df["floor_area_m2"].notna().any()
+        else None
+    )
+    lines = [
+        "BOPTEST's figures (docs/kpis.md)"
+        + (f", per m² of the model's {area:,.0f} m² floor" if area else "")
+        + "; × built-in: the ratio to the building's own controls on the same weather (CityLearn's form):",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|---" * len(head) + "|",
+    ]
+    base = df[df.controller == baseline].set_index("weather")
+
+    def row(label: str, weather: str, r, ref) -> str:
+        cells = [label, weather]
+        for key, _, fmt, ratio in cols:
+            cells.append(fmt.format(r[key]))
+            if ratio:
+                b = None if ref is None else ref.get(key)
+                cells.append(f"{r[key] / b:.3f}" if b else "–")
+        cells += [f"{1000 * r[c]:.1f}" for c in peaks]
+        return "| " + " | ".join(cells) + " |"
+
+    for _, r in df.iterrows():
+        ref = base.loc[r.weather] if r.weather in base.index else None
+        lines.append(row(r.controller, r.weather, r, ref))
+    shared, _ = comparable(df)
+    keys = [b[0] for b in cols] + peaks
+    avg = shared.groupby("controller", sort=False)[keys].mean()
+    ref = avg.loc[baseline] if baseline in avg.index else None
+    for c, r in avg.iterrows():
+        lines.append(row(f"**{c}**", "average", r, ref))
     return "\n".join(lines) + "\n"
 
 
@@ -91,7 +169,7 @@ def write_results(
     table (seeds.py) of controllers with several runs."""
     from parallel_eplus.evaluation import seeds
 
-    full = df if full is None else full
+    full = with_ratios(df if full is None else full, baseline)
     out_dir.mkdir(parents=True, exist_ok=True)
     full.to_csv(out_dir / "results.csv", index=False)
     extra = seeds.seeds_markdown(across) if across is not None else ""

@@ -43,6 +43,8 @@ class Controller:
     run: str = ""  # a policy's training run (its folder's name): policies sharing a label are one recipe's runs
     # A policy in memory, (observation, info) -> action: evaluation during training (training/periodic_eval.py)
     act: Callable[[np.ndarray, dict], np.ndarray] | None = None
+    forecast_hours: int = 0  # the policy observes the outdoor dry bulb's next hours (train --forecast)
+    forecast_error: str | None = None
 
     @property
     def model(self) -> str:
@@ -88,7 +90,13 @@ def policy_controller(spec: str) -> Controller:
     if path.is_dir():
         path = path / "model.zip"
     from parallel_eplus.engine.config import policy_action_names
-    from parallel_eplus.runs.policy_files import check_actions, policy_features, require_policy_files, run_dir_of
+    from parallel_eplus.runs.policy_files import (
+        check_actions,
+        policy_features,
+        policy_forecast,
+        require_policy_files,
+        run_dir_of,
+    )
 
     require_policy_files(path)
     config = run_dir_of(path) / "config.json"
@@ -115,7 +123,8 @@ def policy_controller(spec: str) -> Controller:
         label or path.parent.name, "policy", path, time_features, schedule_features,
         rbc_target_c=saved.get("rbc_target_c"), residual_scale=residual,
         residual_space=saved.get("residual_space", "action"), building=building,
-        run=saved.get("run_name") or run_dir_of(path).name,
+        run=saved.get("run_name") or run_dir_of(path).name, forecast_hours=policy_forecast(path)[0],
+        forecast_error=policy_forecast(path)[1],
     )  # fmt: skip
 
 

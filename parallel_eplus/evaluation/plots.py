@@ -249,7 +249,11 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
     ax = axes[0]
     for col in temps:
         ax.plot(steps["time"], steps[col], lw=0.7, label=col.removesuffix("_c").removesuffix("_temp"))
-    ax.axhspan(*building.band, color="green", alpha=0.1)
+    if building.comfort.per_step:  # each zone's own thermostat bounds (docs/kpis.md): the distinct ones, dashed
+        for lo, hi in dict.fromkeys(building.comfort.bound_names):
+            ax.fill_between(steps["time"], steps[lo], steps[hi], step="pre", color="green", alpha=0.08, lw=0)
+    else:
+        ax.axhspan(*building.band, color="green", alpha=0.1)
     ax.set_ylabel("°C")
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     i = 1
@@ -270,7 +274,8 @@ def episode(episode_dir: Path, path: Path | None = None) -> Path:
         parts[0] += f" (IT {summary['it_power_kw']:.1f}, HVAC {summary['hvac_power_kw']:.1f})"
     for zone in zones_of(pd.DataFrame([summary])):
         parts.append(f"{zone_label(zone)} {summary[f'{zone}_temp_mean']:.2f} ± {summary[f'{zone}_temp_std']:.2f} °C")
-    parts.append(f"in {band_label(building.band)} {summary['in_band_pct']:.2f} %")
+    named = "own thermostat bounds" if building.comfort.per_step else band_label(building.band)
+    parts.append(f"in {named} {summary['in_band_pct']:.2f} %")
     parts.append(f"reward {summary['reward_mean']:.3f}/step")
     text = ";  ".join(parts)
     fig.suptitle(f"{episode_dir.name}\n{textwrap.fill(text, 160)}", fontsize=9)

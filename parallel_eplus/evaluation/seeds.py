@@ -17,6 +17,9 @@ from scipy import stats
 # What the seed tables summarise, with how each reads (higher or lower is better is the reader's call).
 METRICS = {
     "energy_change_pct": "energy vs built-in (%)",
+    "hvac_energy_change_pct": "HVAC energy vs built-in (%)",  # BOPTEST's figures (buildings/kpis.py)
+    "cost_change_pct": "cost vs built-in (%)",
+    "emissions_change_pct": "emissions vs built-in (%)",
     "in_band_pct": "in band (%)",
     "discomfort_kh": "discomfort (K·h/zone)",
     "power_kw": "power (kW)",
@@ -53,6 +56,12 @@ def with_changes(df: pd.DataFrame, baseline: str) -> pd.DataFrame:
     base = df[df.controller == baseline].groupby("weather")[energy].mean()
     df = df.copy()
     df["energy_change_pct"] = 100 * (df[energy] / df["weather"].map(base) - 1)
+    for key in ("hvac_energy_kwh", "cost", "emissions_kg"):  # and BOPTEST's, where the rows have them
+        if key in df.columns:
+            ref = df[df.controller == baseline].groupby("weather")[key].mean()
+            df[f"{key.removesuffix('_kwh').removesuffix('_kg')}_change_pct"] = 100 * (
+                df[key] / df["weather"].map(ref) - 1
+            )
     return df
 
 

@@ -42,8 +42,19 @@ def run_sweep(
     backend: str = "local",
     ray_address: str | None = None,
     keep_going: bool = False,
+    periods: dict | None = None,
+    extra_outputs: tuple[tuple[str, str], ...] = (),
+    weather_noise: str | None = None,
+    noisy_years: int = 1,
 ) -> pd.DataFrame:
     """One episode per (controller, weather), up to `workers` at once; returns results.csv's table.
+
+    `periods`: weather -> a test period (evaluation/scenarios.py) run instead of `run_days` from January 1;
+    `extra_outputs`: (key, variable) pairs EnergyPlus reports every step in each episode's eplusout.csv.
+
+    `weather_noise` (buildings/weather_noise.py): instead, `noisy_years` episodes per (controller, weather), year k
+    the weather perturbed with seed k for every controller; each year is a `run` of the row's controller, so the
+    results give the mean over years and its interval (seeds.py).
 
     `backend` "ray": each episode is a Ray task (ray_sweep.py), on `ray_address`'s cluster or a local Ray.
 
@@ -70,10 +81,27 @@ def run_sweep(
         if c.kind == "rbc":
             c.make(building)
     controllers = unique_labels(controllers)
-    jobs = [(c, _job_config(c, w, building, run_days, reward, out_dir)) for c in controllers for w in weathers]
+    if weather_noise is not None:
+        from parallel_eplus.buildings.weather_noise import parse_noise
+
+        parse_noise(weather_noise)  # a malformed option fails before anything runs
+        if noisy_years < 1:
+            raise ValueError("--noisy-years must be at least 1")
+    years = range(noisy_years) if weather_noise is not None else [None]
+    jobs = [
+        (c, _job_config(c, w, building, run_days, reward, out_dir, weather_noise, k))
+        for c in controllers for w in weathers for k in years
+    ]  # fmt: skip
+    for _, cfg in jobs:
+        cfg.extra_outputs = extra_outputs
+        p = (periods or {}).get(weather_label(cfg.weather))
+        if p is not None:
+            cfg.run_days, cfg.start_day, cfg.start_weekday, cfg.warmup_days = (
+                p.run_days, p.start_day, p.weekday, p.warmup_days
+            )  # fmt: skip
     steps_per_day = load_building(building).steps_per_day
-    total_steps = len(jobs) * run_days * steps_per_day
-    band = dict(zip(("band_low_c", "band_high_c"), load_building(building).band, strict=True)) if building else {}
+    total_steps = sum(cfg.run_days for _, cfg in jobs) * steps_per_day
+    band = _band_columns(building)
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:
         if backend == "ray":
@@ -87,6 +115,8 @@ def run_sweep(
     finally:
         bar.close()
     rows = [{**row, **band} for row in rows]  # a spec's band, beside its "% in band"
+    if weather_noise is not None:  # each noisy year is one of the controller's runs (seeds.py's intervals)
+        rows = [{**row, "run": f"{row.get('run') or ''} year {row['weather_seed']}".strip()} for row in rows]
     order = {c.label: i for i, c in enumerate(controllers)}
     worder = {weather_label(w): i for i, w in enumerate(weathers)}
     df = pd.DataFrame(rows)
@@ -99,15 +129,18 @@ def run_sweep(
 
 def _job_config(
     controller: Controller, weather: str, building: str | None, run_days: int, reward: RewardConfig | None,
-    out_dir: Path,
+    out_dir: Path, weather_noise: str | None = None, year: int | None = None,
 ) -> SimulationConfig:  # fmt: skip
+    folder = out_dir / "episodes" / slug(controller.label) / (controller.run or "") / weather_label(weather)
     return SimulationConfig(
         weather=weather, model=controller.model, building=building, run_days=run_days,
         reward=reward or RewardConfig(),
         time_features=controller.time_features, schedule_features=controller.schedule_features,
         residual_scale=controller.residual_scale, residual_space=controller.residual_space,
         rbc_target_c=controller.rbc_target_c,
-        output_dir=str(out_dir / "episodes" / slug(controller.label) / (controller.run or "") / weather_label(weather)),
+        output_dir=str(folder if year is None else folder / f"year-{year}"),
+        forecast_hours=controller.forecast_hours, forecast_error=controller.forecast_error,
+        weather_noise=weather_noise, seed=year or 0, fixed_seed=year is not None,
     )  # fmt: skip
 
 
@@ -174,3 +207,13 @@ def run_local(
         for job in active:
             job["sim"].close()
     return rows, failures
+
+
+def _band_columns(building: str | None) -> dict:
+    """A spec's one band beside its "% in band"; none where each zone has its own bounds (thermostat, per zone)."""
+    if not building:
+        return {}
+    b = load_building(building)
+    if b.spec.reward.thermostat or b.spec.reward.zone_bands:
+        return {}
+    return dict(zip(("band_low_c", "band_high_c"), b.band, strict=True))

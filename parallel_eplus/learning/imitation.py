@@ -53,6 +53,7 @@ class Demonstrations:
     high: np.ndarray
     names: tuple[str, ...] = ()
     weathers: list[str] = field(default_factory=list)
+    builtin: list[dict] = field(default_factory=list)  # each weather's episode summary under the built-in controls
 
     def to_physical(self, actions: np.ndarray) -> np.ndarray:
         return self.low + (np.clip(actions, -1, 1) + 1) / 2 * (self.high - self.low)
@@ -96,6 +97,7 @@ def record_baseline(
     out_dir: Path,
     features: tuple[bool, bool] = (False, False),
     progress: bool = True,
+    forecast_hours: int = 0,
 ) -> Demonstrations:
     """Run the building's own controls on each weather (`workers` at a time) and pair every observation with what
     those controls set next. `features`: the policy's (time, schedule) observation features."""
@@ -120,7 +122,7 @@ def record_baseline(
     jobs = [
         (controller, SimulationConfig(
             weather=w, model="baseline", building=building, run_days=run_days, time_features=features[0],
-            schedule_features=features[1], extra_outputs=outputs, energyplus_csv=False,
+            schedule_features=features[1], extra_outputs=outputs, energyplus_csv=False, forecast_hours=forecast_hours,
             output_dir=str(out_dir / slug(weather_label(w))),
         ))
         for w in weathers
@@ -147,7 +149,7 @@ def record_baseline(
     high = np.array([a.high for a in spec.actions])
     actions = np.clip(2 * (physical_all - low) / (high - low) - 1, -1, 1).astype(np.float32)
     names = tuple(a.name for a in spec.actions)
-    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels)
+    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, rows)
 
 
 def _actor_mean(policy, obs: th.Tensor) -> th.Tensor:

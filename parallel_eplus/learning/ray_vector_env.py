@@ -57,7 +57,7 @@ class RayVectorEnv:
         self._owns_ray = connect(address, len(shares))
         self.num_envs = len(shares)
         self.single_observation_space = observation_space(
-            config.time_features, config.schedule_features, config.building
+            config.time_features, config.schedule_features, config.building, config.forecast_hours
         )
         self.single_action_space = action_space(len(policy_action_names(config)))
         # A worker silent for step_timeout_s is restarted inside its actor; an actor that serves no

@@ -136,14 +136,27 @@ def _warm_start(model_zip: Path, model, env: VecNormalize) -> None:
     env.obs_rms.mean[:n], env.obs_rms.var[:n], env.obs_rms.count = stats.obs_mean, stats.obs_var, stats.obs_count
 
 
+def policy_forecast(model_zip: str | Path) -> tuple[int, str | None]:
+    """(forecast hours, forecast error level) a saved policy observes with (`train --forecast`), from its run's
+    config.json; (0, None) without one."""
+    import json
+
+    config = run_dir_of(Path(model_zip)) / "config.json"
+    saved = json.loads(config.read_text()) if config.is_file() else {}
+    return int(saved.get("forecast_hours", 0)), saved.get("forecast_error")
+
+
 def policy_features(model_zip: str | Path, building: str | None = None) -> tuple[bool, bool]:
     """Whether a saved policy observes (`model.TIME_FEATURES`, `model.SCHEDULE_FEATURES`), read from
-    the size of its observation statistics beside the sensors of its building (None: the data center)."""
+    the size of its observation statistics beside the sensors of its building (None: the data center), its
+    spec's forecasts and its run's `--forecast` hours (`policy_forecast`)."""
     from parallel_eplus.buildings.building import load_building
     from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES
 
     n = read_stats(normalization_file(Path(model_zip))).n_observations
-    sensors = len(load_building(building).sensors)
+    spec = load_building(building).spec
+    sensors = len(load_building(building).observed) + sum(f.count for f in spec.forecasts)
+    sensors += policy_forecast(model_zip)[0]
     options = [(t, s) for t in (False, True) for s in (False, True)]
     found = [o for o in options if sensors + len(TIME_FEATURES) * o[0] + len(SCHEDULE_FEATURES) * o[1] == n]
     if not found:

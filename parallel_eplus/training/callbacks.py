@@ -12,7 +12,12 @@ from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
 from tqdm import tqdm
 
 from parallel_eplus import io
+from parallel_eplus.evaluation.building_table import RATIOS
 from parallel_eplus.training.config import STEPS_PER_YEAR
+
+# The built-in controls' episode summaries on the training weathers (written by `--init-from-baseline`, which runs
+# them anyway): each episode's BOPTEST figures are then also reported as ratios to them.
+BUILTIN_FILE = "builtin.csv"
 
 
 def episodes_per_weather(episodes_csv: Path) -> dict[str, int]:
@@ -66,6 +71,15 @@ def tensorboard_logger(folder: Path) -> Logger:
     return Logger(str(folder), [WeatherRuns(str(folder))])
 
 
+def builtin_figures(path: Path) -> dict[str, dict[str, float]]:
+    """weather -> the built-in controls' BOPTEST figures (`RATIOS`) from `BUILTIN_FILE`; empty without one."""
+    if not path.is_file():
+        return {}
+    table = pd.read_csv(path)
+    keys = [k for k in RATIOS if k in table.columns]
+    return {str(r["weather"]): {k: float(r[k]) for k in keys} for _, r in table.iterrows()}
+
+
 class EpisodeMetrics(BaseCallback):
     """Per finished episode, tagged by weather: reward, power, zone temperatures, share in range
     (`episode/<weather>/<tag>`, which WeatherRuns writes as one TensorBoard run per weather).
@@ -82,6 +96,10 @@ class EpisodeMetrics(BaseCallback):
         "energy_kwh": "energy_kwh",  # BOPTEST's figures (buildings/comfort.py)
         "peak_power_kw": "peak_power_kw",
         "discomfort_kh": "discomfort_kh",
+        "hvac_energy_kwh_m2": "hvac_energy_kwh_m2",  # BOPTEST's ener_tot, cost_tot, emis_tot (buildings/kpis.py)
+        "energy_kwh_m2": "energy_kwh_m2",
+        "cost_m2": "cost_m2",
+        "emissions_kg_m2": "emissions_kg_m2",
     }  # and every reward temperature's mean and std, and the share in band where it applies (`_tags`)
 
     def __init__(self, episodes_csv: Path, progress: tqdm | None, steps_per_year: int = STEPS_PER_YEAR):
@@ -93,6 +111,7 @@ class EpisodeMetrics(BaseCallback):
         self.episodes = 0
         self.restarts = 0
         self.per_weather = episodes_per_weather(episodes_csv)  # a resumed run counts on from its earlier episodes
+        self.builtin = builtin_figures(episodes_csv.parent / BUILTIN_FILE)
         self._t0 = time.monotonic()
         self._steps0 = 0
 
@@ -115,6 +134,8 @@ class EpisodeMetrics(BaseCallback):
         self.episodes += 1
         weather = summary.get("weather", "?")
         self.per_weather[weather] = self.per_weather.get(weather, 0) + 1
+        reference = self.builtin.get(weather, {})
+        summary = summary | {f"{k}_vs_builtin": summary[k] / v for k, v in reference.items() if k in summary and v}
         for key, tag in self._tags(summary).items():
             self.logger.record_mean(f"episode/{weather}/{tag}", summary[key])
         if episode_return is not None:
@@ -128,7 +149,8 @@ class EpisodeMetrics(BaseCallback):
     def _tags(self, summary: dict) -> dict[str, str]:
         """Summary key -> TensorBoard tag: the fixed ones, each reward temperature's, the share in band."""
         tags = {k: t for k, t in self.KEYS.items() if k in summary}
-        tags |= {k: k for k in summary if k.endswith(("_temp_mean", "_temp_std"))}
+        tags |= {k: k for k in summary if k.endswith(("_temp_mean", "_temp_std", "_vs_builtin"))}
+        tags |= {k: k for k in summary if k.startswith("noise_")}  # the episode's weather noise (weather_noise.py)
         if "in_band_pct" in summary:  # the data center's tag names its band, as its runs always have
             tags["in_band_pct"] = "in_22_25_pct" if "west_temp_mean" in summary else "in_band_pct"
         return tags

@@ -62,6 +62,12 @@ class TrainConfig:
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
     comfort: ComfortConstraint = field(default_factory=ComfortConstraint)  # --comfort-target (learning/lagrangian.py)
+    objective: str | None = None  # --objective: energy, hvac, cost, emissions (buildings/kpis.py); None: the spec's
+    # Weather noise per episode (buildings/weather_noise.py's form, "drybulb=1:0:24"; None: the files as they are)
+    # and the outdoor dry bulb's next `forecast_hours` as observations, with BOPTEST's `forecast_error` level.
+    weather_noise: str | None = None
+    forecast_hours: int = 0
+    forecast_error: str | None = None
     init_from_baseline: bool = False  # imitate the building's own controls first (learning/imitation.py)
     imitation: ImitationSettings = field(default_factory=ImitationSettings)
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
@@ -110,6 +116,14 @@ class TrainConfig:
             raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE (kg/s of demand per unit)")
         self.comfort.check()
         self.evaluation.check(self.weathers)
+        from parallel_eplus.buildings.forecast import ERROR_LEVELS
+        from parallel_eplus.buildings.weather_noise import parse_noise
+
+        parse_noise(self.weather_noise)
+        if self.forecast_hours < 0 or (self.forecast_error is not None and self.forecast_error not in ERROR_LEVELS):
+            raise ValueError(f"--forecast takes hours >= 0 and --forecast-error one of {', '.join(ERROR_LEVELS)}")
+        if self.forecast_error is not None and not self.forecast_hours:
+            raise ValueError("--forecast-error needs --forecast N (the hours of outdoor temperature forecast)")
         if self.init_from_baseline and self.init_from is not None:
             raise ValueError("--init-from-baseline and --init-from both give the first policy: pass one of them")
         if self.init_from_baseline and self.residual_scale:

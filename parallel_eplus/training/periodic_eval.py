@@ -96,7 +96,9 @@ class Evaluator:
     def _config(self, controller: Controller, weather: str, out: Path) -> SimulationConfig:
         cfg = _job_config(controller, weather, self.sim.building, self.days, self.sim.reward, out)
         model = "baseline" if controller.kind == "baseline" else self.sim.model
-        return dataclasses.replace(cfg, model=model, step_timeout_s=self.sim.step_timeout_s, keep_episodes=1)
+        # the run's own objective (what the reward's energy term counts); the weather as it is, without noise
+        return dataclasses.replace(cfg, model=model, step_timeout_s=self.sim.step_timeout_s, keep_episodes=1,
+                                   objective=self.sim.objective)  # fmt: skip
 
     def _run(self, controller: Controller, weathers: list[str], out: Path) -> dict[str, dict]:
         jobs = [(controller, self._config(controller, w, out)) for w in weathers]
@@ -126,6 +128,7 @@ class Evaluator:
             "Policy", "policy", time_features=features[0], schedule_features=features[1],
             rbc_target_c=self.sim.rbc_target_c, residual_scale=self.sim.residual_scale,
             residual_space=self.sim.residual_space, building=self.sim.building, run="eval",
+            forecast_hours=self.sim.forecast_hours, forecast_error=self.sim.forecast_error,
             act=lambda obs, info: act(obs[None, :])[0],
         )  # fmt: skip
         out = self.run_dir / "eval-episodes" / "latest"

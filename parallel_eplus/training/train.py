@@ -36,7 +36,13 @@ from parallel_eplus.runs.policy_files import (
 )
 from parallel_eplus.runs.run_names import claim_run_name
 from parallel_eplus.runs.run_status import RunStatus
-from parallel_eplus.training.callbacks import EpisodeMetrics, UpdateTimer, episodes_per_weather, tensorboard_logger
+from parallel_eplus.training.callbacks import (
+    BUILTIN_FILE,
+    EpisodeMetrics,
+    UpdateTimer,
+    episodes_per_weather,
+    tensorboard_logger,
+)
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.resume_settings import load_kwargs
 
@@ -61,6 +67,11 @@ def sim_config(cfg: TrainConfig) -> SimulationConfig:
         rbc_target_c=cfg.rbc_target_c,
         step_timeout_s=cfg.step_timeout_s,
         comfort_margin_c=cfg.comfort.margin_c if cfg.constrained else None,
+        objective=cfg.objective,
+        weather_noise=cfg.weather_noise,
+        seed=cfg.seed,
+        forecast_hours=cfg.forecast_hours,
+        forecast_error=cfg.forecast_error,
     )
 
 
@@ -231,7 +242,9 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
     days = cfg.imitation.run_days or cfg.run_days
     work = cfg.run_dir / "baseline-record"
     demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, work,
-                            (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
+                            (cfg.time_features, cfg.schedule_features), progress, cfg.forecast_hours)  # fmt: skip
+    if days == cfg.run_days and demos.builtin:  # the built-in's figures: episodes' ratios to them (callbacks.py)
+        io.write_text(cfg.run_dir / BUILTIN_FILE, pd.DataFrame(demos.builtin).to_csv(index=False))
     building = load_building(cfg.building)
     regulated = [building.sensor_names.index(t) for t in building.temperatures]
     report = clone(model, env, demos, cfg.imitation, cfg.seed, regulated, building.band)
