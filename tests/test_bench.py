@@ -22,6 +22,7 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     results = run(cfg, out)
     assert json.loads(out.read_text()) == results
     assert results["env_steps_per_s"] > 0 and results["env_over_raw"] == results["env_s"] / results["raw_s"]
+    assert results["alone_s"] > 0 and results["env_over_alone"] == results["env_s"] / results["alone_s"]
     # Two raw runs at once take at least about as long as one (not half: each does a whole run).
     assert results["raw_scaling"] == pytest.approx(results["raw_s"] / results["raw_n_s"])
     assert 0.2 < results["raw_scaling"] < 1.5
@@ -42,6 +43,7 @@ def test_bench_measures_everything_and_writes_json(tmp_path, no_leaks):
     assert results["update_s"] > 0 and results["train_steps_per_s"] > 0
     assert results["train_ray_over_local"] == results["train_ray_steps_per_s"] / results["train_steps_per_s"] > 0
     table = format_table(results)
+    assert "EnergyPlus alone, EMS holds the action" in table and "pipes only" in table
     assert "2 runs at once" in table and "cores busy" in table and "stepped alone" in table and "lockstep" in table
     assert "Ray backend" in table
 

@@ -1,7 +1,8 @@
-"""`parallel-eplus bench`: our overhead against raw EnergyPlus, measured in one run on this machine.
+"""`parallel-eplus bench`: our overhead against EnergyPlus alone, measured in one run on this machine.
 
-1. raw: EnergyPlus alone (the agent model, a constant action applied by the EnergyPlus-side callback
-   with no pipe exchange), wall seconds from process start to exit;
+1. two yardsticks, wall seconds from process start to exit: EnergyPlus alone (alone.py: the prepared model, the
+   constant action held by EnergyPlus's own EMS program, no code of ours), and "pipes only" (raw.py: our
+   EnergyPlus-side program applying the constant action with no pipe exchange);
 2. env: the same period and action stepped through `EnergyPlusEnv` (reset + steps, wall seconds);
 3. vector env: aggregate steps/s with 1 and N workers, and the scaling efficiency, with the workers
    pipelined (each stepped as soon as it answers, as training steps them) and in lockstep, beside
@@ -12,7 +13,9 @@
    and the floor for a million steps here (raw EnergyPlus's time under those actions plus the updates);
 5. the same training through a local Ray (one actor per worker, each collecting its fragment of the
    batch), against the local backend: the Ray backend's price, re-measured whenever speed work lands;
-6. time to first observation, peak RSS of one EnergyPlus worker and of the learner.
+6. time to first observation, peak RSS of one EnergyPlus worker and of the learner;
+7. with `short`: short episodes (short.py): ten consecutive 1- and 7-day episodes in one env against EnergyPlus alone
+   running the same ten periods, reset latency, TRPO steps/s at 1, 7, 14 and 365-day episodes.
 
 Random actions in 3 are drawn like an untrained TRPO policy's (N(0, 1) clipped to [-1, 1]), so 3 and
 4 ask EnergyPlus for the same kind of work: control changes EnergyPlus's own cost several-fold.
@@ -31,6 +34,7 @@ import tempfile
 from dataclasses import asdict, replace
 from pathlib import Path
 
+from parallel_eplus.bench.alone import alone_seconds
 from parallel_eplus.bench.config import BenchConfig, _exploring_actions
 from parallel_eplus.bench.rates import env_run, independent_rate, training_rate, vector_rate
 from parallel_eplus.bench.raw import _physical, raw_rate, raw_seconds, replay_run
@@ -51,8 +55,9 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
         tmp = Path(tmp)
         # Back to back within each repeat, and ratios taken per repeat: this machine's speed drifts by
         # 10-20 % from one minute to the next, which medians of separate series would not cancel.
-        raw, raw_n, envs = [], [], []
+        raw, raw_n, envs, alone = [], [], [], []
         for i in range(cfg.repeats):
+            alone.append(alone_seconds(cfg, tmp / f"alone{i}"))
             raw.append(raw_seconds(cfg, tmp / f"raw{i}"))
             envs.append(env_run(cfg, tmp / f"env{i}"))
             # The machine's own ceiling on scaling: N raw runs at once against one alone.
@@ -64,6 +69,8 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
         results["env_s"] = statistics.median(e["seconds"] for e in envs)
         results["env_steps_per_s"] = statistics.median(e["steps_per_s"] for e in envs)
         results["env_over_raw"] = statistics.median(e["seconds"] / r for e, r in zip(envs, raw, strict=True))
+        results["alone_s"] = statistics.median(alone)
+        results["env_over_alone"] = statistics.median(e["seconds"] / a for e, a in zip(envs, alone, strict=True))
         results["first_obs_s"] = statistics.median(e["first_obs_s"] for e in envs)
         one, many, lockstep, alone, phys_1, phys_n = [], [], [], [], [], []
         for i in range(cfg.repeats):
@@ -109,12 +116,43 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
             ray_tr = training_rate(cfg, tmp / "train-ray", backend="ray")
             results["train_ray_steps_per_s"] = ray_tr["steps_per_s"]
             results["train_ray_over_local"] = ray_tr["steps_per_s"] / tr["steps_per_s"]
+        if cfg.short:
+            results["short"] = short_episodes(cfg, tmp / "short")
         results["worker_peak_rss_mb"] = worker_rss_mb
         results["learner_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(results, indent=2))
     return results
+
+
+def short_episodes(cfg: BenchConfig, workdir: Path) -> dict:
+    """Issue 39's figures: consecutive short episodes against EnergyPlus alone, resets, TRPO by episode length."""
+    from parallel_eplus.bench.short import consecutive, parked_resets, training
+
+    out = {f"{d}d": consecutive(d, 10, cfg.repeats, cfg.weather) for d in (1, 7)}
+    out |= parked_resets(1, 30, cfg.weather, workdir / "parked")
+    out |= training([1, 7, 14, 365], cfg.train_steps, 1)
+    return out
+
+
+def _short_rows(s: dict) -> list[tuple[str, str, str]]:
+    rows = []
+    for d in ("1d", "7d"):
+        c = s[d]
+        took = f"{c['prepared_s']:.2f} s (cold {c['cold_s']:.2f})"
+        ratio = f"/alone {c['prepared_over_alone']:.2f}, cold {c['cold_over_alone']:.2f} (target <= 1.10)"
+        rows.append((f"10 consecutive {d[:-1]}-day episodes, one env", took, f"{ratio}; alone {c['alone_s']:.2f} s"))
+    c = s["1d"]
+    rows.append(("reset, back to back (1-day)", f"p50 {c['reset_p50_ms']:.0f} / p99 {c['reset_p99_ms']:.0f} ms",
+                 f"cold p50 {c['cold_reset_p50_ms']:.0f} / p99 {c['cold_reset_p99_ms']:.0f} ms"))  # fmt: skip
+    rows.append(("reset, the prepared episode parked", f"p50 {s['parked_reset_p50_ms']:.1f} / p99 "
+                 f"{s['parked_reset_p99_ms']:.1f} ms", "target p99 <= 50 ms"))  # fmt: skip
+    for d, goal in ((1, " (target >= 0.75)"), (7, " (target >= 0.90)"), (14, "")):
+        rows.append((f"TRPO learn, 2 workers, {d}-day episodes", f"{s[f'train_{d}d_steps_per_s']:.0f} steps/s",
+                     f"{s[f'train_{d}d_over_365d']:.2f} of year-long{goal}"))  # fmt: skip
+    rows.append(("TRPO learn, 2 workers, year-long episodes", f"{s['train_365d_steps_per_s']:.0f} steps/s", ""))
+    return rows
 
 
 def format_table(r: dict) -> str:
@@ -124,9 +162,12 @@ def format_table(r: dict) -> str:
     building = Path(c["building"]).stem if c.get("building") else "datacenter-2zone"
     rows = [
         ("building", building, f"weather {c['weather']}"),
-        ("raw EnergyPlus, constant action", f"{r['raw_s']:.2f} s for {c['raw_days']} days", ""),
+        *([("EnergyPlus alone, EMS holds the action", f"{r['alone_s']:.2f} s for {c['raw_days']} days",
+             "the yardstick: no code of ours")] if "alone_s" in r else []),
+        ("our EnergyPlus side, no pipes", f"{r['raw_s']:.2f} s for {c['raw_days']} days", "the pipes-only yardstick"),
         ("EnergyPlusEnv, same action", f"{r['env_s']:.2f} s ({r['env_steps_per_s']:.0f} steps/s)",
-         f"env/raw {r['env_over_raw']:.2f} (target <= 1.25)"),
+         (f"env/alone {r['env_over_alone']:.2f} (target <= 1.10); " if "env_over_alone" in r else "")
+         + f"pipes only: env/raw {r['env_over_raw']:.2f}"),
         (f"raw EnergyPlus, {n} runs at once", f"{r['raw_n_s']:.2f} s",
          f"the machine's own scaling {r['raw_scaling']:.2f}"),
         ("raw EnergyPlus, exploring actions, 1 run", f"{r['raw_exploring_1_steps_per_s']:.0f} steps/s",
@@ -149,6 +190,7 @@ def format_table(r: dict) -> str:
         ("1M TRPO steps", f"{r['million_steps_minutes']:.1f} min",
          f"target <= 15 min; EnergyPlus's own time and the updates: {r['million_steps_floor_minutes']:.1f} min"),
         ("time to first observation", f"{r['first_obs_s']:.2f} s", "target <= 2 s"),
+        *(_short_rows(r["short"]) if "short" in r else []),
         ("peak RSS: EnergyPlus worker / learner", f"{r['worker_peak_rss_mb']:.0f} / {r['learner_peak_rss_mb']:.0f} MB",
          "worker target <= 300 MB"),
     ]  # fmt: skip

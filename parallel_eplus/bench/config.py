@@ -26,6 +26,7 @@ class BenchConfig:
     action: float = 0.0  # the constant normalized action for raw and env
     ray: bool = True  # also time training through a local Ray (the Ray backend's row)
     building: str | None = None  # a spec path or built-in name; None: the data center (temp_fan)
+    short: bool = False  # also short episodes (short.py): consecutive episodes, resets, TRPO by episode length
 
 
 def bench_building(cfg: BenchConfig) -> Building:

@@ -30,6 +30,7 @@ def env_run(cfg: BenchConfig, workdir: Path) -> dict[str, float]:
     env = EnergyPlusEnv(
         weather=cfg.weather, run_days=cfg.raw_days, output_dir=workdir, keep_episodes=0, building=cfg.building,
         energyplus_csv=False,  # as training runs it, and as raw_seconds runs EnergyPlus alone
+        prepare_next=False,  # one episode: a next one prepared beside it would only take CPU from it
     )  # fmt: skip
     action = np.full(env.action_space.shape, cfg.action, dtype=np.float32)
     try:
@@ -147,8 +148,11 @@ def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
     return sum(rates)
 
 
-def training_rate(cfg: BenchConfig, workdir: Path, backend: str = "local") -> dict[str, float]:
-    """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded.
+def training_rate(
+    cfg: BenchConfig, workdir: Path, backend: str = "local", run_days: int = 365, prepare_next: bool = True
+) -> dict[str, float]:
+    """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded; `run_days` per episode,
+    each worker preparing its next episode while one runs unless `prepare_next` is off.
 
     backend "ray": the same run through a local Ray, one actor per worker collecting fragments.
     """
@@ -158,6 +162,7 @@ def training_rate(cfg: BenchConfig, workdir: Path, backend: str = "local") -> di
 
     tc = TrainConfig(
         workers=cfg.workers, weathers=[cfg.weather], building=cfg.building, timesteps=cfg.train_steps,
+        run_days=run_days, prepare_next=prepare_next,
         batch_size=-(-cfg.batch_size // cfg.workers) * cfg.workers,  # split evenly across the workers
         run_name="bench", runs_dir=str(workdir / "runs"), tensorboard_dir=str(workdir / "tb"),
         checkpoint_every=10**9, keep_episodes=0, backend=backend, workers_per_actor=1,

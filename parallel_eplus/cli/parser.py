@@ -217,6 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--repeats", type=int, default=3, help="repetitions; medians are reported")
     be.add_argument("--out", type=Path, default=Path("results") / "bench.json")
     be.add_argument("--no-ray", action="store_true", help="skip the Ray backend's row (a local Ray's training rate)")
+    be.add_argument("--short", action="store_true", help="also short episodes: consecutive ones against EnergyPlus "
+                    "alone, reset latency, TRPO steps/s at 1, 7, 14 and 365-day episodes (docs/speed.md)")  # fmt: skip
     be.add_argument(
         "--replay-run", type=Path, metavar="RUN_DIR",
         help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",

@@ -41,6 +41,9 @@ class SimulationConfig:
     # per zone, in kg/s, to the controller's split-range flow demand (rbc.DEMAND_CORRECTIONS).
     residual_space: str = "action"
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
+    # Envs and vector envs: fork each episode's process from a warm interpreter and start the next episode while
+    # one runs, so a reset finds it parked at its first step (engine/prepared.py). A lone Simulation never does.
+    prepare_next: bool = True
     native_bridge: bool = True  # EnergyPlus's side of each step in C (native.py) where a C compiler works
     # Set: comfort is a constraint (learning/lagrangian.py): the reward pays for energy only and each step reports
     # a comfort cost rising over this many kelvin inside the band's edges, and its zones out of band.

@@ -5,7 +5,8 @@
 
 Without pipes it runs EnergyPlus alone for benchmarks (bench/raw.py): `--replay A.npy` applies one action
 row per step where the env's actions would land, stops after `--steps`, and prints the stepping time.
-With `--native LIB` (native.py) every step after the first runs in C (eplus_callback.c).
+With `--native LIB` (native.py) every step after the first runs in C (eplus_callback.c). With `--serve` it runs
+episode after episode, each request a `main` (warm_process.py).
 """
 
 from __future__ import annotations
@@ -40,7 +41,18 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """One episode. A process that runs many (warm_process.py) gets back everything it opened: fds, the state."""
     args = parse_args(argv)
+    opened: list[int] = []
+    try:
+        return _run(args, opened)
+    finally:
+        for fd in opened:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+def _run(args: argparse.Namespace, opened: list[int]) -> int:
     # Open our ends first. The env holds both FIFOs open, so neither open waits for it; if it died after
     # starting us, there is no reader and a blocking open would wait forever: ENXIO, and we exit.
     obs_fd = act_fd = None
@@ -50,8 +62,10 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as e:
             print(f"the env is gone before EnergyPlus started ({e}); exiting", file=sys.stderr)
             return 1
+        opened.append(obs_fd)
         os.set_blocking(obs_fd, True)
         act_fd = os.open(args.act_pipe, os.O_RDONLY | os.O_NONBLOCK)
+        opened.append(act_fd)
 
     def fail(status: float) -> int:
         if obs_fd is not None:
@@ -75,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         keep = native.register(api, state, bridge, args.native)
         status = api.runtime.run_energyplus(state, ["-d", args.output_dir, "-w", args.epw, args.idf])
         bridge.collect()
+        api.state_manager.delete_state(state)  # its memory is reused by the next episode's state
         del keep
     except BaseException:  # noqa: BLE001
         traceback.print_exc()
@@ -96,4 +111,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--serve"]:  # episode after episode in this process (warm_process.py)
+        from parallel_eplus.engine.warm_process import serve
+
+        sys.exit(serve(main))
     sys.exit(main())

@@ -176,13 +176,18 @@ class PipePair:
         self.obs_fd = os.open(self.obs_path, os.O_RDWR | os.O_NONBLOCK)
         self._obs = FrameReader(self.obs_fd)
         self._pidfd: int | None = None
+        self._exit_fd: int | None = None
         self._alive: Callable[[], bool] = lambda: True
         self._deadline = 0.0  # of the frame being read (time.monotonic)
 
-    def watch(self, pid: int, alive: Callable[[], bool]) -> None:
-        """Wake reads when the process on the other end exits."""
+    def watch(self, pid: int, alive: Callable[[], bool], exit_fd: int | None = None) -> None:
+        """Wake reads when the process on the other end exits, or with `exit_fd` (not ours to close) when that
+        becomes readable: a long-lived process's answer that its episode is over (warm_process.py)."""
         self._close_pidfd()
         self._alive = alive
+        self._exit_fd = exit_fd
+        if exit_fd is not None:
+            return
         try:
             self._pidfd = os.pidfd_open(pid)
         except (AttributeError, OSError):  # pragma: no cover - kernels without pidfd
@@ -205,14 +210,19 @@ class PipePair:
     def send(self, frame: bytes) -> None:
         os.write(self.act_fd, frame)
 
+    @property
+    def _watched(self) -> int | None:
+        """The fd readable once the other end is done: `exit_fd`, or the child's pidfd."""
+        return self._pidfd if self._exit_fd is None else self._exit_fd
+
     def fds(self) -> list[int]:
         """What becomes readable when the next frame arrives or the child exits: for a select over many pipes."""
-        return [self.obs_fd] if self._pidfd is None else [self.obs_fd, self._pidfd]
+        return [self.obs_fd] if self._watched is None else [self.obs_fd, self._watched]
 
     @property
     def watches_exit(self) -> bool:
-        """Whether `fds()` includes a pidfd, so a select wakes when the child exits (Linux >= 5.3)."""
-        return self._pidfd is not None
+        """Whether `fds()` includes a pidfd or an exit fd, so a select wakes when the child is done (Linux >= 5.3)."""
+        return self._watched is not None
 
     def has_frame(self) -> bool:
         """A whole frame is already read and waiting (no select would report it)."""
@@ -230,13 +240,13 @@ class PipePair:
 
     def _wait_readable(self, got: int) -> None:
         deadline = self._deadline
-        fds = [self.obs_fd] if self._pidfd is None else [self.obs_fd, self._pidfd]
+        fds = self.fds()
         while True:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 cut = f" ({got} bytes of a frame so far)" if got else ""
                 raise TimeoutError(f"no data from EnergyPlus{cut}")
-            slice_s = remaining if self._pidfd is not None else min(remaining, 0.2)
+            slice_s = remaining if self.watches_exit else min(remaining, 0.2)
             ready, _, _ = select.select(fds, [], [], slice_s)
             if self.obs_fd in ready:
                 return
@@ -248,9 +258,9 @@ class PipePair:
 
     def wait_exit(self, timeout: float) -> bool | None:
         """Wait for the watched process to exit (no sleep-polling); False on timeout, None without pidfd."""
-        if self._pidfd is None:
+        if self._watched is None:
             return None
-        ready, _, _ = select.select([self._pidfd], [], [], timeout)
+        ready, _, _ = select.select([self._watched], [], [], timeout)
         return bool(ready)
 
     def _has_data(self) -> bool:

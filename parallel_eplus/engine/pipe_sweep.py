@@ -129,6 +129,8 @@ def leftover_processes() -> list[Leftover]:
         if CALLBACK_MODULE not in args:
             continue
         pipe_dir = Path(args[args.index("--act-pipe") + 1]).parent if "--act-pipe" in args[:-1] else None
+        if "--pipes" in args[:-1]:  # a long-lived one (warm_process.py): the pipes it serves
+            pipe_dir = Path(args[args.index("--pipes") + 1])
         alive = owner_alive(pipe_dir) if pipe_dir is not None else None
         orphaned = ppid == 1 or (pipe_dir is not None and not pipe_dir.exists())  # its pipe already swept
         if alive is False or (alive is None and orphaned):

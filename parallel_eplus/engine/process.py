@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.engine import pipe, spin
+from parallel_eplus.engine.warm_process import Episode, WarmProcess
 
 log = logging.getLogger(__name__)
 
@@ -28,16 +29,18 @@ log = logging.getLogger(__name__)
 class EnergyPlusProcess:
     """The EnergyPlus side of one worker, episode after episode, over one pipe pair kept between episodes."""
 
-    def __init__(self, spin_s: float | None, native_bridge: str | None, siblings: int = 1):
+    def __init__(self, spin_s: float | None, native_bridge: str | None, siblings: int = 1, warm: bool = False):
         """`spin_s`: how long both sides' reads spin before blocking; None: `spin.auto_spins` for `siblings`
-        EnergyPlus processes stepped by this process, decided again at each spawn."""
+        EnergyPlus processes stepped by this process, decided again at each spawn. `warm`: run episode after episode
+        in one long-lived EnergyPlus-side process (warm_process.py); else a new process per episode."""
+        self.warm = WarmProcess() if warm else None
         self.auto_spin = spin_s is None
         self.siblings = siblings
         self.spin_s = 0.0 if spin_s is None else spin_s  # how long our reads spin before blocking
         self.child_spin_s = self.spin_s  # the same for EnergyPlus's side
         self.native_bridge = native_bridge
         self.pipes: pipe.PipePair | None = None
-        self.proc: subprocess.Popen | None = None
+        self.proc: subprocess.Popen | Episode | None = None
         self.deadline = math.inf  # when the frame awaited next is overdue (monotonic s)
 
     def spawn(self, args: list[str], log_path: Path, first_frame_s: float) -> None:
@@ -47,18 +50,22 @@ class EnergyPlusProcess:
         self.pipes.drain()
         if self.auto_spin:
             self.spin_s, self.child_spin_s = spin.auto_spins(self.siblings)
-        cmd = [
-            sys.executable, "-m", "parallel_eplus.engine.eplus_callback",
+        argv = [
             "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path), *args,
             "--spin-us", str(self.child_spin_s * 1e6),
             *(["--native", self.native_bridge] if self.native_bridge else []),
         ]  # fmt: skip
-        with open(log_path, "wb") as logf:
-            self.proc = subprocess.Popen(
-                cmd, stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT,
-                start_new_session=True,  # Ctrl-C reaches the learner, which stops us cleanly
-            )  # fmt: skip
-        self.pipes.watch(self.proc.pid, lambda: self.proc is not None and self.proc.poll() is None)
+        if self.warm is not None:
+            self.proc = self.warm.run(argv, log_path, self.pipes.dir)
+        else:
+            with open(log_path, "wb") as logf:
+                self.proc = subprocess.Popen(
+                    [sys.executable, "-m", "parallel_eplus.engine.eplus_callback", *argv],
+                    stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT,
+                    start_new_session=True,  # Ctrl-C reaches the learner, which stops us cleanly
+                )  # fmt: skip
+        alive = lambda: self.proc is not None and self.proc.poll() is None  # noqa: E731
+        self.pipes.watch(self.proc.pid, alive, getattr(self.proc, "exit_fd", None))
         self.deadline = time.monotonic() + first_frame_s
 
     def send(self, frame: bytes, answer_s: float) -> None:
@@ -82,6 +89,25 @@ class EnergyPlusProcess:
             log.warning("EnergyPlus did not exit within %.0f s of the last step; killing it", grace_s)
         self.kill()
 
+    def warm_up(self) -> None:
+        """Start the long-lived process now, with no episode yet: its start-up and imports then run beside the
+        episode before the one it will prepare."""
+        if self.warm is not None and self.warm.proc is None:
+            if self.pipes is None:
+                self.pipes = pipe.PipePair()
+            self.warm.start(self.pipes.dir)
+
+    def end_episode(self, grace_s: float = 5.0) -> None:
+        """End a running episode early. A long-lived process gets a control frame where EnergyPlus awaits its next
+        action (the bridge stops EnergyPlus) and stays for the next episode; one that does not stop in
+        `grace_s`, or a process of its own, is killed."""
+        if self.warm is not None and self.running():
+            with contextlib.suppress(OSError):
+                self.pipes.send(pipe.encode([], pipe.END))  # not an action: the bridge stops EnergyPlus
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.proc.wait(timeout=grace_s)
+        self.kill()
+
     def kill(self) -> None:
         proc, self.proc = self.proc, None
         if proc is None:
@@ -96,6 +122,8 @@ class EnergyPlusProcess:
 
     def close(self) -> None:
         self.kill()
+        if self.warm is not None:
+            self.warm.close()
         if self.pipes is not None:
             self.pipes.close()
             self.pipes = None

@@ -19,7 +19,6 @@ import numpy as np
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.forecast import Forecaster
-from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.model import (
     ACTIONS,
     control_model,
@@ -36,14 +35,13 @@ from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
 from parallel_eplus.engine.config import SimulationConfig, forecast_specs, policy_action_names
 from parallel_eplus.engine.episode import (
-    MODEL_FILE,
     StepRecorder,
-    claim_episode_dir,
     err_tail,
     link_or_copy,
     prune_episodes,
     write_records,
 )
+from parallel_eplus.engine.prepared import EpisodePlan, EpisodeStarter, PreparedEpisode
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
@@ -53,12 +51,24 @@ log = logging.getLogger(__name__)
 class Simulation:
     """Spawns, steps and stops EnergyPlus processes for consecutive episodes."""
 
-    def __init__(self, config: SimulationConfig, weathers: list[str] | None = None, name: str = "0", siblings: int = 1):
-        """`siblings`: how many Simulations one process steps together (sets the default spin)."""
+    def __init__(
+        self,
+        config: SimulationConfig,
+        weathers: list[str] | None = None,
+        name: str = "0",
+        siblings: int = 1,
+        prepare: bool = False,
+    ):
+        """`siblings`: how many Simulations one process steps together (sets the default spin). `prepare`: episode
+        after episode (an env's): two long-lived EnergyPlus-side processes take turns, one running an episode
+        while the other prepares the next (prepared.py, warm_process.py); off for one episode (an evaluation's)."""
         self.config = config
-        self.process = EnergyPlusProcess(
-            config.spin_s, native.bridge_library() if config.native_bridge else None, siblings=siblings
-        )
+        self.prepare_next = prepare
+        bridge = native.bridge_library() if config.native_bridge else None
+        self.process = EnergyPlusProcess(config.spin_s, bridge, siblings=siblings, warm=prepare)
+        self._spare = EnergyPlusProcess(config.spin_s, bridge, siblings=siblings, warm=prepare)
+        self.prepared: PreparedEpisode | None = None
+        self._from_prepared = False  # the running episode was prepared ahead (a failed start-up is retried cold)
         self.name = name
         self.building = load_building(config.building)  # None: the data center, whose variants `model` names
         self.model = self.building.control(config.model) if config.building else control_model(config.model)
@@ -117,6 +127,13 @@ class Simulation:
         self._whole: list[Path] = []  # this Simulation's own episode directories still whole, oldest first
         self.weather = self.weathers[0]
         self.weather_index = 0
+        self.plan: EpisodePlan | None = None
+        building = ["--building", str(self.building.spec.path)] if config.building else []
+        self._starter = EpisodeStarter(self.output_dir, self.idf, config, [
+            "--model", self.model.name, *building, "--steps", str(self.steps_per_episode),
+            "--initial-action", *map(str, self.initial_action),
+        ])  # fmt: skip
+        self._prepare_due = False  # the next episode is prepared at the first action (reset returns first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
@@ -148,38 +165,40 @@ class Simulation:
         return self.process.running()
 
     # -- episode lifecycle --------------------------------------------------------------------
-    def start(self, weather_index: int | None = None, seed: int | None = None) -> tuple[np.ndarray, dict]:
+    def start(self, weather_index: int | None = None, plan: EpisodePlan | None = None) -> tuple[np.ndarray, dict]:
         """Stop any running process, start the next episode and return observation 0."""
-        self.launch(weather_index, seed)
+        self.launch(weather_index, plan)
         return self.first_observation()
 
-    def launch(self, weather_index: int | None = None, seed: int | None = None) -> None:
-        """Start the next episode's process without waiting for it (the vector env starts many at once).
-
-        Weathers cycle episode by episode unless `weather_index` picks one. `seed`: the episode's weather noise and
-        forecast error (None: drawn from the config's seed, this worker's name and the episode's number).
-        """
-        self.stop()
+    def next_plan(self, weather_index: int | None = None, seed: int | None = None, options: dict | None = None):
+        """The next episode's plan: weathers cycle episode by episode unless `weather_index` picks one. `seed`: the
+        episode's weather noise and forecast error (None: drawn from the config's seed, this worker's name and the
+        episode's number, when its directory is claimed)."""
         i = self.episode % len(self.weathers) if weather_index is None else weather_index
-        self.weather_index = i
+        return EpisodePlan(i, self.weathers[i], self.weather_paths[i], seed, EpisodePlan.options_key(options))
+
+    def launch(self, weather_index: int | None = None, plan: EpisodePlan | None = None) -> None:
+        """Start the next episode without waiting for its first observation (the vector env starts many at once):
+        the prepared one if it was prepared for `plan` and is alive, else a new process."""
+        self.stop()
+        plan = plan or self.next_plan(weather_index)
+        ready, self.prepared = self.prepared, None
+        if ready is not None and (ready.plan != plan or not ready.usable(self.config.start_timeout_s)):
+            ready.discard()
+            ready = None
+        self._from_prepared = ready is not None
+        if ready is not None:  # swap it in; the finished episode's process (and pipes) prepare the one after
+            self.process, self._spare = ready.process, self.process
+            self.episode_dir, self._number = ready.episode_dir, ready.number
+            self.weather_params, self._forecaster = ready.weather
+        else:
+            started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather)
+            self.episode_dir, self._number, (self.weather_params, self._forecaster) = started
+        if self.prepare_next:
+            self._spare.warm_up()  # the first episode's spare process starts up beside it
+        self.plan = plan
+        self.weather_index, self.weather = plan.weather_index, plan.weather
         self.episode += 1
-        self.weather = self.weathers[i]
-        epw = self.weather_paths[i]
-        label = weather_label(self.weather)
-        self.episode_dir, self._number = claim_episode_dir(self.output_dir, label, self._number + 1)
-        cfg = self.config
-        prepare_idf(
-            self.idf, self.episode_dir / MODEL_FILE, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
-            cfg.start_day, cfg.start_weekday,
-        )  # fmt: skip
-        epw = self._episode_weather(epw, seed)
-        args = [
-            "--idf", str(self.episode_dir / MODEL_FILE), "--epw", str(epw),
-            "--output-dir", str(self.episode_dir), "--model", self.model.name,
-            *(["--building", str(self.building.spec.path)] if self.config.building else []),
-            "--steps", str(self.steps_per_episode), "--initial-action", *map(str, self.initial_action),
-        ]  # fmt: skip
-        self.process.spawn(args, self.episode_dir / "energyplus.log", self.config.start_timeout_s)
         self.records = StepRecorder(self.action_names, self.sensor_names)
         self._action = self.initial_action.tolist()
         self.last_summary = None
@@ -189,18 +208,50 @@ class Simulation:
             rbc = {"schedule": it_load_schedule(self.idf)} | ({} if target is None else {"target_c": target})
             self.base = RuleBasedController(RBCConfig(**rbc))
 
+    def prepare(self, plan: EpisodePlan | None = None) -> None:
+        """Start the next episode (`plan`, default: the rotation's next) in the spare process, to be swapped in
+        by the `launch` that asks for the same plan."""
+        if self.prepared is not None or self._closed:
+            return
+        plan = plan or self.next_plan()
+        self._spare.kill()
+        episode_dir, number, weather = self._starter.start(plan, self._spare, self._number + 1, self._episode_weather)
+        self._number = number  # numbers follow the order episodes began in
+        self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number, weather)
+
+    def discard_prepared(self) -> None:
+        if self.prepared is not None:
+            self.prepared.discard()
+            self.prepared = None
+
     def first_observation(self) -> tuple[np.ndarray, dict]:
-        """Wait through sizing and warmup for observation 0 of the launched episode."""
-        code, values = self._recv("the first observation", self.config.start_timeout_s)
+        """Wait through sizing and warmup for observation 0 of the launched episode (its first action then starts
+        preparing the next one).
+
+        A prepared episode that fails before its first observation is replaced by a cold start of the same plan
+        (the cold one's failure is the episode's)."""
+        try:
+            code, values = self._recv("the first observation", self.config.start_timeout_s)
+        except EnergyPlusError:
+            if not self._from_prepared:
+                raise
+            log.warning("the prepared episode failed to start (%s); starting it afresh", self.episode_dir)
+            self.episode -= 1  # the same episode again: the weather rotation does not move on
+            self.launch(plan=self.plan)
+            code, values = self._recv("the first observation", self.config.start_timeout_s)
         if code != pipe.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
         obs, info = self._observation(values)
+        self._prepare_due = self.prepare_next
         return obs, info
 
     def send(self, action) -> None:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
         if self.proc is None:
             raise RuntimeError("no simulation running: call reset() first")
+        if self._prepare_due:
+            self._prepare_due = False
+            self.prepare()
         if self.base is None:
             self._action = scale_action(action, self.low, self.high, self.action_names)
         else:
@@ -239,25 +290,26 @@ class Simulation:
         return obs, r, terminated, info
 
     # -- internals ----------------------------------------------------------------------------
-    def _episode_weather(self, epw: Path, seed: int | None) -> Path:
-        """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file) and its
-        forecasts, which read that same file."""
+    def _episode_weather(self, plan: EpisodePlan, episode_dir: Path, number: int) -> tuple[Path, tuple]:
+        """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file), and
+        (its seed and noise parameters for its records, its forecasts, which read that same file)."""
+        seed = plan.seed
         if seed is None and self.config.fixed_seed:
             seed = self.config.seed
         if seed is None:
-            seed = int(np.random.SeedSequence([self.config.seed, zlib.crc32(self.name.encode()), self._number])
+            seed = int(np.random.SeedSequence([self.config.seed, zlib.crc32(self.name.encode()), number])
                        .generate_state(1)[0])  # fmt: skip
-        target = self.episode_dir / epw.name
+        target = episode_dir / plan.epw.name
         if self.noise is None:
-            link_or_copy(epw, target)
-            self.weather_params = {}
+            link_or_copy(plan.epw, target)
+            params = {}
         else:
-            self.weather_params = {"weather_seed": seed, **perturb_epw(epw, target, self.noise, seed)}
+            params = {"weather_seed": seed, **perturb_epw(plan.epw, target, self.noise, seed)}
         if self.forecasts and any(f.error for f in self.forecasts):
-            self.weather_params.setdefault("weather_seed", seed)
+            params.setdefault("weather_seed", seed)
         per_hour, days = self.building.steps_per_day // 24, self.config.run_days
-        self._forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
-        return target
+        forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
+        return target, (params, forecaster)
 
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
         if len(values) != pipe.TIME_FIELDS + len(self.sensor_names):
@@ -304,8 +356,11 @@ class Simulation:
         return code, values
 
     def _error(self, message: str, kind: type[EnergyPlusError] = EnergyPlusError) -> EnergyPlusError:
-        """Stop the process first, so the error file is complete and nothing is left running."""
+        """Stop the process first, so the error file is complete and nothing is left running (a prepared episode
+        and an idle warm process neither: whoever handles the error starts afresh)."""
         self._kill()
+        self.discard_prepared()
+        self._spare.close()
         if self.records is not None and not self.records.n:
             self.records = None  # keep the failed episode's directory for the user to inspect
         return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))
@@ -350,9 +405,10 @@ class Simulation:
         self.process.kill()
 
     def stop(self) -> None:
-        """End a running episode early: kill EnergyPlus and keep the partial record."""
+        """End a running episode early (EnergyPlus stopped, its long-lived process kept) and keep the partial
+        record."""
         if self.proc is not None:
-            self._kill()
+            self.process.end_episode()
         if self.records is not None:
             if self.records.n:
                 self._write_records(complete=False)
@@ -364,8 +420,12 @@ class Simulation:
         if self._closed:
             return
         self._closed = True
+        self._kill()  # no need to stop EnergyPlus gracefully: its process goes too
+        self._spare.kill()
+        self.discard_prepared()
         self.stop()
         self.process.close()
+        self._spare.close()
         if self._tmp is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
 

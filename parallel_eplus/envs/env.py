@@ -47,8 +47,9 @@ class EnergyPlusEnv(gym.Env):
     ## Description
     EnergyPlus's two-zone data center (`2ZoneDataCenterHVAC_wEconomizer`, West and East zones, each with
     its own air loop) with the built-in setpoint managers and fan control replaced by the agent
-    (Moriyama et al. 2018). `reset()` starts a new EnergyPlus process on the next weather file and a
-    private pair of named pipes; every `step()` runs one zone timestep (15 minutes) under the action.
+    (Moriyama et al. 2018). `reset()` starts the next episode on the next weather file (prepared while the
+    last one ran, so it is already at its first step: engine/prepared.py), over a private pair of named pipes;
+    every `step()` runs one zone timestep (15 minutes) under the action.
 
     ## Action Space
     `Box(-1, 1, (4,))`, scaled linearly to physical units (`buildings/model.py` `ACTIONS`): West and
@@ -82,9 +83,10 @@ class EnergyPlusEnv(gym.Env):
     `weather`: a short name (CA, CO, FL, IL, VA), an EPW path, or a list cycled episode by episode;
     `run_days`; `output_dir` and `keep_episodes` for episode records (envs sharing one `output_dir`, in one process
     or several, each get their own `episode-NNNNNN-<weather>` directories); `energyplus_csv=False` drops
-    EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `reward`; `idf` to override the
-    model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the spec's);
-    `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
+    EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `prepare_next=False`
+    starts every episode cold instead of preparing the next while one runs (engine/prepared.py); `reward`; `idf` to
+    override the model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the
+    spec's); `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
     not apply; its reward parameters are the default `reward`; it is checked against its model first);
     `name`: the `worker` its episodes' summaries name (`rllib_env` names RLlib's env runners).
@@ -115,6 +117,7 @@ class EnergyPlusEnv(gym.Env):
         building: str | Path | None = None,
         energyplus_csv: bool = True,
         name: str = "0",
+        prepare_next: bool = True,
         weather_noise: str | None = None,
         forecast_hours: int = 0,
         forecast_error: str | None = None,
@@ -145,12 +148,14 @@ class EnergyPlusEnv(gym.Env):
             rbc_target_c=rbc_target_c,
             building=None if building is None else str(building),
             energyplus_csv=energyplus_csv,
+            prepare_next=prepare_next,
             weather_noise=weather_noise,
             forecast_hours=forecast_hours,
             forecast_error=forecast_error,
             seed=seed,
         )
-        self.sim = Simulation(self.config, weathers, name=name)  # its episodes' summaries' `worker`
+        # `name`: the `worker` its episodes' summaries name
+        self.sim = Simulation(self.config, weathers, name=name, prepare=prepare_next)
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
         self.observation_space = observation_space(time_features, schedule_features, building, forecast_hours)
@@ -158,8 +163,11 @@ class EnergyPlusEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        weather_index = (options or {}).get("weather_index")
-        return self.sim.start(weather_index, seed)
+        options = dict(options or {})
+        weather_index = options.pop("weather_index", None)
+        # The episode this reset asks for: the one prepared while the last ran if it was planned for the same
+        # weather, seed and options (the rotation's next, no seed, no options), else a cold start (prepared.py).
+        return self.sim.start(plan=self.sim.next_plan(weather_index, seed, options))
 
     def step(self, action):
         self.sim.send(action)

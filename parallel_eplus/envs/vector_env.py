@@ -62,7 +62,10 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             for i, share in enumerate(shares):
                 worker = first_worker + i
                 out = None if config.output_dir is None else str(Path(config.output_dir) / f"worker-{worker}")
-                sim = Simulation(replace(config, output_dir=out), share, name=str(worker), siblings=len(shares))
+                sim = Simulation(
+                    replace(config, output_dir=out), share, name=str(worker), siblings=len(shares),
+                    prepare=config.prepare_next,
+                )  # fmt: skip
                 self.sims.append(sim)
         except BaseException:
             self.close()

@@ -35,6 +35,7 @@ class TrainConfig:
     building: str | None = None  # a building spec (TOML); None: the data center (`model` picks its variant)
     timesteps: int = 1_000_000
     run_days: int = 365
+    prepare_next: bool = True  # each worker prepares its next episode while one runs (engine/prepared.py)
     batch_size: int = 16384  # the paper's timesteps_per_batch, split evenly across workers
     seed: int = 0
     run_name: str | None = None

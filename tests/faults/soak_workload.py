@@ -19,6 +19,7 @@ from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
 
 VECTOR_EPISODES, SINGLE_EPISODES, SINGLE_ENVS = 50, 50, 16
+PREPARED_EVERY = 4  # every 4th single env prepares its next episode (each costs a second EnergyPlus process)
 
 
 def _energyplus_children() -> int:
@@ -65,8 +66,10 @@ def vector(out: Path) -> list[dict]:
 
 
 def single(out: Path) -> list[dict]:
-    """50 one-day episodes through 16 single envs open at once; the last sample is after closing them."""
-    envs = [EnergyPlusEnv(weather="CO", run_days=1, output_dir=out / f"s{i}", keep_episodes=1)
+    """50 one-day episodes through 16 single envs open at once (every 4th prepares its next episode, and the
+    seeded resets discard what it prepared); the last sample is after closing them."""
+    envs = [EnergyPlusEnv(weather="CO", run_days=1, output_dir=out / f"s{i}", keep_episodes=1,
+                          prepare_next=i % PREPARED_EVERY == 0)
             for i in range(SINGLE_ENVS)]  # fmt: skip
     samples = [sample(0)]
     try:

@@ -50,6 +50,13 @@ def _kill_one(pattern: str) -> None:
     os.kill(_ours(pattern)[0], signal.SIGKILL)
 
 
+def _kill_all(pattern: str) -> None:
+    """Every match: EnergyPlus-side processes cannot be told apart by name, and one preparing an episode is
+    replaced without a failure (engine/prepared.py), so the running ones go too."""
+    for pid in _ours(pattern):
+        os.kill(pid, signal.SIGKILL)
+
+
 def _left_running() -> list:
     return [t for t in threading.enumerate() if t.name == "parallel-eplus-collect"] + our_processes()
 
@@ -82,7 +89,7 @@ def test_ctrl_c_during_an_overlapped_update_saves_a_checkpoint_stops_the_collect
 def test_a_worker_lost_during_an_overlapped_update_ends_the_run_after_a_checkpoint(tmp_path, no_leaks, monkeypatch):
     cfg = small_config(tmp_path, "lost", run_days=1, batch_size=BATCH, timesteps=20 * BATCH, checkpoint_every=10**6,
                        overlap=True, max_restarts=0)  # fmt: skip
-    struck = _strike_at_first_update(monkeypatch, lambda: _kill_one(pipe_sweep.CALLBACK_MODULE))
+    struck = _strike_at_first_update(monkeypatch, lambda: _kill_all(pipe_sweep.CALLBACK_MODULE))
     with pytest.raises(EnergyPlusError, match="failed 1 times in a row"):
         train(cfg, progress=False)
     assert struck

@@ -1,0 +1,121 @@
+"""The next episode, decided and started before `reset()` asks for it (issue 39).
+
+While an episode runs, its worker prepares the next: the episode's directory and model are written and its
+EnergyPlus process (forked warm, forkserver.py) reads its inputs, sizes, warms up and parks at its first control
+step, its observation 0 written and its first action awaited. `reset()` swaps it in if it was prepared for what
+the reset asks (the same `EpisodePlan`); otherwise, or if it died or hung meanwhile, it is discarded (killed, its
+directory removed) and the episode starts cold. Nothing in EnergyPlus sees the difference: the same files, the
+same arguments, the same process code, so a prepared episode equals a cold one bit for bit
+(tests/test_prepared.py).
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from parallel_eplus.buildings.idf_prep import prepare_idf
+from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import MODEL_FILE, claim_episode_dir
+from parallel_eplus.engine.process import EnergyPlusProcess
+
+log = logging.getLogger(__name__)
+STOP_GRACE_S = 5.0  # for a discarded parked episode to stop before its process is killed
+
+
+@dataclass(frozen=True)
+class EpisodePlan:
+    """What one episode runs, decided before its process starts: its weather (the rotation's pick, or the
+    reset's `weather_index`) and the reset's seed and options it was planned for. Everything drawn per episode
+    (a perturbed weather file, say) belongs here, drawn when the plan is made, so a prepared episode and a cold
+    one with the same plan are the same episode."""
+
+    weather_index: int
+    weather: str
+    epw: Path
+    seed: int | None = None
+    options: tuple = field(default=())  # the reset's options as sorted (key, value) pairs
+
+    @staticmethod
+    def options_key(options: dict | None) -> tuple:
+        return tuple(sorted((options or {}).items(), key=lambda kv: kv[0]))
+
+
+class EpisodeStarter:
+    """Writes an episode's directory (its model, its weather) and starts its EnergyPlus: one code path for a cold
+    start and a prepared one, which is why they are the same episode."""
+
+    def __init__(self, output_dir: Path, idf: Path, config: SimulationConfig, args: list[str]):
+        """`args`: the EnergyPlus side's arguments every episode shares (model, steps, initial action)."""
+        self.output_dir, self.idf, self.config, self.args = output_dir, idf, config, args
+        self._model: bytes | None = None  # the episode's model (idf_prep.py), the same for every episode
+
+    def start(
+        self, plan: EpisodePlan, process: EnergyPlusProcess, number: int, weather: Callable[..., tuple[Path, Any]]
+    ) -> tuple[Path, int, Any]:
+        """Claim the episode's directory (numbered `number` or above), write its files, start its EnergyPlus in
+        `process` without waiting: (the directory, its number, what `weather` made beside the weather file).
+
+        `weather(plan, episode_dir, number)` writes the episode's weather file into its directory (a link, or a
+        perturbed copy: the noise is drawn here, when the episode is prepared) and returns (its path, extras)."""
+        episode_dir, number = claim_episode_dir(self.output_dir, weather_label(plan.weather), number)
+        cfg, model = self.config, episode_dir / MODEL_FILE
+        try:
+            if self._model is None:  # tokenized once (~20 ms), written each time
+                prepare_idf(self.idf, model, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs, cfg.start_day,
+                            cfg.start_weekday)  # fmt: skip
+                self._model = model.read_bytes()
+            else:
+                model.write_bytes(self._model)
+            epw, extras = weather(plan, episode_dir, number)
+            args = ["--idf", str(model), "--epw", str(epw), "--output-dir", str(episode_dir)]
+            process.spawn([*args, *self.args], episode_dir / "energyplus.log", cfg.start_timeout_s)
+        except BaseException:
+            shutil.rmtree(episode_dir, ignore_errors=True)
+            raise
+        return episode_dir, number, extras
+
+
+@dataclass
+class PreparedEpisode:
+    """A started episode not yet handed out: its plan, its process and the directory it writes to."""
+
+    plan: EpisodePlan
+    process: EnergyPlusProcess
+    episode_dir: Path
+    number: int
+    weather: Any = None  # what the episode's weather file came with (noise parameters, forecasts)
+    started_at: float = field(default_factory=time.monotonic)
+
+    def parked(self) -> bool:
+        """Observation 0 is written: EnergyPlus waits at its first control step."""
+        pipes = self.process.pipes
+        return pipes is not None and (pipes.has_frame() or bool(select.select([pipes.obs_fd], [], [], 0)[0]))
+
+    def usable(self, start_timeout_s: float) -> bool:
+        """Alive, and either parked or still within its start-up deadline: a dead or hung one is replaced."""
+        if not self.process.running():
+            log.warning("the prepared episode's EnergyPlus (%s) died; starting the episode afresh", self.episode_dir)
+            return False
+        if self.parked():
+            self.process.deadline = time.monotonic() + start_timeout_s  # its frame is there: read it now
+            return True
+        if self.process.deadline <= time.monotonic():
+            log.warning("the prepared episode's EnergyPlus (%s) hung in start-up; starting afresh", self.episode_dir)
+            return False
+        return True  # still warming up: the reset waits for it, as for a cold start, but less
+
+    def discard(self) -> None:
+        """End its episode (a parked one in a long-lived process is stopped, the process kept) and remove its
+        directory: it never stepped, so nothing in it is worth keeping."""
+        if self.parked():
+            self.process.end_episode(STOP_GRACE_S)
+        self.process.kill()  # what was still starting up
+        shutil.rmtree(self.episode_dir, ignore_errors=True)

@@ -1,0 +1,223 @@
+"""Prepared episodes (engine/prepared.py): the next episode started while one runs, swapped in by `reset()`."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from parallel_eplus import EnergyPlusEnv
+from parallel_eplus.buildings.resources import SOURCE_ROOT
+from parallel_eplus.engine.pipe_sweep import sweep
+
+from .conftest import our_processes
+
+ZERO = np.zeros(4, dtype=np.float32)
+
+
+def _episode(env: EnergyPlusEnv, **reset) -> np.ndarray:
+    """One whole episode under a constant action: every observation and reward, row by row."""
+    obs, _ = env.reset(**reset)
+    rows, terminated = [np.append(obs, 0.0)], False
+    while not terminated:
+        obs, reward, terminated, truncated, _ = env.step(ZERO)
+        assert not truncated
+        rows.append(np.append(obs, reward))
+    return np.array(rows)
+
+
+def _parked(env: EnergyPlusEnv, timeout_s: float = 120.0):
+    """The env's prepared episode, once it waits at its first control step."""
+    deadline = time.monotonic() + timeout_s
+    while env.sim.prepared is None or not env.sim.prepared.parked():
+        assert time.monotonic() < deadline, "the next episode was not prepared"
+        time.sleep(0.02)
+    return env.sim.prepared
+
+
+@pytest.mark.slow
+def test_a_prepared_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks):
+    weathers = ["CA", "FL"]
+    cold = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "cold", prepare_next=False)
+    warm = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "warm")
+    try:
+        expected = [_episode(cold) for _ in range(3)]
+        got, prepared = [], []
+        for _ in range(3):
+            got.append(_episode(warm))
+            prepared.append(warm.sim._from_prepared)
+    finally:
+        cold.close()
+        warm.close()
+    assert prepared == [False, True, True]  # the first reset has nothing prepared
+    for a, b in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(a, b)  # bit for bit: observations and rewards
+    assert sorted(p.name for p in (tmp_path / "warm").iterdir()) == [
+        "episode-000001-CA", "episode-000002-FL", "episode-000003-CA"
+    ]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_a_reset_with_other_options_or_a_seed_discards_the_prepared_episode(tmp_path, no_leaks):
+    env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path)
+    try:
+        env.reset()
+        env.step(ZERO)  # the first action starts preparing the next episode (FL)
+        ready = _parked(env)
+        assert ready.plan.weather == "FL"
+        pid = ready.process.proc.pid
+        obs, info = env.reset(options={"weather_index": 0})  # CA again: not what was prepared
+        assert not env.sim._from_prepared and info["weather"] == "CA"
+        assert not ready.episode_dir.exists()  # discarded: its directory removed, its run over
+        assert ready.process.proc is None and ready.process.warm.proc.pid == pid  # stopped, its process kept
+        env.step(ZERO)
+        ready = _parked(env)
+        env.reset(seed=3)  # a seed the prepared episode was not planned for
+        assert not env.sim._from_prepared and not ready.episode_dir.exists()
+        env.step(ZERO)
+        _parked(env)
+        env.reset(options={"weather_index": env.sim.prepared.plan.weather_index})  # exactly what was prepared
+        assert env.sim._from_prepared
+    finally:
+        env.close()
+
+
+def _state(pid: int) -> str:
+    try:
+        return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return ""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", ["killed", "hung"])
+def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path, no_leaks, fault):
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    try:
+        obs, _ = env.reset()
+        rows = [np.append(obs, 0.0)]
+        obs, reward, terminated, _, _ = env.step(ZERO)  # the next episode starts preparing here
+        rows.append(np.append(obs, reward))
+        ready = env.sim.prepared
+        pid = ready.process.proc.pid
+        if fault == "killed":  # died while parked at its first step
+            _parked(env)
+            os.kill(pid, signal.SIGKILL)
+        else:  # stopped in its start-up, and now past its deadline
+            os.kill(pid, signal.SIGSTOP)
+            ready.process.deadline = time.monotonic() - 1
+        while not terminated:
+            obs, reward, terminated, _, _ = env.step(ZERO)
+            rows.append(np.append(obs, reward))
+        again = _episode(env)
+        assert not env.sim._from_prepared  # replaced by a fresh start, not returned
+        np.testing.assert_array_equal(np.array(rows), again)
+        assert not ready.episode_dir.exists() and _state(pid) in ("", "Z")
+    finally:
+        env.close()
+    assert our_processes() == []
+
+
+WORKLOAD = """
+import sys, time, numpy as np
+from parallel_eplus import EnergyPlusEnv
+env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=sys.argv[1])
+env.reset(); env.step(np.zeros(4, np.float32))
+while env.sim.prepared is None or not env.sim.prepared.parked():
+    time.sleep(0.02)
+print(env.sim.process.proc.pid, env.sim.prepared.process.proc.pid, flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
+def test_the_learner_interrupted_or_killed_ends_running_and_prepared_processes(tmp_path, sig):
+    learner = subprocess.Popen([sys.executable, "-c", WORKLOAD, str(tmp_path)], cwd=SOURCE_ROOT,
+                               stdout=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        pids = [int(p) for p in learner.stdout.readline().split()]
+        assert len(pids) == 2
+        learner.send_signal(sig)
+        learner.wait(timeout=30)
+        deadline = time.monotonic() + 30
+        while any(_state(p) not in ("", "Z") for p in pids):
+            assert time.monotonic() < deadline, f"EnergyPlus-side processes outlived the learner: {pids}"
+            time.sleep(0.05)
+    finally:
+        if learner.poll() is None:
+            learner.kill()
+            learner.wait()
+        sweep()  # a killed learner's pipe directories: what its next run's first pipe sweeps
+
+
+@pytest.mark.slow
+def test_a_vector_env_worker_whose_prepared_process_died_starts_its_next_episode_afresh(tmp_path, no_leaks):
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
+
+    venv = EnergyPlusVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path)), [["CA"], ["FL"]])
+    actions = np.zeros((2, 4), dtype=np.float32)
+    try:
+        venv.reset(seed=0)
+        venv.step(actions)
+        sim = venv.sims[0]
+        deadline = time.monotonic() + 120
+        while sim.prepared is None or not sim.prepared.parked():
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        struck = sim.prepared
+        os.kill(struck.process.proc.pid, signal.SIGKILL)
+        ended = np.zeros(2, int)
+        while ended.min() < 2:
+            _, _, terminated, truncated, _ = venv.step(actions)
+            assert not truncated.any()  # replaced before it was handed out: no episode failed
+            ended += terminated
+    finally:
+        venv.close()
+    assert not struck.episode_dir.exists()  # what it prepared is gone; both episodes that ran are whole
+    done = sorted((tmp_path / "worker-0").glob("episode-*"))
+    assert struck.episode_dir not in done and len(done) == 2 and all((d / "steps.parquet").is_file() for d in done)
+
+
+@pytest.mark.slow
+def test_a_reset_mid_episode_stops_energyplus_and_keeps_its_process_and_the_partial_record(tmp_path, no_leaks):
+    import json
+
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    try:
+        env.reset()
+        for _ in range(5):
+            env.step(ZERO)
+        cut, pid = env.episode_dir, env.sim.proc.pid
+        warm = env.sim.process.warm
+        env.reset()
+        assert warm.proc is not None and warm.proc.pid == pid  # stopped by a control frame, not killed
+        summary = json.loads((cut / "summary.json").read_text())
+        assert summary["complete"] is False and summary["steps"] == 5
+        _episode(env, options={"weather_index": 0})  # the same process serves a later episode
+    finally:
+        env.close()
+
+
+@pytest.mark.slow
+def test_a_prepared_episode_with_weather_noise_equals_a_cold_one(tmp_path, no_leaks):
+    """The noise is drawn when the episode is prepared, from the same seed a cold start draws it from."""
+    kw = {"weather": "CA", "run_days": 1, "weather_noise": "drybulb=1:0:24", "seed": 7}
+    cold = EnergyPlusEnv(output_dir=tmp_path / "cold", prepare_next=False, **kw)
+    warm = EnergyPlusEnv(output_dir=tmp_path / "warm", **kw)
+    try:
+        expected = [_episode(cold) for _ in range(2)]
+        got = [_episode(warm) for _ in range(2)]
+        assert warm.sim._from_prepared
+    finally:
+        cold.close()
+        warm.close()
+    for a, b in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(got[0][:, 0], got[1][:, 0])  # each episode its own perturbed outdoor temperature
