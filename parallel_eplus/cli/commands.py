@@ -82,6 +82,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.learning.model_based.settings import MPCSettings
     from parallel_eplus.runs.policy_files import normalization_file
     from parallel_eplus.training.config import (
         ComfortConstraint,
@@ -139,6 +140,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             days=args.eval_days,
             target=args.target,
         ),  # fmt: skip
+        mpc=MPCSettings.from_text(args.mpc),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)
@@ -174,7 +176,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.errors import EnergyPlusError
-    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, RBC_LABEL, Controller, policy_controllers
+    from parallel_eplus.evaluation.controllers import (
+        BASELINE_LABEL,
+        RBC_LABEL,
+        Controller,
+        http_controller,
+        policy_controllers,
+    )
     from parallel_eplus.evaluation.results import failures_markdown, write_results
     from parallel_eplus.evaluation.sweep import run_sweep
 
@@ -193,9 +201,15 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(RBC_LABEL, "rbc"))
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    controllers += [c for p in args.policy or [] for c in policy_controllers(p)]
+    from parallel_eplus.learning.model_based.control import planner_controller
+
+    controllers += [c for p in args.policy or [] for c in ([planner_controller(p)] if planner_controller(p) else
+                                                           policy_controllers(p))]  # fmt: skip
+    controllers += [http_controller(url) for url in args.controller_url or []]
     if not controllers:
-        raise ValueError("nothing to evaluate: give --baseline, --rbc, --rbc-targets and/or --policy PATH")
+        raise ValueError(
+            "nothing to evaluate: give --baseline, --rbc, --rbc-targets, --policy PATH and/or --controller-url URL"
+        )
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     periods = None
     if args.scenario != "year":  # each weather's two weeks, from a year of the built-in controls (kept in --out)

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 from parallel_eplus.cli import commands as c
-from parallel_eplus.cli import many_runs
+from parallel_eplus.cli import deploy, many_runs
 
 DESCRIPTION = "Train and evaluate RL controllers for buildings against parallel EnergyPlus simulations."
 
@@ -54,10 +54,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--forecast-error", choices=["low", "medium", "high"],
                     help="with --forecast: BOPTEST's AR(1) forecast error at this level (default: exact)")  # fmt: skip
     tr.add_argument(
-        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac"],
+        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac", "mpc"],
         help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting; "
-        "sac: Stable-Baselines3's off-policy SAC (training/config.py SACSettings; --batch-size is unused)",
+        "sac: Stable-Baselines3's off-policy SAC (training/config.py SACSettings; --batch-size is unused); "
+        "mpc: learn a model of the building and plan on it, then distil the planner (docs/model-based.md)",
     )  # fmt: skip
+    tr.add_argument("--mpc", metavar="NAME=VALUE,...", help="with --algorithm mpc: its settings (docs/model-based.md)")
     tr.add_argument(
         "--residual", type=float, default=0.0, metavar="SCALE",
         help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting alone",
@@ -201,7 +203,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="ray: each episode is a Ray task on --ray-address's cluster (or a local Ray)")  # fmt: skip
     ev.add_argument("--ray-address", help="an existing Ray cluster (default: start Ray locally)")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    ev.add_argument(
+        "--controller-url", action="append", metavar="URL",
+        help="a controller served by `parallel-eplus serve` (e.g. http://127.0.0.1:8000): each step goes over HTTP",
+    )  # fmt: skip
     ev.set_defaults(func=c.cmd_evaluate)
+    deploy.add_commands(sub)
 
     be = sub.add_parser("bench", help="measure our overhead against raw EnergyPlus on this machine")
     be.add_argument("--weather", default="CA", help="a short name (the spec's, or CA, CO, FL, IL, VA) or an .epw")

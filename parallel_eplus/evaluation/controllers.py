@@ -32,7 +32,9 @@ class Controller:
     """One column of the paper's table: a label and how it acts."""
 
     label: str
-    kind: str  # "baseline", "policy" or "rbc"
+    # "baseline", "policy", "rbc", "http" (a served controller: `url`) or "planner" (a model-based run's:
+    # learning/model_based/control.py)
+    kind: str
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
     schedule_features: bool = False  # and model.SCHEDULE_FEATURES
@@ -43,8 +45,11 @@ class Controller:
     run: str = ""  # a policy's training run (its folder's name): policies sharing a label are one recipe's runs
     # A policy in memory, (observation, info) -> action: evaluation during training (training/periodic_eval.py)
     act: Callable[[np.ndarray, dict], np.ndarray] | None = None
+    url: str | None = None  # "http": where `parallel-eplus serve` answers
     forecast_hours: int = 0  # the policy observes the outdoor dry bulb's next hours (train --forecast)
     forecast_error: str | None = None
+    # kind "planner": makes the episode's actor; given by the layer that knows the planner (picklable, for Ray)
+    factory: Callable[[], Callable[[np.ndarray, dict], np.ndarray]] | None = None
 
     @property
     def model(self) -> str:
@@ -64,6 +69,12 @@ class Controller:
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
         if self.act is not None:
             return self.act
+        if self.kind == "http":
+            from parallel_eplus.evaluation.http_controller import HttpController
+
+            return HttpController(self.url)
+        if self.factory is not None:
+            return self.factory()
         from parallel_eplus.runs.policy_files import load_policy
 
         act = load_policy(self.path)
@@ -128,12 +139,27 @@ def policy_controller(spec: str) -> Controller:
     )  # fmt: skip
 
 
+def http_controller(url: str) -> Controller:
+    """A controller served at `url`, labelled by its contract's algorithm and run; it acts in the building it was
+    exported for (the features it observes are computed by the server from each step's time)."""
+    from parallel_eplus.evaluation.http_controller import HttpController
+
+    client = HttpController(url)
+    try:
+        policy = client.contract["policy"]
+        label = f"{policy['algorithm'].upper()} via HTTP ({policy['run']})"
+        return Controller(label, "http", building=client.building(), run=str(policy["run"]), url=url)
+    finally:
+        client.close()
+
+
 def unique_labels(controllers: list[Controller]) -> list[Controller]:
     """Policies sharing a label from different runs are one recipe's runs (seeds); any other repeat is renamed."""
     seen: dict[str, list[Controller]] = {}
     for c in controllers:
         earlier = seen.get(c.label, [])
-        seeds = earlier and c.kind == "policy" and all(e.kind == "policy" and e.run != c.run for e in earlier)
+        learned = c.kind in ("policy", "planner")
+        seeds = earlier and learned and all(e.kind == c.kind and e.run != c.run for e in earlier)
         if earlier and not seeds:
             c.label = f"{c.label} [{c.path.parent.name if c.path else len(earlier) + 1}]"
         seen.setdefault(c.label, []).append(c)

@@ -70,10 +70,11 @@ def run_sweep(
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
     for c in controllers:  # a policy acts only in the building it was trained on
-        trained = str(load_building(c.building).spec.path) if c.kind == "policy" and c.building else None
-        if c.kind == "policy" and trained != (building or None):
+        acting = c.kind in ("policy", "http", "planner")
+        trained = str(load_building(c.building).spec.path) if acting and c.building else None
+        if acting and trained != (building or None):
             raise ValueError(
-                f"{c.path} was trained on building {c.building or 'datacenter-2zone (default)'}, "
+                f"{c.path or c.url} was trained on building {c.building or 'datacenter-2zone (default)'}, "
                 f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"
             )
     weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs

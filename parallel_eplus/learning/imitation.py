@@ -54,6 +54,7 @@ class Demonstrations:
     names: tuple[str, ...] = ()
     weathers: list[str] = field(default_factory=list)
     builtin: list[dict] = field(default_factory=list)  # each weather's episode summary under the built-in controls
+    times: list = field(default_factory=list)  # each row's time (the end of the step it observed)
 
     def to_physical(self, actions: np.ndarray) -> np.ndarray:
         return self.low + (np.clip(actions, -1, 1) + 1) / 2 * (self.high - self.low)
@@ -107,12 +108,14 @@ def record_baseline(
     wanted = readbacks(building)
     spec = load_building(building)
     recorded: dict[str, list[np.ndarray]] = {}
+    times: dict[str, list] = {}
     empty = np.zeros(0, dtype=np.float32)
 
     class Recorder(Controller):
         def make(self, building=None):
             def act(obs: np.ndarray, info: dict) -> np.ndarray:
                 recorded.setdefault(weather_label(info["weather"]), []).append(np.array(obs, np.float32))
+                times.setdefault(weather_label(info["weather"]), []).append(info["time"])
                 return empty
 
             return act
@@ -134,7 +137,7 @@ def record_baseline(
         log.warning("the built-in controls did not finish %s (%s): cloning without it", f["weather"], f["error"])
     if not rows:
         raise ValueError("the built-in controls finished no weather: nothing to imitate")
-    observations, physical, labels = [], [], []
+    observations, physical, labels, when = [], [], [], []
     for row in rows:
         weather = row["weather"]
         obs = np.stack(recorded[weather])
@@ -144,12 +147,13 @@ def record_baseline(
         observations.append(obs)
         physical.append(chosen)
         labels += [weather] * len(obs)
+        when += times[weather]
     physical_all = np.concatenate(physical)
     low = np.array([a.low for a in spec.actions])
     high = np.array([a.high for a in spec.actions])
     actions = np.clip(2 * (physical_all - low) / (high - low) - 1, -1, 1).astype(np.float32)
     names = tuple(a.name for a in spec.actions)
-    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, rows)
+    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, rows, when)
 
 
 def _actor_mean(policy, obs: th.Tensor) -> th.Tensor:

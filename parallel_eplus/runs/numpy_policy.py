@@ -170,3 +170,36 @@ class NumpyPolicy:
         z2 = (actions - mean) ** 2 / var
         log_prob = -0.5 * (z2 + np.log(var)).sum(axis=1) - _HALF_LOG_2PI * mean.shape[1]
         return actions, _run(self.critic, x)[:, 0], log_prob
+
+
+def squashed_mean(policy):
+    """SAC's deterministic action (tanh of its actor's mean, mapped onto the action space as SB3's `predict` does) in
+    numpy float64, as the on-policy mean above: the same arithmetic an exported controller runs (deploy/graph.py),
+    so both give the same setpoints. None for anything but a plain MLP actor (torch then acts)."""
+    from stable_baselines3.sac.policies import SACPolicy
+
+    if (
+        type(policy) is not SACPolicy
+        or policy.actor.use_sde
+        or type(policy.actor.features_extractor) is not FlattenExtractor
+    ):
+        return None
+    steps: list[tuple] = []
+    for m in [*policy.actor.latent_pi, policy.actor.mu]:
+        if type(m) is th.nn.Linear and m.bias is not None:
+            steps.append((m.weight.detach().double().numpy().T.copy(), m.bias.detach().double().numpy().copy()))
+        elif type(m) is th.nn.ReLU:
+            steps.append((lambda x: np.maximum(x, 0.0),))
+        elif type(m) is th.nn.Tanh:
+            steps.append((np.tanh,))
+        else:
+            return None
+    low, high = (np.asarray(b, dtype=np.float64) for b in (policy.action_space.low, policy.action_space.high))
+
+    def mean(obs: np.ndarray) -> np.ndarray:
+        x = obs.reshape(len(obs), -1).astype(np.float64)
+        for step in steps:
+            x = x @ step[0] + step[1] if len(step) == 2 else step[0](x)
+        return low + 0.5 * (np.tanh(x) + 1.0) * (high - low)
+
+    return mean

@@ -169,15 +169,15 @@ def load_policy(model_zip: str | Path):
     model_zip = Path(model_zip)
     stats = require_policy_files(model_zip)
     saved = _saved_policy(model_zip)
-    from parallel_eplus.runs.numpy_policy import NumpyPolicy
+    from parallel_eplus.runs.numpy_policy import NumpyPolicy, squashed_mean
 
     norm = read_stats(stats)
     low, high = saved.action_space.low, saved.action_space.high
-    fast = NumpyPolicy(saved) if NumpyPolicy.supports(saved) else None
+    fast = NumpyPolicy(saved).mean if NumpyPolicy.supports(saved) else squashed_mean(saved)
 
     def act(obs: np.ndarray) -> np.ndarray:
-        if fast is not None:  # the Gaussian's mean, as SB3's deterministic predict, without torch
-            return np.clip(fast.mean(norm.normalize_obs(obs)), low, high).astype(np.float32)
+        if fast is not None:  # the Gaussian's mean (SAC: squashed), as SB3's deterministic predict, without torch
+            return np.clip(fast(norm.normalize_obs(obs)), low, high).astype(np.float32)
         action, _ = saved.predict(norm.normalize_obs(obs), deterministic=True)
         return action
 

@@ -13,6 +13,7 @@ from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.buildings.reward import RewardConfig
 from parallel_eplus.buildings.weather import parse_weathers
 from parallel_eplus.engine.config import RESIDUAL_SPACES
+from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.learning.settings import (
     ComfortConstraint,
     ImitationSettings,
@@ -75,6 +76,7 @@ class TrainConfig:
     ppo: PPOSettings = field(default_factory=PPOSettings)
     sac: SACSettings = field(default_factory=SACSettings)
     evaluation: EvalSettings = field(default_factory=EvalSettings)  # --eval-every (training/periodic_eval.py)
+    mpc: MPCSettings = field(default_factory=MPCSettings)  # `--algorithm mpc` (learning/model_based/)
 
     def resolved(self) -> TrainConfig:
         """Validate, and fill in the run name."""
@@ -107,8 +109,10 @@ class TrainConfig:
             raise ValueError("--timesteps must be >= 0 and --checkpoint-every >= 1")
         if self.init_from is not None:
             self.init_from = str(Path(self.init_from).resolve())
-        if self.algorithm not in ("trpo", "ppo", "sac"):
-            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo, ppo or sac")
+        if self.algorithm not in ("trpo", "ppo", "sac", "mpc"):
+            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo, ppo, sac or mpc")
+        if self.algorithm == "mpc" and (self.overlap or self.init_from or self.residual_scale):
+            raise ValueError("--algorithm mpc plans on a model it learns: no --overlap, --init-from or --residual")
         if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
             raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
         if self.residual_space not in RESIDUAL_SPACES:
@@ -178,6 +182,7 @@ class TrainConfig:
         raw["comfort"] = ComfortConstraint(**raw.get("comfort", {}))  # runs from before it have none
         raw["imitation"] = ImitationSettings(**raw.get("imitation", {}))
         sac = raw.get("sac", {})
+        raw["mpc"] = MPCSettings(**raw.get("mpc", {}))
         raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
         raw["evaluation"] = EvalSettings(**raw.get("evaluation", {}))  # runs from before it have none
         return cls(**raw)

@@ -22,7 +22,7 @@ MUTABLE_KEYS = sorted({key for keys in MUTABLE.values() for key in keys})
 def load_kwargs(cfg) -> dict:
     """The algorithm's mutable attributes from a TrainConfig, for `ALGORITHM.load(..., **load_kwargs(cfg))`."""
     out = {}
-    for key, attribute in MUTABLE[cfg.algorithm].items():
+    for key, attribute in MUTABLE.get(cfg.algorithm, {}).items():
         head, _, tail = key.partition(".")
         out[attribute] = getattr(getattr(cfg, head), tail)
     return out

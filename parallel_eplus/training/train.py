@@ -113,6 +113,10 @@ def train(
     runs/<name>/status.json says how far it got and how it ended (run_status.py; `parallel-eplus runs`).
     """
     cfg, checkpoint = _prepare(cfg, resume, overwrite)
+    if cfg.algorithm == "mpc":  # the model-based learner drives the same workers itself
+        from parallel_eplus.training.mpc import train_mpc
+
+        return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model, callbacks)
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
         return _learn(cfg, checkpoint, progress, timer, status, callbacks)
 
@@ -123,7 +127,7 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
     if resume is not None and cfg.init_from is not None:
         raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
     if resume is not None:
-        checkpoint = resume_point(Path(resume))
+        checkpoint = _resume_point(Path(resume))
         saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
@@ -142,6 +146,16 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
     run_dir.mkdir(parents=True, exist_ok=True)
     io.write_text(run_dir / "config.json", cfg.to_json())
     return cfg, checkpoint
+
+
+def _resume_point(path: Path) -> Path:
+    """The checkpoint `--resume` names: an SB3 save, or a model-based run's (learning/model_based/checkpoint.py)."""
+    config = (path if path.is_dir() else run_dir_of(path)) / "config.json"
+    if config.is_file() and TrainConfig.from_json(config.read_text()).algorithm == "mpc":
+        from parallel_eplus.learning.model_based.checkpoint import newest_checkpoint
+
+        return newest_checkpoint(path)
+    return resume_point(path)
 
 
 def _learn(

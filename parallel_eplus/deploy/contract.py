@@ -1,0 +1,136 @@
+"""controller.json: what a deployed controller reads, what it sets, and where it came from; and turning one
+request's readings into the observation vector its ONNX graph takes.
+
+No torch here, nor in anything this imports: the server loads this beside onnxruntime alone.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import difflib
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES, schedule_features, time_features
+
+FORMAT = 1
+CONTRACT_FILE = "controller.json"
+ONNX_FILE = "controller.onnx"
+# A sensor's unit when its spec gives none, from its name's suffix (the shipped specs name every sensor this way).
+UNIT_SUFFIXES = {"_c": "C", "_w": "W", "_kg_s": "kg/s", "_pct": "%", "_k": "K"}
+UNIT_ALIASES = {"c": "C", "°c": "C", "degc": "C", "celsius": "C", "w": "W", "watt": "W", "kg/s": "kg/s"}
+
+
+class InputError(ValueError):
+    """A request the controller refuses: `field` names the reading (or part of the request) at fault."""
+
+    def __init__(self, field: str, message: str, status: int = 422):
+        self.field, self.status = field, status
+        super().__init__(f"{field}: {message}")
+
+
+def unit_of(name: str, declared: str = "") -> str:
+    if declared:
+        return declared
+    return next((u for suffix, u in UNIT_SUFFIXES.items() if name.endswith(suffix)), "")
+
+
+def _same_unit(a: str, b: str) -> bool:
+    return UNIT_ALIASES.get(a.strip().lower(), a.strip()) == UNIT_ALIASES.get(b.strip().lower(), b.strip())
+
+
+@dataclass
+class Contract:
+    """controller.json as read back: the raw dict, with the lookups a request needs."""
+
+    data: dict
+
+    @classmethod
+    def read(cls, directory: Path) -> Contract:
+        path = Path(directory) / CONTRACT_FILE
+        if not path.is_file():
+            raise FileNotFoundError(f"{path} not found: `parallel-eplus export RUN -o {directory}` writes it")
+        data = json.loads(path.read_text())
+        if int(data.get("format", 0)) > FORMAT:
+            raise ValueError(f"{path}: written by a newer parallel-eplus (format {data['format']})")
+        return cls(data)
+
+    @property
+    def sensors(self) -> list[dict]:
+        return [i for i in self.data["inputs"] if i["source"] == "sensor"]
+
+    @property
+    def features(self) -> list[str]:
+        return [i["name"] for i in self.data["inputs"] if i["source"] != "sensor"]
+
+    @property
+    def outputs(self) -> list[dict]:
+        return self.data["outputs"]
+
+    @property
+    def needs_time(self) -> bool:
+        return bool(self.features)
+
+    def observation(self, body: dict) -> np.ndarray:
+        """One request's `{"time": ISO, "sensors": {name: value or {"value", "unit"}}}` as the graph's float32 row.
+
+        Refused, naming the field: a missing, unknown, non-numeric, non-finite or out-of-range reading, a unit
+        other than the contract's, a missing or unreadable time where the policy observes the clock."""
+        if not isinstance(body, dict):
+            raise InputError("body", "must be a JSON object with 'sensors' (and 'time')", 400)
+        readings = body.get("sensors")
+        if not isinstance(readings, dict):
+            raise InputError("sensors", "must be an object of sensor name -> value (physical units)")
+        names = [s["name"] for s in self.sensors]
+        unknown = sorted(set(readings) - set(names))
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], names, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else f"; the sensors are {', '.join(names)}"
+            raise InputError(f"sensors.{unknown[0]}", f"unknown sensor{hint}")
+        values = [self._reading(s, readings) for s in self.sensors]
+        if self.needs_time:
+            when = self._time(body.get("time"))
+            if any(f in TIME_FEATURES for f in self.features):
+                values += time_features(when)
+            if any(f in SCHEDULE_FEATURES for f in self.features):
+                schedule = tuple(tuple(p) for p in self.data["schedule"])
+                values += schedule_features(when, schedule)
+        return np.array([values], dtype=np.float32)
+
+    @staticmethod
+    def _reading(sensor: dict, readings: dict) -> float:
+        name, field = sensor["name"], f"sensors.{sensor['name']}"
+        if name not in readings:
+            raise InputError(field, f"missing (in {sensor['unit'] or 'its unit'})")
+        value = readings[name]
+        if isinstance(value, dict):
+            unit = value.get("unit")
+            if unit is not None and not _same_unit(str(unit), sensor["unit"]):
+                raise InputError(field, f"unit {unit!r}; the controller reads {sensor['unit']!r}")
+            value = value.get("value")
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise InputError(field, f"must be a number, got {json.dumps(value)[:40]}")
+        if not math.isfinite(value):
+            raise InputError(field, f"is {value}; readings must be finite")
+        if not sensor["low"] <= value <= sensor["high"]:
+            raise InputError(
+                field, f"{value} {sensor['unit']} is outside the trained range [{sensor['low']}, {sensor['high']}]"
+            )
+        return float(value)
+
+    @staticmethod
+    def _time(text) -> dt.datetime:
+        if not isinstance(text, str):
+            raise InputError("time", "required (ISO 8601, local time of the building, the start of the next step)")
+        try:
+            when = dt.datetime.fromisoformat(text)
+        except ValueError:
+            raise InputError("time", f"{text[:40]!r} is not an ISO 8601 date and time") from None
+        return when.replace(tzinfo=None)
+
+    def setpoints(self, row: np.ndarray) -> dict[str, dict]:
+        return {o["name"]: {"value": float(v), "unit": o["unit"]} for o, v in zip(self.outputs, row, strict=True)}

@@ -1,0 +1,82 @@
+"""A controller served over HTTP (`parallel-eplus serve`) driving an evaluation episode: `evaluate --controller-url`.
+
+Each step's sensor readings go out as `POST /act` in physical units with the step's time, and the setpoints that
+come back are what EnergyPlus gets: the same path a building-management system takes. Standard library only (one
+kept-alive connection per episode), so the evaluation adds no HTTP client dependency.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import http.client
+import json
+import math
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import numpy as np
+
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.model import DEFAULT
+
+
+class HttpController:
+    """Callable (observation, info) -> normalized action, asking the server at `url` for each step."""
+
+    def __init__(self, url: str, timeout_s: float = 30.0):
+        parts = urlsplit(url if "://" in url else f"http://{url}")
+        if parts.scheme != "http" or not parts.hostname:
+            raise ValueError(f"--controller-url {url!r}: give http://HOST:PORT (as `parallel-eplus serve` prints)")
+        self.url, self.host, self.port, self.timeout_s = url, parts.hostname, parts.port or 80, timeout_s
+        self.conn: http.client.HTTPConnection | None = None
+        self.contract = self._request("GET", "/contract")
+        self.names = [i["name"] for i in self.contract["inputs"] if i["source"] == "sensor"]
+        self.low = np.array([o["low"] for o in self.contract["outputs"]])
+        self.high = np.array([o["high"] for o in self.contract["outputs"]])
+        self.outputs = [o["name"] for o in self.contract["outputs"]]
+
+    def _request(self, method: str, path: str, body: dict | None = None) -> dict:
+        payload = None if body is None else json.dumps(body).encode()
+        headers = {"Content-Type": "application/json"} if payload is not None else {}
+        for attempt in (0, 1):  # a kept-alive connection the server closed is opened again, once
+            if self.conn is None:
+                self.conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout_s)
+            try:
+                self.conn.request(method, path, payload, headers)
+                response = self.conn.getresponse()
+                text = response.read()
+                break
+            except (OSError, http.client.HTTPException) as e:
+                self.close()
+                if attempt:
+                    raise ValueError(f"controller at {self.url}: {method} {path} failed ({e}); is it serving?") from e
+        if response.status != 200:
+            raise ValueError(f"controller at {self.url} answered {response.status} to {method} {path}: {text[:300]!r}")
+        return json.loads(text)
+
+    def building(self) -> str | None:
+        """The spec the served controller was exported for, as the sweep names it (None: the data center); a
+        different version of the spec here than there is refused."""
+        b = self.contract["building"]
+        spec = load_building(None if b["name"] == DEFAULT.name else b["name"]).spec
+        if hashlib.sha256(Path(spec.path).read_bytes()).hexdigest() != b["sha256"]:
+            raise ValueError(
+                f"controller at {self.url} was exported for another version of building {b['name']} "
+                f"(spec sha256 {b['sha256'][:12]}…; here {spec.path})"
+            )
+        return None if b["name"] == DEFAULT.name else b["name"]
+
+    def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:
+        # The readings as the in-process policy sees them: the env's float32 observation (clipped to the spec's
+        # bounds), in physical units.
+        sensors = {n: float(v) for n, v in zip(self.names, obs[: len(self.names)].tolist(), strict=True)}
+        answer = self._request("POST", "/act", {"time": info["time"].isoformat(), "sensors": sensors})
+        physical = np.array([answer["setpoints"][n]["value"] for n in self.outputs])
+        if not all(map(math.isfinite, physical)):
+            raise ValueError(f"controller at {self.url} returned non-finite setpoints: {answer}")
+        return 2 * (physical - self.low) / (self.high - self.low) - 1
+
+    def close(self) -> None:
+        if self.conn is not None:
+            self.conn.close()
+            self.conn = None

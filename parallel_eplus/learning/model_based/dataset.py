@@ -1,0 +1,161 @@
+"""The model's data: transitions (state, last action, action, exogenous inputs) -> next state, from every source.
+
+The state is what the model predicts: the spec's comfort temperatures and energy terms (the reward's signals),
+in physical units. A row pairs the state after step k with the action applied during step k+1 (normalized to
+[-1, 1], as the policy's), the action before it, the exogenous inputs at the end of step k+1 (exogenous.py)
+and the state then. Each row keeps its origin (the building's own controls, exploration, the planner), its
+episode and step, and whether the comfort band applied, so held-out days and H-step sequences can be drawn.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from parallel_eplus.buildings.building import Building, load_building
+
+ORIGINS = ("baseline", "explore", "planner")
+_FIELDS = ("s", "a_prev", "a", "x", "s_next", "applies", "episode", "step", "origin")
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where the state's elements sit in a building's observation, and the sizes the model needs."""
+
+    sensors: tuple[str, ...]  # the observation's sensor names, in order
+    temperatures: tuple[str, ...]
+    energy: tuple[str, ...]
+    n_actions: int
+    n_exogenous: int
+
+    @classmethod
+    def of(cls, building: Building, n_exogenous: int) -> Layout:
+        energy = tuple(e for e in building.comfort.energy if e not in building.temperatures)
+        return cls(building.sensor_names, building.temperatures, energy, len(building.actions), n_exogenous)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.temperatures + self.energy
+
+    @property
+    def n_state(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def n_inputs(self) -> int:
+        return self.n_state + 2 * self.n_actions + self.n_exogenous
+
+    def state(self, obs: np.ndarray) -> np.ndarray:
+        """The state from observations (the sensors come first in the observation), [..., n_state]."""
+        idx = [self.sensors.index(n) for n in self.state_names]
+        return np.asarray(obs, np.float32)[..., idx]
+
+
+@dataclass
+class Transitions:
+    """Rows of (s, a_prev, a, x, s_next, applies, episode, step, origin), appended as they come."""
+
+    layout: Layout
+    columns: dict[str, list[np.ndarray]] = field(default_factory=dict)
+
+    def add(self, **arrays: np.ndarray) -> None:
+        n = len(arrays["s"])
+        for name in _FIELDS:
+            value = np.asarray(arrays[name])
+            if value.shape[:1] != (n,):
+                value = np.broadcast_to(value, (n, *value.shape[1:]))
+            self.columns.setdefault(name, []).append(value.copy())
+
+    def array(self, name: str) -> np.ndarray:
+        parts = self.columns.get(name, [])
+        if len(parts) > 1:  # keep one block: appends stay cheap, reads after the first are free
+            self.columns[name] = parts = [np.concatenate(parts)]
+        return parts[0] if parts else np.zeros(0)
+
+    def __len__(self) -> int:
+        return len(self.array("s"))
+
+    def inputs(self, rows=slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(model inputs, targets): targets are each temperature's change and each energy term's next value."""
+        s, s_next = self.array("s")[rows], self.array("s_next")[rows]
+        x = np.concatenate([s, self.array("a_prev")[rows], self.array("a")[rows], self.array("x")[rows]], axis=1)
+        return x.astype(np.float32), targets(self.layout, s, s_next)
+
+    def held_out(self, block_steps: int, every: int = 5) -> np.ndarray:
+        """Rows in held-out blocks (a block is `block_steps` consecutive steps of an episode, e.g. a day): one
+        block in `every`, offset by episode, so every weather and season has some."""
+        block = self.array("step") // block_steps + self.array("episode")
+        return block % every == every - 1
+
+    def sequences(self, rows: np.ndarray, horizon: int) -> np.ndarray:
+        """[K, horizon] row indices: runs of `horizon` consecutive steps of one episode, every row in `rows` (a mask).
+        Rows of one episode need not be adjacent: workers' steps interleave as they arrive."""
+        ep, step = self.array("episode"), self.array("step")
+        order = np.lexsort((step, ep))
+        ep, step, inside = ep[order], step[order], rows[order]
+        n = len(order)
+        ok = inside.copy()
+        for h in range(1, horizon):
+            nxt = np.zeros(n, bool)
+            nxt[: n - h] = (ep[h:] == ep[: n - h]) & (step[h:] == step[: n - h] + h) & inside[h:]
+            ok &= nxt
+        starts = np.flatnonzero(ok)
+        return order[starts[:, None] + np.arange(horizon)[None, :]] if len(starts) else np.zeros((0, horizon), int)
+
+    def save(self, path: Path) -> None:
+        np.savez_compressed(path, **{name: self.array(name) for name in _FIELDS})
+
+    @classmethod
+    def load(cls, path: Path, layout: Layout) -> Transitions:
+        with np.load(path) as z:
+            data = cls(layout)
+            if len(z["s"]):
+                data.add(**{name: z[name] for name in _FIELDS})
+            return data
+
+
+def targets(layout: Layout, s: np.ndarray, s_next: np.ndarray) -> np.ndarray:
+    k = len(layout.temperatures)
+    return np.concatenate([s_next[:, :k] - s[:, :k], s_next[:, k:]], axis=1).astype(np.float32)
+
+
+def next_state(layout: Layout, s, out):
+    """The state after a step from the model's output (`targets`' inverse); numpy or torch."""
+    k = len(layout.temperatures)
+    if isinstance(s, np.ndarray):
+        return np.concatenate([s[..., :k] + out[..., :k], out[..., k:]], axis=-1)
+    import torch as th
+
+    return th.cat([s[..., :k] + out[..., :k], out[..., k:]], dim=-1)
+
+
+class ComfortTimes:
+    """When the band applies at a future time: always (data centers), by the clock (`hours`), or (a schedule or an
+    observation) as it applied at that weekday and time of day in the data so far, counted by majority."""
+
+    def __init__(self, building: str | None, step_minutes: float):
+        self.comfort = load_building(building).comfort
+        self.slots = int(round(24 * 60 / step_minutes)) * 7
+        self.step_minutes = step_minutes
+        self.seen = np.zeros(self.slots)
+        self.applied = np.zeros(self.slots)
+
+    def _slot(self, t: dt.datetime) -> int:
+        return int((t.weekday() * 24 * 60 + t.hour * 60 + t.minute) // self.step_minutes) % self.slots
+
+    def learn(self, times: list[dt.datetime], applies: np.ndarray) -> None:
+        for t, a in zip(times, applies, strict=True):
+            self.seen[self._slot(t)] += 1
+            self.applied[self._slot(t)] += bool(a)
+
+    def __call__(self, times: list[dt.datetime]) -> np.ndarray:
+        c = self.comfort
+        if c.always:
+            return np.ones(len(times), np.float32)
+        if c.occupied.observation is None:
+            return np.array([c.applies(t, {}) for t in times], np.float32)
+        slots = [self._slot(t) for t in times]
+        return np.array([self.applied[k] * 2 > self.seen[k] for k in slots], np.float32)

@@ -1,0 +1,73 @@
+"""Where the model's data come from before the planner acts: the building's own controls, then exploration.
+
+1. The building's own controls, recorded as `--init-from-baseline` records them (training/imitation.py): every
+   observation paired with what those controls set next. They cover the states the building normally visits.
+2. Exploration around them: each worker replays the recorded actions of its weather at the same step of the year
+   (the built-in controls are mostly feed-forward: schedule and weather) plus a bounded random walk (increments up
+   to `explore_increment`, at most `explore_offset` from the record). A free random walk drives the zones out of
+   EnergyPlus's range within a day (44 °C at mid-range setpoints); here a rail halves the offset at every step a
+   zone is more than 2 K outside the band, which brings the worker back to the record's behaviour.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from parallel_eplus.learning.model_based.dataset import ORIGINS, ComfortTimes, Transitions
+from parallel_eplus.learning.model_based.exogenous import Forecasts
+
+
+def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: ComfortTimes,
+                 applies_of, first_episode: int) -> dict[str, np.ndarray]:  # fmt: skip
+    """The record's transitions into `data` (one episode per weather); returns each weather's normalized actions.
+
+    `applies_of(time, sensor values)`: whether the band applied to the step ending then (buildings/comfort.py)."""
+    layout = data.layout
+    labels = np.array(demos.weathers)
+    replay = {}
+    for j, weather in enumerate(dict.fromkeys(demos.weathers)):
+        rows = np.flatnonzero(labels == weather)
+        obs, actions = demos.observations[rows], demos.actions[rows]
+        times = [demos.times[r] for r in rows]
+        replay[weather] = actions
+        if len(rows) < 2:
+            continue
+        s = layout.state(obs[:, : len(layout.sensors)])
+        sensed = [dict(zip(layout.sensors, o[: len(layout.sensors)].tolist(), strict=True)) for o in obs]
+        applies = np.array([applies_of(t, v) for t, v in zip(times, sensed, strict=True)], np.float32)
+        comfort_times.learn(times[1:], applies[1:])
+        a_prev = np.concatenate([actions[:1], actions[:-2]])
+        data.add(s=s[:-1], a_prev=a_prev, a=actions[:-1], x=forecasts(weather).at(times[1:]), s_next=s[1:],
+                 applies=applies[1:], episode=first_episode + j, step=np.arange(len(rows) - 1),
+                 origin=ORIGINS.index("baseline"))  # fmt: skip
+    return replay
+
+
+class Explorer:
+    """The recorded actions of each worker's weather at its step, plus a bounded random walk of its own."""
+
+    def __init__(self, replay: dict[str, np.ndarray], workers: int, increment: float, offset: float,
+                 band: tuple[float, float], temperatures: list[int], seed: int = 0):  # fmt: skip
+        self.replay = replay
+        self.rng = np.random.default_rng(seed)
+        self.increment, self.limit = increment, offset
+        self.band, self.temperatures = band, temperatures
+        n_actions = next(iter(replay.values())).shape[1]
+        self.offset = np.zeros((workers, n_actions), np.float32)
+
+    def reset(self, worker: int) -> None:
+        self.offset[worker] = 0.0
+
+    def act(self, obs: np.ndarray, infos: list[dict], steps: np.ndarray) -> np.ndarray:
+        actions = []
+        for i, info in enumerate(infos):
+            record = self.replay.get(info["weather"])
+            if record is None:  # a weather whose built-in controls did not finish: the nearest recorded one
+                record = next(iter(self.replay.values()))
+            base = record[min(int(steps[i]), len(record) - 1)]
+            temps = obs[i, self.temperatures]
+            off_band = np.any((temps < self.band[0] - 2) | (temps > self.band[1] + 2))
+            step = self.rng.uniform(-self.increment, self.increment, base.shape)
+            self.offset[i] = np.clip(self.offset[i] * (0.5 if off_band else 1.0) + step, -self.limit, self.limit)
+            actions.append(np.clip(base + self.offset[i], -1, 1))
+        return np.array(actions, np.float32)

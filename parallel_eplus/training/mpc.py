@@ -1,0 +1,297 @@
+"""`train --algorithm mpc`: learn the building from the workers' own data, plan on it, distil the planner.
+
+The model, the planner and their data live in learning/model_based/; this module runs them as a training run.
+
+The Dyna loop (Sutton 1991) over the service's workers and vector env (local or Ray):
+1. record the building's own controls on the training weathers (sources.py) and fit the ensemble;
+2. explore around them for `explore_steps` env steps, then let the planner act (control.py: one batched plan for
+   every worker per vector step), refitting the model every `refit_every` steps on everything seen so far;
+3. at the end, distil the planner into the usual policy network (distill.py): runs/<name>/model.zip.
+
+The comfort weight of the planner is the run's Lagrange multiplier (`--comfort-target`, training/lagrangian.py),
+updated at every refit from the share of zone samples in band the planner achieved since the last one; without
+a target it stays at its start (10: a sample out of band costs about ten steps' energy).
+
+What a run leaves: runs/<name>/planner/planner.pt (`evaluate --policy runs/<name>/planner` runs the planner),
+model.zip (the distilled policy), transitions.npz (every row the model saw), episodes.csv, status.json,
+checkpoints/mpc_<steps>_steps.{pt,npz} (`--resume` continues from the newest), TensorBoard's model error per
+state element on held-out blocks against persistence, planner cost and milliseconds per step, comfort multiplier.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
+from tqdm import tqdm
+
+from parallel_eplus import io
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.errors import EnergyPlusError, Interrupts
+from parallel_eplus.learning.lagrangian import Lagrangian
+from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
+from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
+from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
+from parallel_eplus.learning.model_based.distill import act, distill, fit
+from parallel_eplus.learning.model_based.sources import Explorer, add_baseline
+from parallel_eplus.runs.run_status import RunStatus
+from parallel_eplus.training.callbacks import EpisodeMetrics, tensorboard_logger
+from parallel_eplus.training.config import TrainConfig
+
+log = logging.getLogger(__name__)
+
+
+class _Model:
+    """What SB3's callbacks read of a model (EpisodeMetrics, RunStatus): the env, the logger, the step count."""
+
+    def __init__(self, env, logger):
+        self.env, self.logger, self.num_timesteps = env, logger, 0
+
+    def get_env(self):
+        return self.env
+
+
+def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool, make_vec_env, new_model,
+              callbacks: Sequence[BaseCallback] = ()) -> Path:  # fmt: skip
+    """Run (or resume from `checkpoint`) the Dyna loop; returns the distilled policy's model.zip (or the planner's
+    file without distillation). Ctrl-C, SIGTERM or a worker's failure saves a checkpoint first.
+
+    `make_vec_env(cfg)`: the workers, as every algorithm gets them; `new_model(cfg, env)`: the policy to distil
+    into (train.py's, passed in so the two modules do not import each other). `callbacks` see every vector step, and
+    each refit as the end of a batch (a sweep's trial reports then: experiments/tune_trial.py)."""
+    th.set_num_threads(1)
+    with RunStatus(cfg.run_dir, cfg.timesteps) as status:
+        venv = make_vec_env(cfg)
+        try:
+            return _Loop(cfg, venv, status, progress, new_model, callbacks).run(checkpoint)
+        finally:
+            venv.close()
+
+
+class _Loop:
+    def __init__(self, cfg: TrainConfig, venv, status: RunStatus, progress: bool, new_model, callbacks=()):
+        self.cfg, self.venv, self.s, self.new_model = cfg, venv, cfg.mpc, new_model
+        self.building = load_building(cfg.building)
+        self.mpc = MPC(cfg.building, self.s, cfg.comfort.margin_c, cfg.reward.power_weight, venv.num_envs, cfg.seed)
+        self.data = Transitions(self.mpc.layout)
+        self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
+        self.mpc.comfort_weight = self.s.comfort_weight or cfg.comfort.multiplier_init
+        self.steps, self.policy_obs, self.policy_act, self.replay = 0, [], [], {}
+        self.student, self.student_fitted = None, False  # DAgger's phase: the distilled policy acts
+        self.logger = tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name))
+        self.shim = _Model(venv, self.logger)
+        self.bar = tqdm(total=cfg.timesteps, unit="step", disable=not progress, desc=f"train {cfg.run_name}")
+        self.callbacks = [EpisodeMetrics(cfg.run_dir / "episodes.csv", self.bar, 365 * self.building.steps_per_day),
+                          status, *callbacks]  # fmt: skip
+        self.checkpoints = Checkpoint(cfg.run_dir / "checkpoints")
+
+    # -- the run --------------------------------------------------------------------------------
+    def run(self, checkpoint: Path | None) -> Path:
+        if checkpoint is None:
+            self._record()
+            self._refit(self.s.epochs)
+        else:
+            self._restore(checkpoint)
+        for cb in self.callbacks:
+            cb.init_callback(self.shim)
+        self.shim.num_timesteps = self.steps
+        self.bar.update(self.steps)
+        try:
+            with Interrupts():
+                self._steps()
+        except BaseException as e:  # Ctrl-C, SIGTERM, a worker's failure, a sweep stopping its trial
+            path = self._save_checkpoint()
+            cause = (
+                "stopped by the failure below" if isinstance(e, EnergyPlusError) else f"stopped ({type(e).__name__})"
+            )
+            cause = "interrupted" if isinstance(e, KeyboardInterrupt) else cause
+            log.warning("%s at step %d; checkpoint saved: %s", cause, self.steps, path)
+            log.warning("resume with: parallel-eplus train --resume %s", self.cfg.run_dir)
+            raise
+        finally:
+            self.bar.close()
+        self.data.save(self.cfg.run_dir / "transitions.npz")
+        planner = self.mpc.save(self.cfg.run_dir / "planner" / PLANNER_FILE)
+        io.write_text(planner.parent / "config.json", self.cfg.to_json())  # `evaluate` reads its building
+        self._save_checkpoint()
+        if not self.s.distill or not self.policy_obs:
+            return planner
+
+        model, env = self._student()
+        model.num_timesteps = self.steps  # what the run took (a sweep reads it from model.zip)
+        obs, act = np.concatenate(self.policy_obs), np.concatenate(self.policy_act)
+        return distill(model, env, self.cfg, obs, act)
+
+    def _student(self):
+        """The policy the planner is distilled into (made on first use; DAgger's phase and the end refit it)."""
+        if self.student is None:
+            from stable_baselines3.common.vec_env import VecNormalize
+
+            env = VecNormalize(self.venv, norm_obs=True, norm_reward=False, gamma=self.cfg.trpo.gamma)
+            self.student = (self.new_model(self.cfg, env), env)
+        return self.student
+
+    def _refit_student(self) -> None:
+        model, env = self._student()
+        report = fit(model, env, self.cfg, np.concatenate(self.policy_obs), np.concatenate(self.policy_act))
+        for name, value in report["rmse"].items():
+            self.logger.record(f"distill/rmse/{name}", value)
+        self.student_fitted = True
+
+    def _steps(self) -> None:
+        venv, n = self.venv, self.venv.num_envs
+        obs = venv.reset()
+        infos = venv.reset_infos
+        a_last = np.tile(self.mpc.initial, (n, 1))
+        step_of = np.zeros(n, int)
+        episode_of = np.arange(n) + 1000 * (1 + self.steps // 1000)  # unique episode keys for this session
+        explorer = Explorer(self.replay, n, self.s.explore_increment, self.s.explore_offset, self.building.band,
+                            [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures],
+                            self.cfg.seed + self.steps) if self.replay else None  # fmt: skip
+        rng = np.random.default_rng(self.cfg.seed + self.steps)
+        out = zones = 0.0
+        while self.steps < self.cfg.timesteps:
+            planning = self.steps >= self.s.explore_steps or explorer is None
+            dagger = planning and self.s.distill and self.steps >= (1 - self.s.dagger_share) * self.cfg.timesteps
+            if dagger and not self.student_fitted and self.policy_obs:
+                self._refit_student()
+            if planning:
+                planned = self.mpc.act(obs, infos, a_last)
+                self.policy_obs.append(obs.copy())
+                self.policy_act.append(planned)
+                actions = np.clip(planned + self.s.noise * rng.standard_normal(planned.shape), -1, 1).astype(np.float32)
+                if dagger and self.student_fitted:  # the student acts; the planner takes over a worker far out of band
+                    temps = obs[:, [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures]]
+                    low, high = self.building.band
+                    far = np.any((temps < low - 2) | (temps > high + 2), axis=1)
+                    actions = np.where(far[:, None], actions, act(*self._student(), obs))
+            else:
+                actions = explorer.act(obs, infos, step_of)
+            new_obs, _, dones, new_infos = venv.step(actions)
+            for i in range(n):
+                after = new_infos[i].get("final_info", new_infos[i]) if dones[i] else new_infos[i]
+                nxt = new_infos[i].get("terminal_observation") if dones[i] else new_obs[i]
+                if "time" in after and nxt is not None:  # a failed step (restarted episode) teaches nothing
+                    self._add(obs[i], nxt, a_last[i], actions[i], after, episode_of[i], step_of[i], planning)
+                    temps = [after[t] for t in self.building.temperatures]
+                    if after.get("comfort_applies", True):
+                        out += self.building.comfort.out_of_band(tuple(temps))[0]
+                        zones += len(temps)
+                if dones[i]:
+                    a_last[i], step_of[i], episode_of[i] = self.mpc.initial, 0, episode_of[i] + n
+                    self.mpc.planner.reset(i)
+                    if explorer is not None:
+                        explorer.reset(i)
+                else:
+                    a_last[i], step_of[i] = actions[i], step_of[i] + 1
+            obs, infos = new_obs, new_infos
+            self.steps += n
+            self.shim.num_timesteps = self.steps
+            for cb in self.callbacks:
+                cb.update_locals({"infos": new_infos, "dones": dones})
+                cb.on_step()
+            if self.steps // self.s.refit_every != (self.steps - n) // self.s.refit_every:
+                self._update_comfort(out, zones)
+                out = zones = 0.0
+                self._refit(self.s.refit_epochs)
+                if self.student_fitted:
+                    self._refit_student()
+                for cb in self.callbacks:
+                    cb.on_rollout_end()
+            if self.steps // self.cfg.checkpoint_every != (self.steps - n) // self.cfg.checkpoint_every:
+                self._save_checkpoint()
+            if planning:
+                self.logger.record_mean("planner/ms_per_step", self.mpc.planner.last_ms)
+                self.logger.record_mean("planner/cost", float(self.mpc.planner.last_cost.mean()))
+
+    def _add(self, obs, nxt, a_prev, a, after: dict, episode: int, step: int, planning: bool) -> None:
+        layout = self.mpc.layout
+        x = self.mpc.forecasts(after["weather"]).at([after["time"]])
+        applies = float(after.get("comfort_applies", True))
+        self.mpc.comfort_times.learn([after["time"]], [applies])
+        sensors = len(layout.sensors)
+        self.data.add(s=layout.state(obs[None, :sensors]), a_prev=a_prev[None], a=a[None], x=x,
+                      s_next=layout.state(np.asarray(nxt)[None, :sensors]), applies=[applies], episode=[episode],
+                      step=[step], origin=[ORIGINS.index("planner" if planning else "explore")])  # fmt: skip
+
+    # -- the model, the comfort weight ----------------------------------------------------------
+    def _record(self) -> None:
+        from parallel_eplus.learning.imitation import record_baseline
+
+        days = self.s.record_days or self.cfg.run_days
+        demos = record_baseline(self.cfg.building, self.cfg.weathers, days, self.cfg.workers,
+                                self.cfg.run_dir / "baseline-record", progress=self.bar.disable is False)  # fmt: skip
+        comfort = self.building.comfort
+        self.replay = add_baseline(self.data, demos, self.mpc.forecasts, self.mpc.comfort_times,
+                                   lambda t, v: comfort.always or comfort.applies(t, v), 0)  # fmt: skip
+        import shutil
+
+        shutil.rmtree(self.cfg.run_dir / "baseline-record", ignore_errors=True)
+        log.info("recorded the building's own controls: %d transitions", len(self.data))
+
+    def _refit(self, epochs: int) -> None:
+        t0 = time.perf_counter()
+        block = self.building.steps_per_day
+        held = self.data.held_out(block)
+        if held.all() or not held.any():  # too little data for a held-out day: quarter days
+            block = max(block // 4, 1)
+            held = self.data.held_out(block)
+        loss = self.mpc.model.fit(self.data, np.flatnonzero(~held), epochs)
+        self.mpc.planner.set_support(self.data.array("a"))
+        errors = self.mpc.model.errors(self.data, held, self.s.horizon)
+        for key, value in errors.items():
+            self.logger.record(f"model/{key}", value)
+        self.logger.record("model/train_loss", loss)
+        self.logger.record("model/rows", len(self.data))
+        self.logger.record("model/fit_s", time.perf_counter() - t0)
+        self.logger.record("planner/comfort_weight", self.mpc.comfort_weight)
+        for i, name in enumerate(a.name for a in self.building.actions):
+            self.logger.record(f"planner/support/{name}_low", float(self.mpc.planner.support[0][i]))
+            self.logger.record(f"planner/support/{name}_high", float(self.mpc.planner.support[1][i]))
+        self.logger.dump(self.steps)
+        io.write_text(self.cfg.run_dir / "model_error.json", __import__("json").dumps(errors, indent=2))
+        log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,
+                 _summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
+
+    def _update_comfort(self, out: float, zones: float) -> None:
+        if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student_fitted:
+            self.mpc.comfort_weight = self.lagrangian.update(out, zones)
+            self.lagrangian.record(self.logger)
+
+    # -- checkpoints ----------------------------------------------------------------------------
+    def _save_checkpoint(self) -> Path:
+        extra = {"steps": self.steps, "lagrangian": None if self.lagrangian is None else self.lagrangian.multiplier,
+                 "replay": {w: th.as_tensor(a) for w, a in self.replay.items()}}  # fmt: skip
+        policy = (np.concatenate(self.policy_obs), np.concatenate(self.policy_act)) if self.policy_obs else None
+        return self.checkpoints.save(self.steps, self.mpc, self.data, extra, policy)
+
+    def _restore(self, checkpoint: Path) -> None:
+        state, self.data, policy = self.checkpoints.load(checkpoint, self.mpc.layout)
+        self.mpc = MPC.from_state(state["mpc"], self.venv.num_envs, self.cfg.seed + state["steps"])
+        self.data.layout = self.mpc.layout
+        self.steps = state["steps"]
+        self.replay = {w: np.asarray(a) for w, a in state["replay"].items()}
+        if self.lagrangian is not None and state["lagrangian"] is not None:
+            self.lagrangian.multiplier = state["lagrangian"]
+        if policy is not None:
+            self.policy_obs, self.policy_act = [policy[0]], [policy[1]]
+        log.info("resuming %s from %s at step %d (%d transitions)", self.cfg.run_name, checkpoint, self.steps,
+                 len(self.data))  # fmt: skip
+
+
+def _summary(errors: dict, names, horizon: int) -> str:
+    parts = []
+    for name in names:
+        for h in sorted({1, horizon}):
+            m, p = errors.get(f"{name}/{h}_step_model"), errors.get(f"{name}/{h}_step_persistence")
+            if m is not None:
+                parts.append(f"{name} {h}-step {m:.3g} (persistence {p:.3g})")
+    return "; ".join(parts) or "(no held-out rows yet)"
+
+
+__all__ = ["train_mpc", "newest_checkpoint"]

@@ -1,0 +1,110 @@
+#!/usr/bin/env bash
+# Model-based control (issue 38) on every shipped building, three seeds each: `train --algorithm mpc` (record the
+# building's own controls, explore around them, plan on a learned ensemble, refit: Dyna), then the planner
+# distilled into a policy; trained on CA, CO and FL, evaluated frozen on all five weathers (IL and VA held out).
+#
+#   bash scripts/model_based.sh run [BUILDING...]      # work through the (building, seed) runs for CHUNK_MIN minutes
+#   bash scripts/model_based.sh status                 # each run's steps and state
+#   bash scripts/model_based.sh evaluate BUILDING [W]  # planner and distilled policy against built-in and rule-based
+#   bash scripts/model_based.sh save                   # small results (configs, episodes, planners, policies)
+#
+# `run` works in chunks: each trainer gets the time left of the chunk (default 110 min, under the sessions' 2 h)
+# and is then stopped with SIGINT, which checkpoints it (checkpoints/mpc_<steps>_steps.pt); the next `run`
+# resumes every unfinished run from its newest checkpoint. Runs use a copy of the package at a fixed commit
+# ($COMMIT, git archive), so later edits to the working tree cannot disturb them. `evaluate` takes one weather
+# at a time when given one (a year of planning is ~10-20 min per episode on a busy 2-core VM).
+#
+# Budget knobs (environment): STEPS (default 200000 env steps per run, the issue's goal), SEEDS ("0 1 2"),
+# DAYS (episode length; default the year, the CRAC's 351), CHUNK_MIN (110; CHUNK_S in seconds), MPC (extra --mpc
+# settings), NICE (0).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+REPO=$PWD
+COMMIT=${COMMIT:-$(git rev-parse --short HEAD)}
+WORK=${WORK:-$REPO/../model-based}
+SEEDS=${SEEDS:-"0 1 2"}
+STEPS=${STEPS:-200000}
+CHUNK_MIN=${CHUNK_MIN:-110}
+NICE=${NICE:-0}
+PY=$REPO/.venv/bin/python
+SAVED=$REPO/results/model-based
+BUILDINGS=${BUILDINGS:-"datacenter-2zone datacenter-crac office-small"}
+
+recipe() {  # building -> train arguments
+    case $1 in
+    # The CRAC's model fails in Golden's cold snap of December 18-19 with its own controls too (results/learned/).
+    datacenter-2zone) echo "--comfort-target 99.6 --run-days ${DAYS:-365}" ;;
+    datacenter-crac) echo "--comfort-target 99.9 --run-days ${DAYS:-351}" ;;
+    office-small) echo "--comfort-target 97.5 --run-days ${DAYS:-365}" ;;
+    *) echo "unknown building $1" >&2; exit 2 ;;
+    esac
+}
+
+finished() { [ -f "$1/status.json" ] && grep -q '"state": "finished"' "$1/status.json"; }
+has_checkpoint() { ls "$1"/checkpoints/mpc_*_steps.pt >/dev/null 2>&1; }
+
+run_one() {  # building seed deadline(epoch s)
+    local b=$1 s=$2 deadline=$3 name="$1-mpc-seed$2"
+    local dir="$WORK/runs/$name" left=$(( deadline - $(date +%s) ))
+    if finished "$dir"; then echo "$name: done"; return 0; fi
+    if [ "$left" -lt 60 ]; then echo "$name: not started (chunk over)"; return 1; fi
+    local cmd=("$PY" -m parallel_eplus.cli train --quiet)
+    if has_checkpoint "$dir"; then
+        cmd+=(--resume "$dir" --timesteps "$STEPS")
+    else
+        # shellcheck disable=SC2046
+        cmd+=(--algorithm mpc --building "$b" --weathers CA,CO,FL --workers 2 --seed "$s" --run-name "$name"
+              --timesteps "$STEPS" --checkpoint-every 10000 $(recipe "$b") ${MPC:+--mpc "$MPC"})
+        [ -d "$dir" ] && cmd+=(--overwrite)  # stopped before its first checkpoint: start it again
+    fi
+    echo "$(date -Is) $name (${left}s left in the chunk): ${cmd[*]:3}"
+    (cd "$WORK" && PYTHONPATH="$WORK/code-$COMMIT" timeout --signal=INT --kill-after=600 "$left" \
+        nice -n "$NICE" "${cmd[@]}") || true
+    finished "$dir"
+}
+
+case "${1:-status}" in
+run)
+    shift || true
+    [ $# -gt 0 ] && BUILDINGS="$*"
+    mkdir -p "$WORK/runs"
+    code="$WORK/code-$COMMIT"
+    [ -d "$code" ] || { mkdir -p "$code" && git archive "$COMMIT" parallel_eplus idf | tar -x -C "$code"; }
+    deadline=$(( $(date +%s) + ${CHUNK_S:-$(( CHUNK_MIN * 60 ))} ))
+    for s in $SEEDS; do for b in $BUILDINGS; do  # seeds outer: every building's first seed before any second
+        run_one "$b" "$s" "$deadline" || { echo "chunk over: run again to continue"; exit 0; }
+    done; done
+    echo "every run finished"
+    ;;
+status)
+    for d in "$WORK"/runs/*/; do
+        [ -d "$d" ] || continue
+        state=$(grep -o '"state": "[a-z]*"' "$d/status.json" 2>/dev/null | cut -d'"' -f4)
+        steps=$(grep -o '"steps": [0-9]*' "$d/status.json" 2>/dev/null | grep -o '[0-9]*$')
+        echo "$(basename "$d"): ${state:-?} at step ${steps:-0}"
+    done
+    ;;
+evaluate)
+    b=$2; weathers=${3:-CA,CO,FL,IL,VA}; policies=()
+    for run in "$WORK"/runs/"$b"-mpc-seed*/; do
+        finished "$run" || continue
+        policies+=(--policy "${run}planner=Planner" --policy "${run%/}=Distilled")
+    done
+    [ ${#policies[@]} -gt 0 ] || { echo "no finished run of $b"; exit 1; }
+    days=$(recipe "$b" | grep -o -- "--run-days [0-9]*")
+    # shellcheck disable=SC2086
+    "$PY" -m parallel_eplus.cli evaluate --building "$b" --baseline --rbc "${policies[@]}" --weathers "$weathers" \
+        --workers 2 $days --out "$SAVED/$b/${3:-all}" --quiet
+    ;;
+save)
+    for d in "$WORK"/runs/*/; do
+        name=$(basename "$d"); b=${name%-mpc-seed*}; out="$SAVED/$b/runs/$name"
+        mkdir -p "$out"
+        cp "$d"/{config.json,episodes.csv,status.json,model_error.json,distill.json} "$out/" 2>/dev/null || true
+        [ -f "$d/model.zip" ] && cp "$d/model.zip" "$d/vecnormalize.npz" "$out/"
+        [ -d "$d/planner" ] && mkdir -p "$out/planner" && cp "$d"/planner/* "$out/planner/"
+        echo "saved $name"
+    done
+    ;;
+*) echo "usage: $0 run|status|evaluate|save" >&2; exit 2 ;;
+esac

@@ -1,0 +1,109 @@
+"""`train --algorithm mpc` on real short episodes: the model, the planner, the distilled policy, a killed worker.
+
+One small run (2 workers, CA and FL, 2-day episodes: the building's own controls recorded, a day of exploration,
+then the planner) serves the first three tests; the fault test runs its own.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch as th
+
+from parallel_eplus.errors import EnergyPlusError
+from parallel_eplus.evaluation.controllers import Controller
+from parallel_eplus.evaluation.sweep import run_sweep
+from parallel_eplus.learning.model_based.control import MPC, planner_controller
+from parallel_eplus.learning.model_based.dataset import Transitions
+from parallel_eplus.learning.model_based.settings import MPCSettings
+from parallel_eplus.runs.policy_files import load_policy
+from parallel_eplus.training.config import ComfortConstraint, TrainConfig
+from parallel_eplus.training.train import train
+
+from .faults.strikes import strike_after_step
+
+
+def mpc_config(root: Path, name: str, **overrides) -> TrainConfig:
+    settings = overrides.pop("mpc", MPCSettings(explore_steps=192, refit_every=192, epochs=20, candidates=128))
+    base = dict(
+        algorithm="mpc", workers=2, weathers=["CA", "FL"], run_days=2, timesteps=768, checkpoint_every=384,
+        run_name=name, runs_dir=str(root / "runs"), tensorboard_dir=str(root / "tb"), mpc=settings,
+        comfort=ComfortConstraint(target_pct=99.0),
+    )  # fmt: skip
+    base.update(overrides)
+    return TrainConfig(**base)
+
+
+@pytest.fixture(scope="module")
+def mpc_run(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("mpc")
+    final = train(mpc_config(root, "small"), progress=False)
+    assert final == root / "runs" / "small" / "model.zip"
+    return final.parent
+
+
+@pytest.mark.slow
+def test_the_model_beats_persistence_on_held_out_steps(mpc_run, no_leaks):
+    mpc = MPC.load(mpc_run / "planner" / "planner.pt")
+    data = Transitions.load(mpc_run / "transitions.npz", mpc.layout)
+    held = data.held_out(24)  # quarter days (a 2-day episode has too few whole days to hold out)
+    assert 0 < held.sum() < len(data)
+    errors = mpc.model.errors(data, held, 4)
+    for name in mpc.layout.state_names:  # both zones and the power
+        assert errors[f"{name}/1_step_model"] < errors[f"{name}/1_step_persistence"], (name, errors)
+    saved = json.loads((mpc_run / "model_error.json").read_text())  # what the run reported (TensorBoard too)
+    assert "west_temp_c/1_step_model" in saved
+
+
+class Constant(Controller):
+    def make(self, building=None):
+        return lambda obs, info: np.zeros(4, np.float32)  # mid-range setpoints (25 °C) and fans
+
+
+@pytest.mark.slow
+def test_the_planner_keeps_a_two_day_episode_in_band_where_a_constant_action_does_not(mpc_run, tmp_path, no_leaks):
+    th.set_num_threads(1)
+    planner = planner_controller(f"{mpc_run / 'planner'}=Planner")
+    assert planner.kind == "planner" and planner.run == "small"
+    table = run_sweep([planner, Constant("Constant", "policy")], ["CA"], 2, 2, tmp_path / "ev", progress=False)
+    in_band = dict(zip(table["controller"], table["in_band_pct"], strict=True))
+    assert in_band["Planner"] >= 95.0, in_band
+    assert in_band["Constant"] < 50.0, in_band
+
+
+@pytest.mark.slow
+def test_the_distilled_policy_tracks_the_planners_actions(mpc_run):
+    saved = sorted((mpc_run / "checkpoints").glob("mpc_*_steps.npz"), key=lambda p: int(p.stem.split("_")[1]))[-1]
+    with np.load(saved) as z:
+        obs, planned = z["policy_obs"], z["policy_act"]
+    assert len(obs) >= 500  # every planner step of both workers
+    act = load_policy(mpc_run / "model.zip")
+    distilled = act(obs)
+    rmse = np.sqrt(((distilled - planned) ** 2).mean(0))
+    spread = planned.std(0)  # what the best constant action would score
+    assert np.all(rmse < 0.8 * spread), (rmse, spread)
+
+
+@pytest.mark.slow
+def test_a_worker_killed_mid_plan_ends_the_run_with_a_checkpoint_and_it_resumes(tmp_path, monkeypatch, no_leaks):
+    settings = MPCSettings(explore_steps=0, refit_every=96, epochs=10, candidates=64, record_days=1)
+    cfg = mpc_config(tmp_path, "cut", run_days=1, weathers=["CA"], timesteps=10_000, max_restarts=0, mpc=settings)
+    hit = strike_after_step(monkeypatch, signal.SIGKILL, worker="0", episode=1, step=40)
+    with pytest.raises(EnergyPlusError):
+        train(cfg, progress=False)
+    assert hit
+    run = tmp_path / "runs" / "cut"
+    saved = list((run / "checkpoints").glob("mpc_*_steps.pt"))
+    assert len(saved) == 1 and (run / "checkpoints" / saved[0].with_suffix(".npz").name).is_file()
+    assert json.loads((run / "status.json").read_text())["state"] == "failed"
+    monkeypatch.undo()
+    steps = int(saved[0].stem.split("_")[1])
+    assert 0 < steps < 96
+    resumed = mpc_config(tmp_path, "cut", timesteps=steps + 20)
+    final = train(resumed, resume=run, progress=False)
+    assert final == run / "model.zip" and (run / "planner" / "planner.pt").is_file()
+    assert json.loads((run / "status.json").read_text())["state"] == "finished"
