@@ -9,8 +9,6 @@ import pytest
 from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.engine.episode import SUMMARY_FILE
 
-ENV = "parallel_eplus:parallel_eplus/DataCenter-v0"  # as scripts/rllib_ppo.py and docs/rllib.md use it
-
 
 def _runner_state(runner) -> dict:
     """What one env runner's env has done: episodes begun and the folder of the current one."""
@@ -24,13 +22,20 @@ def _runner_state(runner) -> dict:
 def test_rllib_ppo_trains_with_two_env_runners_sharing_one_output_dir(tmp_path, no_leaks):
     ray = pytest.importorskip("ray")
     from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.tune.registry import register_env
+
+    from parallel_eplus.envs.env import rllib_env
 
     out = tmp_path / "episodes"
     ray.init(address="local", num_cpus=2, include_dashboard=False)
     try:
+        register_env("parallel_eplus-datacenter", rllib_env)  # as scripts/rllib_ppo.py: episodes name their runner
         config = (
             PPOConfig()
-            .environment(ENV, env_config={"weather": "CA", "run_days": 1, "output_dir": str(out), "keep_episodes": 1})
+            .environment(
+                "parallel_eplus-datacenter",
+                env_config={"weather": "CA", "run_days": 1, "output_dir": str(out), "keep_episodes": 1},
+            )
             .env_runners(num_env_runners=2, num_cpus_per_env_runner=1)
             .fault_tolerance(restart_failed_env_runners=False)  # a runner that fails fails the test
             # Seeded: untrained exploration can heat a zone past EnergyPlus's limits (once, in CI: the west zone at
@@ -58,6 +63,8 @@ def test_rllib_ppo_trains_with_two_env_runners_sharing_one_output_dir(tmp_path, 
     # Both runners began CA episode 1, 2, 3 on the same config: every one has a folder of its own.
     assert len(folders) == sum(r["episodes"] for r in runners), (folders, runners)
     assert all(f.name.startswith("episode-") and f.name.endswith("-CA") for f in folders)
+    workers = [json.loads((f / SUMMARY_FILE).read_text())["worker"] for f in folders if (f / SUMMARY_FILE).is_file()]
+    assert set(workers) == {"runner-1", "runner-2"}, workers  # each summary names the env runner that ran it
     finished = [json.loads((f / SUMMARY_FILE).read_text()) for f in folders if (f / SUMMARY_FILE).is_file()]
     assert len([s for s in finished if s["complete"] and s["steps"] == STEPS_PER_DAY]) >= 6
     # keep_episodes=1: each env keeps its own newest whole and prunes only its own older ones

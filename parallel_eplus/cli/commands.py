@@ -91,6 +91,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         TrainConfig,
         TRPOSettings,
     )
+    from parallel_eplus.training.eval_target import EvalSettings
     from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
@@ -133,6 +134,12 @@ def cmd_train(args: argparse.Namespace) -> int:
             log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
         ),  # fmt: skip
         sac=SACSettings(gamma=args.gamma),
+        evaluation=EvalSettings(
+            every=args.eval_every,
+            weathers=[w.strip() for w in (args.eval_weathers or "").split(",") if w.strip()],
+            days=args.eval_days,
+            target=args.target,
+        ),  # fmt: skip
         mpc=MPCSettings.from_text(args.mpc),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
@@ -242,6 +249,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_plot(args: argparse.Namespace) -> int:
     from parallel_eplus.evaluation.redraw import plot_path
 
+    if (args.path / "sweep.json").is_file():  # a training sweep's folder: its learning curves over seeds
+        from parallel_eplus.experiments.sweep_curves import plot_sweep
+
+        print(f"written: {plot_sweep(args.path)}")
+        return 0
     written = plot_path(args.path)
     for path in written if isinstance(written, list) else [written]:
         print(f"written: {path}")

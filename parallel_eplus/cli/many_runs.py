@@ -49,12 +49,20 @@ def _run_sweep(spec, ray_address: str | None, overwrite: bool) -> int:
 
 
 def cmd_runs(args: argparse.Namespace) -> int:
-    from parallel_eplus.runs import registry, registry_view
+    from parallel_eplus.experiments import registry_view
+    from parallel_eplus.runs import registry
 
     if args.runs_command is None:
         runs = registry.list_runs(args.dir)
         print(registry_view.table(runs) if runs else f"no runs in {args.dir}")
         return 0
+    if args.runs_command == "show":
+        from parallel_eplus.experiments.sweep_view import find_sweep, sweep_table
+
+        sweep = find_sweep(args.name, args.dir)
+        if sweep is not None:
+            print(sweep_table(sweep))
+            return 0
     info = registry.read_run(registry.resolve_run(args.name, args.dir), args.dir)
     if args.runs_command == "show":
         print(registry_view.details(info))

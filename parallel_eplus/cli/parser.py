@@ -142,6 +142,18 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     tr.add_argument("--step-timeout", type=float, default=60.0, help="seconds before a silent EnergyPlus is hung")
     tr.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
+    tr.add_argument(
+        "--eval-every", type=int, default=0, metavar="STEPS",
+        help="every STEPS env steps, run the frozen deterministic policy on --eval-weathers: evaluations.csv, "
+        "TensorBoard eval/..., and the best so far kept as runs/<name>/best/model.zip (docs/training.md)",
+    )  # fmt: skip
+    tr.add_argument("--eval-weathers", metavar="W,...", help="default: the training weathers (never IL or VA)")
+    tr.add_argument("--eval-days", type=int, metavar="N", help="evaluation episode length (default: --run-days)")
+    tr.add_argument(
+        "--target", metavar="KPI>=X,...",
+        help='e.g. "in_band_pct>=99.6,energy_change_pct<=-22" (energy against the built-in controller): the step '
+        "and wall time it is first met go to runs/<name>/target.json; with a target, best = met, then lowest energy",
+    )  # fmt: skip
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=c.cmd_train)
 

@@ -89,6 +89,7 @@ class EnergyPlusEnv(gym.Env):
     spec's); `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
     not apply; its reward parameters are the default `reward`; it is checked against its model first);
+    `name`: the `worker` its episodes' summaries name (`rllib_env` names RLlib's env runners).
     `weather_noise` ("drybulb=1:0:24", buildings/weather_noise.py): each episode runs a perturbed copy of its
     weather file, seeded by `reset(seed=)` (same seed, same year) or else by `seed`, the worker and the episode;
     `forecast_hours`: the outdoor dry bulb's next N hours end the observation, with BOPTEST's `forecast_error`
@@ -115,6 +116,7 @@ class EnergyPlusEnv(gym.Env):
         rbc_target_c: float | None = None,
         building: str | Path | None = None,
         energyplus_csv: bool = True,
+        name: str = "0",
         prepare_next: bool = True,
         weather_noise: str | None = None,
         forecast_hours: int = 0,
@@ -152,7 +154,8 @@ class EnergyPlusEnv(gym.Env):
             forecast_error=forecast_error,
             seed=seed,
         )
-        self.sim = Simulation(self.config, weathers, prepare=prepare_next)
+        # `name`: the `worker` its episodes' summaries name
+        self.sim = Simulation(self.config, weathers, name=name, prepare=prepare_next)
         if not self.sim.elements:
             raise ValueError(f"model {model!r} has no agent actions; it runs through the evaluation sweep")
         self.observation_space = observation_space(time_features, schedule_features, building, forecast_hours)
@@ -178,3 +181,13 @@ class EnergyPlusEnv(gym.Env):
 
     def close(self) -> None:
         self.sim.close()
+
+
+def rllib_env(context) -> EnergyPlusEnv:
+    """RLlib's env creator (`config.environment(rllib_env, env_config={...})`): the env of one env runner, its
+    episodes' `worker` named `runner-<worker_index>` (and `-env-<vector_index>` for a runner's further envs), so
+    the summaries of runners sharing one output folder say whose they are. `context` is RLlib's EnvContext: the
+    env_config dict with `worker_index` and `vector_index` (0 for the local runner)."""
+    worker, vector = int(getattr(context, "worker_index", 0)), int(getattr(context, "vector_index", 0))
+    kwargs = {k: v for k, v in dict(context).items() if k != "num_envs"}
+    return EnergyPlusEnv(**kwargs, name=f"runner-{worker}" + (f"-env-{vector}" if vector else ""))

@@ -43,6 +43,8 @@ class Controller:
     residual_space: str = "action"  # what the correction applies to (SimulationConfig)
     building: str | None = None  # the spec a policy was trained on (its config.json); None: the data center
     run: str = ""  # a policy's training run (its folder's name): policies sharing a label are one recipe's runs
+    # A policy in memory, (observation, info) -> action: evaluation during training (training/periodic_eval.py)
+    act: Callable[[np.ndarray, dict], np.ndarray] | None = None
     url: str | None = None  # "http": where `parallel-eplus serve` answers
     forecast_hours: int = 0  # the policy observes the outdoor dry bulb's next hours (train --forecast)
     forecast_error: str | None = None
@@ -65,6 +67,8 @@ class Controller:
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
+        if self.act is not None:
+            return self.act
         if self.kind == "http":
             from parallel_eplus.evaluation.http_controller import HttpController
 

@@ -8,7 +8,17 @@ from pathlib import Path
 
 from parallel_eplus.runs.registry import CONFIG_FILE, RunInfo
 
-COLUMNS = ("NAME", "STATE", "PROCESS", "STEPS", "EPISODES", "WALL", "CHECKPOINT", "LATEST (in band, power)")
+COLUMNS = (
+    "NAME",
+    "STATE",
+    "PROCESS",
+    "STEPS",
+    "EPISODES",
+    "WALL",
+    "CHECKPOINT",
+    "EVAL (step: in band, energy)",
+    "LATEST (in band, power)",
+)
 
 
 def duration(seconds: float | None) -> str:
@@ -33,6 +43,14 @@ def _latest(info: RunInfo) -> str:
     return ", ".join(parts) or "-"
 
 
+def evaluation(e: dict | None) -> str:
+    """The newest evaluation, short: `4096: 99.1% -12.3%` (in band; energy against the built-in controller)."""
+    if not e:
+        return "-"
+    band, energy = e.get("in_band_pct", float("nan")), e.get("energy_change_pct", float("nan"))
+    return f"{int(e['timesteps'])}: {band:.1f}% {energy:+.1f}%" + (" met" if e.get("target_met") else "")
+
+
 def _steps(info: RunInfo) -> str:
     return f"{info.steps}/{info.planned}" if info.planned else str(info.steps)
 
@@ -41,7 +59,7 @@ def table(runs: list[RunInfo]) -> str:
     """One line per run, columns aligned."""
     rows = [COLUMNS] + [
         (r.name, r.state, r.process or "-", _steps(r), str(r.episodes), duration(r.wall_s),
-         r.checkpoint.name if r.checkpoint else "-", _latest(r))
+         r.checkpoint.name if r.checkpoint else "-", evaluation(r.evaluation), _latest(r))
         for r in runs
     ]  # fmt: skip
     widths = [max(len(row[i]) for row in rows) for i in range(len(COLUMNS) - 1)]
@@ -69,6 +87,11 @@ def details(info: RunInfo) -> str:
     ]
     if info.note:
         lines.append(f"note        {info.note}")
+    if info.evaluation:
+        lines.append(f"evaluation  {evaluation(info.evaluation)} (newest; evaluations.csv, best/model.zip)")
+    if info.target:
+        t = info.target
+        lines.append(f"target      {t['target']}: first met at step {t['timesteps']} after {duration(t['wall_s'])}")
     if info.latest:
         lines += ["", "latest episode of each weather:", "  weather  episodes  at step  in band  power     reward/step"]
         for weather, row in info.latest.items():

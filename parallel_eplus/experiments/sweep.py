@@ -26,15 +26,18 @@ import logging
 import os
 import signal
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from parallel_eplus import io
 from parallel_eplus.errors import RunExistsError
-from parallel_eplus.experiments.sweep_spec import SweepSpec, trial_name
+from parallel_eplus.experiments.sweep_rank import best_of, trial_evaluation, write_choice
+from parallel_eplus.experiments.sweep_spec import SweepSpec, evaluates, trial_name
 from parallel_eplus.runs.policy_files import MODEL_FILE, saves_newest_first
 
 log = logging.getLogger(__name__)
+
+EXPERIMENT = "experiment"  # runs/<sweep>/_tune/experiment/: one Tune experiment per sweep, continued on a re-run
 
 
 @dataclass
@@ -42,13 +45,14 @@ class TrialOutcome:
     """How one trial ended, as the sweep reports it."""
 
     name: str
-    state: str  # finished, failed, stopped, pending
+    state: str  # finished, failed, stopped, early-stopped (by the scheduler), pending
     run_dir: Path
     timesteps: int = 0
     in_band_pct: float = float("nan")
     power_kw: float = float("nan")
     reward: float = float("nan")
     error: str = ""
+    evaluation: dict = field(default_factory=dict)  # its best evaluation (sweep_rank.trial_evaluation)
 
 
 def _quiet_tune_hints(record: logging.LogRecord) -> bool:
@@ -70,11 +74,15 @@ def _param_space(spec: SweepSpec) -> dict:
     return space
 
 
-def _claim(spec: SweepSpec, root: Path, tb_root: Path, overwrite: bool) -> None:
-    """A sweep's folder holds one sweep: the same spec continues it, another is refused (or moved aside)."""
+def _claim(spec: SweepSpec, root: Path, tb_root: Path, overwrite: bool) -> bool:
+    """A sweep's folder holds one sweep: the same spec continues it, another is refused (or moved aside).
+    True: the same spec with the same steps (its Tune experiment is restored as it was)."""
     saved = root / "sweep.json"
+    same = False
     if saved.is_file() and not overwrite:
         old, new = json.loads(saved.read_text()), json.loads(spec.to_json())
+        old.setdefault("scheduler", None)  # sweeps from before [scheduler]
+        same = old == new
         old["base"].pop("timesteps", None), new["base"].pop("timesteps", None)
         if old != new:
             raise RunExistsError(
@@ -92,6 +100,7 @@ def _claim(spec: SweepSpec, root: Path, tb_root: Path, overwrite: bool) -> None:
         raise RunExistsError(f"{root} exists and is not a sweep's folder: use another name, or --overwrite")
     root.mkdir(parents=True, exist_ok=True)
     io.write_text(saved, spec.to_json())
+    return same
 
 
 def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool = False) -> list[TrialOutcome]:
@@ -105,13 +114,14 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
     from ray.tune.logger import CSVLoggerCallback, JsonLoggerCallback
 
     from parallel_eplus.envs.ray_session import connect
+    from parallel_eplus.experiments.tune_schedulers import concurrency, make_scheduler
     from parallel_eplus.experiments.tune_trial import TrialRun
 
     root = Path(spec.runs_dir).resolve() / spec.name
     tb_root = Path(spec.tensorboard_dir).resolve() / spec.name
     if spec.search is not None and importlib.util.find_spec("optuna") is None:
         raise ValueError("a [search] needs Optuna: .venv/bin/pip install optuna (a grid or seeds do not)")
-    _claim(spec, root, tb_root, overwrite)
+    same = _claim(spec, root, tb_root, overwrite)
     base_workers = int(spec.base.get("workers", os.cpu_count() or 1))
     varied = spec.varied
     numbered = spec.search is not None
@@ -134,20 +144,30 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
     started = connect(ray_address, os.cpu_count() or 1)
     old_term = signal.signal(signal.SIGTERM, lambda *_: os.kill(os.getpid(), signal.SIGINT))  # Tune's graceful stop
     try:
-        tuner = tune.Tuner(
-            trainable,
-            param_space=_param_space(spec),
-            tune_config=tune.TuneConfig(
-                num_samples=spec.search.samples if spec.search else 1, search_alg=search_alg,
-                trial_name_creator=name_of, trial_dirname_creator=name_of, reuse_actors=False,
-            ),
-            run_config=tune.RunConfig(
-                name=time.strftime("%Y%m%d-%H%M%S"), storage_path=str(root / "_tune"), verbose=1,
-                failure_config=tune.FailureConfig(max_failures=0),
-                checkpoint_config=tune.CheckpointConfig(checkpoint_at_end=False),
-                callbacks=[JsonLoggerCallback(), CSVLoggerCallback()],
-            ),
-        )  # fmt: skip
+        at_once = concurrency(spec, int(ray.cluster_resources().get("CPU", os.cpu_count() or 1)))
+        log.info("sweep %s: up to %d trial(s) at once", spec.name, at_once)
+        # A grid's trials all exist from the start and queue for cores (the closing table lists those that never
+        # started as pending); a search draws its next trial only when one may start.
+        limit = at_once if spec.search is not None else None
+        experiment = root / "_tune" / EXPERIMENT
+        if same and tune.Tuner.can_restore(experiment):  # the same sweep again: its one Tune experiment goes on
+            tuner = tune.Tuner.restore(str(experiment), trainable, resume_unfinished=True, resume_errored=True)
+        else:  # new, or more steps (finished trials must run again): a new experiment in the same folder
+            tuner = tune.Tuner(
+                trainable,
+                param_space=_param_space(spec),
+                tune_config=tune.TuneConfig(
+                    num_samples=spec.search.samples if spec.search else 1, search_alg=search_alg,
+                    scheduler=make_scheduler(spec), max_concurrent_trials=limit,
+                    trial_name_creator=name_of, trial_dirname_creator=name_of, reuse_actors=False,
+                ),
+                run_config=tune.RunConfig(
+                    name=EXPERIMENT, storage_path=str(root / "_tune"), verbose=1,
+                    failure_config=tune.FailureConfig(max_failures=0),
+                    checkpoint_config=tune.CheckpointConfig(checkpoint_at_end=False),
+                    callbacks=[JsonLoggerCallback(), CSVLoggerCallback()],
+                ),
+            )  # fmt: skip
         grid = tuner.fit()
     finally:
         signal.signal(signal.SIGTERM, old_term)
@@ -159,7 +179,7 @@ def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool =
 def _outcome(result, root: Path) -> TrialOutcome:
     metrics = result.metrics or {}
     name = Path(result.path).name
-    outcome = TrialOutcome(name=name, state="pending", run_dir=root / name)
+    outcome = TrialOutcome(name=name, state="pending", run_dir=root / name, evaluation=trial_evaluation(root / name))
     for key in ("timesteps", "in_band_pct", "power_kw", "reward"):
         if key in metrics:
             setattr(outcome, key, metrics[key])
@@ -167,8 +187,10 @@ def _outcome(result, root: Path) -> TrialOutcome:
         text = str(result.error).strip().splitlines()
         cause = next((ln for ln in text if ln.startswith("RuntimeError: ")), text[-1] if text else "")
         outcome.state, outcome.error = "failed", cause.removeprefix("RuntimeError: ")
-    elif metrics.get("done") and not metrics.get("stopped"):
+    elif metrics.get("done") and not metrics.get("stopped") and metrics.get("finished", True):
         outcome.state = "finished"
+    elif metrics.get("done") and not metrics.get("stopped"):  # Tune marks done the result its scheduler stops at
+        outcome.state = "early-stopped"
     elif metrics.get("training_iteration"):  # stopped by the sweep's stop, or its own process's signal
         outcome.state = "stopped"
         saves = saves_newest_first(outcome.run_dir)  # the stop's checkpoint, after the last reported batch
@@ -178,18 +200,44 @@ def _outcome(result, root: Path) -> TrialOutcome:
 
 
 def format_outcomes(outcomes: list[TrialOutcome], spec: SweepSpec | None = None) -> str:
-    """The sweep's closing table: one line per trial, each failure's cause, and a search's best trial."""
+    """The sweep's closing table: one line per trial (the best marked `<- best`), each failure's cause, and the best
+    trial's configuration as a ready command (written to the sweep's folder too: sweep_rank.write_choice)."""
+    evaluated = spec is not None and evaluates(spec)
     w = max([28] + [len(o.name) for o in outcomes])
-    lines = [f"{'trial':<{w}} {'state':<9} {'steps':>8} {'in band %':>9} {'power kW':>9} {'reward':>7}"]
+    head = f"{'trial':<{w}} {'state':<13} {'steps':>8} {'in band %':>9} {'power kW':>9} {'reward':>7}"
+    lines = [head + (f" {'eval: in band %':>15} {'energy %':>8} {'score':>8} {'at step':>8}" if evaluated else "")]
+    best, how = _best(outcomes, spec)
     for o in outcomes:
-        lines.append(f"{o.name:<{w}} {o.state:<9} {o.timesteps:>8} {o.in_band_pct:>9.2f} {o.power_kw:>9.1f} "
-                     f"{o.reward:>7.3f}")  # fmt: skip
+        line = (f"{o.name:<{w}} {o.state:<13} {o.timesteps:>8} {o.in_band_pct:>9.2f} "
+                f"{o.power_kw:>9.1f} {o.reward:>7.3f}")  # fmt: skip
+        if evaluated:
+            e = o.evaluation or trial_evaluation(o.run_dir)
+            line += (f" {e['eval_in_band_pct']:>15.2f} {e['eval_energy_change_pct']:>+8.2f} {e['eval_score']:>8.2f} "
+                     f"{e['eval_timesteps']:>8}")  # fmt: skip
+        lines.append(line + ("  <- best" if o is best else ""))
     lines += [f"{o.name} failed: {o.error}" for o in outcomes if o.state == "failed"]
-    search = spec.search if spec is not None else None
-    done = [o for o in outcomes if o.state == "finished" and getattr(o, search.metric) == getattr(o, search.metric)] \
-        if search else []  # fmt: skip
-    if done:
-        pick = max if search.mode == "max" else min
-        best = pick(done, key=lambda o: getattr(o, search.metric))
-        lines.append(f"best by {search.metric} ({search.mode}): {best.name}")
+    if best is not None:
+        lines.append(f"best by {how}: {best.name}")
+        if (best.run_dir / "config.json").is_file():
+            from parallel_eplus.training.config import TrainConfig
+
+            lines += write_choice(best.run_dir.parent, spec.name, best.run_dir, json.loads(TrainConfig().to_json()))
+            lines.append(f"written: {best.run_dir.parent / 'best.toml'}, {best.run_dir.parent / 'best-command.txt'}")
     return "\n".join(lines)
+
+
+def _best(outcomes: list[TrialOutcome], spec: SweepSpec | None) -> tuple[TrialOutcome | None, str]:
+    """By evaluation when the trials evaluate (their best evaluation's score: eval_target.py), else by a
+    search's metric over its finished trials; none for a grid or seeds without evaluation."""
+    if spec is not None and evaluates(spec):
+        target = spec.base.get("evaluation.target")
+        rows = [{"o": o, **(o.evaluation or trial_evaluation(o.run_dir))} for o in outcomes if o.state != "failed"]
+        pick = best_of(rows, "eval_score", "max")
+        how = f"evaluation (target {target}: met, then lowest energy)" if target else "evaluation (mean reward)"
+        return (pick["o"] if pick else None), how
+    search = spec.search if spec is not None else None
+    if search is None:
+        return None, ""
+    rows = [{"o": o, search.metric: getattr(o, search.metric)} for o in outcomes if o.state == "finished"]
+    pick = best_of(rows, search.metric, search.mode)
+    return (pick["o"] if pick else None), f"{search.metric} ({search.mode})"

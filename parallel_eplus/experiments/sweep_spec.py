@@ -22,7 +22,27 @@ from parallel_eplus.training.config import TrainConfig
 NOT_SWEPT = {"backend", "ray_address", "workers_per_actor", "run_name", "runs_dir", "tensorboard_dir"}
 PATH_KEYS = ("building", "init_from")  # resolved where the sweep starts: a trial runs in a folder of Tune's
 DISTRIBUTIONS = ("uniform", "loguniform", "choice", "randint")
-METRICS = {"in_band_pct": "max", "power_kw": "min", "reward": "max"}
+# The last training batch's (a stochastic policy on one batch), or a trial's best evaluation's (`eval_...`: the
+# frozen policy on the validation weathers; needs `evaluation.every`); eval_score is training/eval_target.py's.
+METRICS = {"in_band_pct": "max", "power_kw": "min", "reward": "max", "eval_score": "max", "eval_in_band_pct": "max",
+           "eval_energy_change_pct": "min", "eval_reward_mean": "max"}  # fmt: skip
+SCHEDULERS = ("asha", "pbt")
+
+
+@dataclass
+class SchedulerSpec:
+    """Ray Tune's trial scheduler over the trials' results (`timesteps` is its clock): ASHA stops the trials
+    that trail the others at each rung; PBT copies the leaders' weights into the trailers and perturbs their
+    `mutations` settings. Both judge by `metric` (default eval_score)."""
+
+    kind: str  # "asha" or "pbt"
+    metric: str = "eval_score"
+    mode: str = ""
+    grace_period: int = 0  # ASHA: env steps before a trial can be stopped; 0: one evaluation's (evaluation.every)
+    reduction_factor: int = 2  # ASHA: 1/this of the trials go on at each rung
+    interval: int = 0  # PBT: env steps between exploits; 0: evaluation.every
+    mutations: dict[str, list] = field(default_factory=dict)  # PBT: key -> values to choose from
+    quantile_fraction: float = 0.25  # PBT: the bottom share of trials copies the top share
 
 
 @dataclass
@@ -44,6 +64,7 @@ class SweepSpec:
     grid: dict[str, list] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=lambda: [0])
     search: SearchSpec | None = None
+    scheduler: SchedulerSpec | None = None
     runs_dir: str = "runs"
     tensorboard_dir: str = "tensorboard_logs"
 
@@ -107,10 +128,10 @@ def load_spec(path: str | Path) -> SweepSpec:
         raw = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"{path}: not valid TOML ({e})") from None
-    unknown = set(raw) - {"name", "seeds", "train", "grid", "search", "runs_dir", "tensorboard_dir"}
+    unknown = set(raw) - {"name", "seeds", "train", "grid", "search", "scheduler", "runs_dir", "tensorboard_dir"}
     if unknown:
         raise ValueError(f"{path}: unknown section(s) {sorted(unknown)}; a sweep has name, seeds, [train], [grid], "
-                         "[search], runs_dir, tensorboard_dir")  # fmt: skip
+                         "[search], [scheduler], runs_dir, tensorboard_dir")  # fmt: skip
     train = _flatten(raw.get("train", {}))
     if isinstance(train.get("reward"), str):  # a reward file, as `train --reward FILE.json` takes
         train |= {f"reward.{k}": v for k, v in asdict(RewardConfig.from_any(train.pop("reward"))).items()}
@@ -125,8 +146,18 @@ def load_spec(path: str | Path) -> SweepSpec:
         if unknown or not space:
             raise ValueError(f"{path}: [search] takes samples, metric, mode and a [search.space] table")
         search = SearchSpec(space=space, **s)
+    scheduler = None
+    if "scheduler" in raw:
+        s = dict(raw["scheduler"])
+        kind = s.pop("type", None)
+        mutations = _flatten(s.pop("mutations", {}))
+        fields = {"metric", "mode", "grace_period", "reduction_factor", "interval", "quantile_fraction"}
+        if kind not in SCHEDULERS or set(s) - fields:
+            raise ValueError(f"{path}: [scheduler] takes type (asha or pbt), metric, mode, grace_period, "
+                             "reduction_factor (ASHA), interval and a [scheduler.mutations] table (PBT)")  # fmt: skip
+        scheduler = SchedulerSpec(kind=kind, mutations=mutations, **s)
     spec = SweepSpec(
-        name=str(raw.get("name") or path.stem), base=train, grid=grid, search=search,
+        name=str(raw.get("name") or path.stem), base=train, grid=grid, search=search, scheduler=scheduler,
         seeds=list(raw.get("seeds", [train.get("seed", 0)])), runs_dir=raw.get("runs_dir", "runs"),
         tensorboard_dir=raw.get("tensorboard_dir", "tensorboard_logs"),
     )  # fmt: skip
@@ -158,13 +189,58 @@ def check(spec: SweepSpec, where: str = "sweep") -> None:
             if not isinstance(dist, dict) or len(dist) != 1 or next(iter(dist)) not in DISTRIBUTIONS:
                 raise ValueError(f"{where} [search.space]: {key} takes one of {', '.join(DISTRIBUTIONS)}, e.g. "
                                  f"{key} = {{ loguniform = [1e-4, 1e-2] }}")  # fmt: skip
-        if s.metric not in METRICS:
-            raise ValueError(f"{where} [search]: metric is one of {', '.join(METRICS)}")
-        s.mode = s.mode or METRICS[s.metric]
-        if s.mode not in ("max", "min") or s.samples < 1:
-            raise ValueError(f"{where} [search]: mode is max or min, samples at least 1")
+        _check_metric(spec, s, f"{where} [search]")
+        if s.samples < 1:
+            raise ValueError(f"{where} [search]: samples at least 1")
+    if spec.scheduler is not None:
+        _check_scheduler(spec, where)
     spec.base = _resolved_paths(spec.base)
     spec.grid = {k: [_resolved_paths({k: v})[k] for v in vs] for k, vs in spec.grid.items()}
+
+
+def evaluates(spec: SweepSpec) -> bool:
+    """Whether every trial evaluates its policy during training (`evaluation.every` in [train])."""
+    return bool(spec.base.get("evaluation.every"))
+
+
+def _check_metric(spec: SweepSpec, s, where: str) -> None:
+    if s.metric not in METRICS:
+        raise ValueError(f"{where}: metric is one of {', '.join(METRICS)}")
+    if s.metric.startswith("eval_") and not evaluates(spec):
+        raise ValueError(f"{where}: metric {s.metric} is an evaluation's: set evaluation.every in [train] "
+                         "(e.g. [train.evaluation] every = 4096)")  # fmt: skip
+    s.mode = s.mode or METRICS[s.metric]
+    if s.mode not in ("max", "min"):
+        raise ValueError(f"{where}: mode is max or min")
+
+
+def _check_scheduler(spec: SweepSpec, where: str) -> None:
+    s = spec.scheduler
+    _check_metric(spec, s, f"{where} [scheduler]")
+    every = int(spec.base.get("evaluation.every") or 0)
+    s.grace_period = s.grace_period or every
+    s.interval = s.interval or every
+    if s.kind == "asha" and (s.grace_period < 1 or s.reduction_factor < 2):
+        raise ValueError(f"{where} [scheduler]: ASHA takes grace_period >= 1 env steps and reduction_factor >= 2")
+    if s.kind == "pbt":
+        if s.interval < 1 or not s.mutations:
+            raise ValueError(f"{where} [scheduler]: PBT takes interval >= 1 env steps and a [scheduler.mutations] "
+                             'table, e.g. "trpo.target_kl" = [0.005, 0.01, 0.02]')  # fmt: skip
+        _check_keys(s.mutations, f"{where} [scheduler.mutations]")
+        from parallel_eplus.training.resume_settings import MUTABLE_KEYS
+
+        fixed = sorted(set(s.mutations) - set(MUTABLE_KEYS))
+        if fixed:
+            raise ValueError(f"{where} [scheduler.mutations]: PBT can change {', '.join(MUTABLE_KEYS)} mid-run, not "
+                             f"{', '.join(fixed)} (they change the network or the buffers)")  # fmt: skip
+        if spec.grid or spec.search:
+            raise ValueError(f"{where}: PBT copies weights between trials of one configuration: give it seeds and "
+                             "[scheduler.mutations], not a [grid] or [search]")  # fmt: skip
+        if not 0 < s.quantile_fraction <= 0.5:
+            raise ValueError(f"{where} [scheduler]: quantile_fraction is within (0, 0.5]")
+        for key, values in s.mutations.items():
+            if not isinstance(values, list) or not values:
+                raise ValueError(f"{where} [scheduler.mutations]: {key} takes a list of values")
 
 
 def seeds_spec(cfg: TrainConfig, seeds: list[int]) -> SweepSpec:
@@ -211,6 +287,8 @@ def trial_name(config: dict[str, Any], varied: list[str], prefix: str | None = N
         if isinstance(value, str) and "/" in value:  # a file: its name
             value = Path(value).stem
         text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return text  # a number keeps its sign: log_std_init--0.5
         return re.sub(r"[^A-Za-z0-9.+-]+", "-", text).strip("-") or "x"
 
     parts = [f"{key.split('.')[-1]}-{shown(config[key])}" for key in varied if key in config]

@@ -23,7 +23,14 @@ from pathlib import Path
 import pandas as pd
 
 from parallel_eplus.engine import pipe_sweep
-from parallel_eplus.runs.run_files import MODEL_FILE, read_status, saves_newest_first
+from parallel_eplus.runs.run_files import (
+    MODEL_FILE,
+    TARGET_FILE,
+    latest_evaluation,
+    read_json,
+    read_status,
+    saves_newest_first,
+)
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +55,8 @@ class RunInfo:
     latest: dict[str, dict] = field(default_factory=dict)  # weather -> its latest episode's row of episodes.csv
     note: str = ""  # why the state is what it is, where it was inferred or recorded
     status: dict | None = None
+    evaluation: dict | None = None  # the newest evaluation's means (evaluations.csv; `train --eval-every`)
+    target: dict | None = None  # when it first met its --target (target.json)
 
 
 def find_runs(folder: Path) -> list[Path]:
@@ -161,7 +170,7 @@ def read_run(run_dir: Path, folder: Path | None = None) -> RunInfo:
             wall += max(_age_s(status.get("updated")) or 0.0, 0.0)
     name = run_dir.relative_to(folder).as_posix() if folder and run_dir != Path(folder) else run_dir.name
     return RunInfo(name, run_dir, state, process, steps, planned, episodes, wall, saves[0] if saves else None,
-                   latest, note, status)  # fmt: skip
+                   latest, note, status, latest_evaluation(run_dir), read_json(run_dir / TARGET_FILE))  # fmt: skip
 
 
 def list_runs(folder: Path) -> list[RunInfo]:

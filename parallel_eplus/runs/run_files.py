@@ -12,6 +12,29 @@ from pathlib import Path
 MODEL_FILE = "model.zip"
 STATUS_FILE = "status.json"  # run_status.py
 STATES = ("running", "finished", "stopped", "failed")
+EVALUATIONS_FILE = "evaluations.csv"  # evaluation during training (periodic_eval.py)
+TARGET_FILE = "target.json"  # when the run first met its --target
+BEST_DIR = "best"  # the best-by-evaluation policy: best/model.zip and its statistics
+ALL_WEATHERS = "all"  # evaluations.csv's row of means over the evaluation weathers
+
+
+def latest_evaluation(run_dir: Path) -> dict | None:
+    """The newest evaluation's means over its weathers (evaluations.csv), or None."""
+    import pandas as pd
+
+    try:
+        df = pd.read_csv(Path(run_dir) / EVALUATIONS_FILE)
+    except (OSError, ValueError):
+        return None
+    rows = df[df["weather"] == ALL_WEATHERS] if "weather" in df else df.iloc[0:0]
+    return rows.iloc[-1].to_dict() if len(rows) else None
+
+
+def read_json(path: Path) -> dict | None:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
 
 
 def saves_newest_first(run_dir: Path) -> list[Path]:

@@ -21,6 +21,7 @@ from parallel_eplus.learning.settings import (
     SACSettings,
     TRPOSettings,
 )
+from parallel_eplus.training.eval_target import EvalSettings
 
 STEPS_PER_YEAR = 365 * STEPS_PER_DAY
 
@@ -74,6 +75,7 @@ class TrainConfig:
     trpo: TRPOSettings = field(default_factory=TRPOSettings)
     ppo: PPOSettings = field(default_factory=PPOSettings)
     sac: SACSettings = field(default_factory=SACSettings)
+    evaluation: EvalSettings = field(default_factory=EvalSettings)  # --eval-every (training/periodic_eval.py)
     mpc: MPCSettings = field(default_factory=MPCSettings)  # `--algorithm mpc` (learning/model_based/)
 
     def resolved(self) -> TrainConfig:
@@ -95,6 +97,8 @@ class TrainConfig:
             self.time_features |= spec.time_features  # the spec's opt-in observation features
             self.schedule_features |= spec.schedule_features
         parse_weathers(",".join(self.weathers), known if self.building else None)
+        if self.evaluation.weathers:
+            parse_weathers(",".join(self.evaluation.weathers), known if self.building else None)
         if self.workers < 1:
             raise ValueError("--workers must be at least 1")
         if self.batch_size < self.workers:
@@ -116,6 +120,7 @@ class TrainConfig:
         if self.residual_space != "action" and not self.residual_scale:
             raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE (kg/s of demand per unit)")
         self.comfort.check()
+        self.evaluation.check(self.weathers)
         from parallel_eplus.buildings.forecast import ERROR_LEVELS
         from parallel_eplus.buildings.weather_noise import parse_noise
 
@@ -179,6 +184,7 @@ class TrainConfig:
         sac = raw.get("sac", {})
         raw["mpc"] = MPCSettings(**raw.get("mpc", {}))
         raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
+        raw["evaluation"] = EvalSettings(**raw.get("evaluation", {}))  # runs from before it have none
         return cls(**raw)
 
 

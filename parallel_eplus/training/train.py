@@ -44,13 +44,14 @@ from parallel_eplus.training.callbacks import (
     tensorboard_logger,
 )
 from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.resume_settings import load_kwargs
 
 log = logging.getLogger(__name__)
 
 
-def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
-    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
-    sim = SimulationConfig(
+def sim_config(cfg: TrainConfig) -> SimulationConfig:
+    """What each training worker simulates (the first weather; the workers' shares cycle the others)."""
+    return SimulationConfig(
         weather=cfg.weathers[0],
         model=cfg.model,
         building=cfg.building,
@@ -73,6 +74,11 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         forecast_hours=cfg.forecast_hours,
         forecast_error=cfg.forecast_error,
     )
+
+
+def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
+    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
+    sim = sim_config(cfg)
     shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
         from parallel_eplus.learning.ray_vector_env import RayVectorEnv
@@ -127,6 +133,8 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
         saved.timesteps = cfg.timesteps or saved.timesteps
         saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
         saved.overlap = cfg.overlap
+        if cfg.evaluation.every:  # evaluation may be added to (or changed for) a resumed run
+            saved.evaluation = cfg.evaluation
         cfg = saved
     cfg = cfg.resolved()
     if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
@@ -163,7 +171,7 @@ def _learn(
     try:
         if checkpoint is not None:
             env = read_stats(normalization_file(checkpoint)).wrap(venv)
-            model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu")
+            model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu", **load_kwargs(cfg))
             _load_replay_buffer(model, checkpoint)
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
         else:
@@ -190,6 +198,7 @@ def _learn(
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
             *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.algorithm == "sac" else []),
             status,
+            *_evaluation(cfg, model, env),
             *callbacks,
         ])  # fmt: skip
         try:
@@ -212,6 +221,17 @@ def _learn(
         if bar is not None:
             bar.close()
         venv.close()
+
+
+def _evaluation(cfg: TrainConfig, model, env: VecNormalize) -> list[BaseCallback]:
+    """`--eval-every`: the frozen policy on the validation weathers between batches (training/periodic_eval.py)."""
+    if not cfg.evaluation.every:
+        return []
+    from parallel_eplus.training.periodic_eval import Evaluator, PeriodicEval
+
+    evaluator = Evaluator(cfg.run_dir, cfg.evaluation, sim_config(cfg), cfg.weathers, cfg.workers)
+    return [PeriodicEval(evaluator, (cfg.time_features, cfg.schedule_features),
+                         lambda path: save_checkpoint(model, env, path))]  # fmt: skip
 
 
 def _load_replay_buffer(model, checkpoint: Path) -> None:
