@@ -7,6 +7,8 @@ The top layer: it may import every other folder; nothing imports it.
 from __future__ import annotations
 
 import logging
+import re
+from importlib import metadata
 
 from parallel_eplus.cli.parser import build_parser
 
@@ -32,6 +34,27 @@ def main(argv: list[str] | None = None) -> int:
     except (EnergyPlusError, ValueError, FileNotFoundError, DiskFullError) as e:
         log.error("%s", e.strerror if isinstance(e, DiskFullError) else e)
         return 2
+    except ModuleNotFoundError as e:
+        extra = _extra_for(e.name or "")
+        if extra is None:
+            raise
+        log.error("%s is not installed: pip install 'parallel-eplus[%s]' (scripts/setup.sh installs every extra)", e.name, extra)
+        return 2
     except KeyboardInterrupt:
         log.warning("interrupted")
         return 130
+
+
+def _extra_for(module: str) -> str | None:
+    """The extra (pyproject.toml) whose distribution provides `module`, so a command run in a lighter install (a
+    controller server's `[serve]`) says what to install instead of a traceback; None if no extra has it."""
+    top = module.split(".")[0]
+    try:
+        requirements = metadata.requires("parallel-eplus") or []
+    except metadata.PackageNotFoundError:
+        return None
+    for requirement in requirements:  # e.g. 'torch==2.13.0; extra == "train"'
+        found = re.match(r"\s*([A-Za-z0-9_.-]+).*;.*extra\s*==\s*[\"'](\w+)[\"']", requirement)
+        if found and found[1].lower().replace("-", "_").removesuffix("_lbnl") == top:  # pyenergyplus-lbnl
+            return found[2]
+    return None
