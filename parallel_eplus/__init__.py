@@ -1,7 +1,8 @@
 """Reinforcement-learning control of a data center's cooling against parallel EnergyPlus simulations.
 
 Importing the package registers `parallel_eplus/DataCenter-v0` (with Gymnasium: the `train` extra); everything else
-loads on first use, so the EnergyPlus-side process (which imports `parallel_eplus.buildings.model`) stays small and starts fast.
+loads on first use, so the EnergyPlus-side process (which imports `parallel_eplus.buildings.model`) stays small and
+starts fast.
 """
 
 ENV_ID = "parallel_eplus/DataCenter-v0"

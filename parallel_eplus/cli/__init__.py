@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
         extra = _extra_for(e.name or "")
         if extra is None:
             raise
-        log.error("%s is not installed: pip install 'parallel-eplus[%s]' (scripts/setup.sh installs every extra)", e.name, extra)
+        log.error("%s is not installed: pip install 'parallel-eplus[%s]' (setup.sh installs all)", e.name, extra)
         return 2
     except KeyboardInterrupt:
         log.warning("interrupted")
