@@ -7,9 +7,8 @@ The top layer: it may import every other folder; nothing imports it.
 from __future__ import annotations
 
 import logging
-import re
-from importlib import metadata
 
+from parallel_eplus.cli import extras
 from parallel_eplus.cli.parser import build_parser
 
 log = logging.getLogger("parallel_eplus")
@@ -25,6 +24,10 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
+    needs = getattr(args, "needs", "train")  # every command but `serve`, `export` and `clean` runs the training stack
+    if (absent := extras.missing(needs)) is not None:
+        log.error("%s", extras.install_hint(absent, needs))
+        return 2
     from parallel_eplus.errors import EnergyPlusError, Interrupts
     from parallel_eplus.io import DiskFullError
 
@@ -35,26 +38,10 @@ def main(argv: list[str] | None = None) -> int:
         log.error("%s", e.strerror if isinstance(e, DiskFullError) else e)
         return 2
     except ModuleNotFoundError as e:
-        extra = _extra_for(e.name or "")
-        if extra is None:
+        if (extra := extras.extra_for(e.name or "")) is None:
             raise
-        log.error("%s is not installed: pip install 'parallel-eplus[%s]' (setup.sh installs all)", e.name, extra)
+        log.error("%s", extras.install_hint(e.name, extra))
         return 2
     except KeyboardInterrupt:
         log.warning("interrupted")
         return 130
-
-
-def _extra_for(module: str) -> str | None:
-    """The extra (pyproject.toml) whose distribution provides `module`, so a command run in a lighter install (a
-    controller server's `[serve]`) says what to install instead of a traceback; None if no extra has it."""
-    top = module.split(".")[0]
-    try:
-        requirements = metadata.requires("parallel-eplus") or []
-    except metadata.PackageNotFoundError:
-        return None
-    for requirement in requirements:  # e.g. 'torch==2.13.0; extra == "train"'
-        found = re.match(r"\s*([A-Za-z0-9_.-]+).*;.*extra\s*==\s*[\"'](\w+)[\"']", requirement)
-        if found and found[1].lower().replace("-", "_").removesuffix("_lbnl") == top:  # pyenergyplus-lbnl
-            return found[2]
-    return None
