@@ -8,41 +8,25 @@ drives several, writing every action before reading any observation.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import shutil
 import tempfile
-import zlib
 from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.forecast import Forecaster
-from parallel_eplus.buildings.model import (
-    ACTIONS,
-    control_model,
-    it_load_schedule,
-    schedule_features,
-    time_features,
-)
-from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
+from parallel_eplus.buildings.rbc import RuleBasedController
 from parallel_eplus.buildings.reward import reward
-from parallel_eplus.buildings.spec import OBJECTIVES
-from parallel_eplus.buildings.weather import resolve_weather, weather_label
-from parallel_eplus.buildings.weather_noise import parse_noise, perturb_epw
+from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
-from parallel_eplus.engine.config import SimulationConfig, forecast_specs, policy_action_names
-from parallel_eplus.engine.episode import (
-    StepRecorder,
-    err_tail,
-    link_or_copy,
-    prune_episodes,
-    write_records,
-)
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import StepRecorder, err_tail, prune_episodes, write_records
+from parallel_eplus.engine.observation import Observer
 from parallel_eplus.engine.prepared import EpisodePlan, EpisodeStarter, PreparedEpisode
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
+from parallel_eplus.engine.setup import WorkerSetup
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
 log = logging.getLogger(__name__)
@@ -70,48 +54,16 @@ class Simulation:
         self.prepared: PreparedEpisode | None = None
         self._from_prepared = False  # the running episode was prepared ahead (a failed start-up is retried cold)
         self.name = name
-        self.building = load_building(config.building)  # None: the data center, whose variants `model` names
-        self.model = self.building.control(config.model) if config.building else control_model(config.model)
-        self.sensor_names = self.building.sensor_names
-        self.obs_low, self.obs_high = (np.array(b, dtype=np.float32) for b in self.building.bounds())
-        self._lows, self._highs = (tuple(b.tolist()) for b in (self.obs_low, self.obs_high))  # float32, as floats
-        self.comfort = self.building.comfort  # zones, band, when it applies, energy (buildings/comfort.py)
-        if config.objective and config.objective != self.comfort.objective:
-            if config.objective not in OBJECTIVES:
-                raise ValueError(f"objective {config.objective!r} is not one of {list(OBJECTIVES)}")
-            if self.comfort.kpis is None and config.objective != "energy":
-                raise ValueError(f"objective {config.objective!r} needs the building's HVAC signals ([kpis] hvac)")
-            self.comfort = dataclasses.replace(self.comfort, objective=config.objective)
-        self._observed = len(self.building.observed)  # the sensors after these are read for the figures only
-        self._hidden = self.building.hidden
-        self._temps = self.comfort.temperatures
-        self.elements = self.model.actions
-        self.idf = Path(config.idf) if config.idf else self.model.idf
-        if not self.idf.is_file():
-            raise FileNotFoundError(f"model file not found: {self.idf}")
-        self._schedule = it_load_schedule(self.idf) if config.schedule_features else None
-        self.noise = parse_noise(config.weather_noise)  # a malformed option fails before anything is spawned
-        self.forecasts = forecast_specs(config)
+        s = self.setup = WorkerSetup.resolve(config, weathers)  # every check before anything is spawned
+        self.building, self.model, self.comfort, self.idf = s.building, s.model, s.comfort, s.idf
+        self.elements, self.observer, self.sensor_names = s.elements, Observer(s), s.building.sensor_names
+        self._temps, self.noise, self.forecasts = s.comfort.temperatures, s.noise, s.forecasts
+        self.weathers, self.weather_paths, self.steps_per_episode = s.weathers, s.weather_paths, s.steps_per_episode
+        self.low, self.high = tuple(e.low for e in s.elements), tuple(e.high for e in s.elements)
+        self.initial_action, self.policy_names = s.initial_action, s.policy_names
+        self._demand = config.residual_scale > 0 and config.residual_space == "demand"
         self._forecaster: Forecaster | None = None
         self.weather_params: dict = {}  # this episode's seed and noise parameters, for its records
-        self.weathers = weathers or [config.weather]
-        named = self.building.spec.weathers  # the spec's short names, then codes and .epw paths
-        self.weather_paths = [named.get(w) or resolve_weather(w) for w in self.weathers]  # fail before spawning
-        self.steps_per_episode = config.run_days * self.building.steps_per_day
-        if config.warmup_days >= config.run_days and config.warmup_days:
-            raise ValueError(f"warmup_days ({config.warmup_days}) must be fewer than run_days ({config.run_days})")
-        self.low = tuple(e.low for e in self.elements)
-        self.high = tuple(e.high for e in self.elements)
-        self.initial_action = np.array(config.initial_action or [e.initial for e in self.elements], float)
-        if len(self.initial_action) != len(self.low):
-            raise ValueError(f"initial_action needs {len(self.low)} values in physical units")
-        if config.residual_scale < 0:
-            raise ValueError("residual_scale must be >= 0")
-        if config.residual_scale and self.elements != ACTIONS:
-            n = len(self.elements)
-            raise ValueError(f"residual control corrects all four actions; model {config.model!r} has {n}")
-        self.policy_names = policy_action_names(config)  # what `send` takes; `action_names`: what EnergyPlus gets
-        self._demand = config.residual_scale > 0 and config.residual_space == "demand"
         self._tmp = None
         if config.output_dir is None:
             self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
@@ -128,11 +80,7 @@ class Simulation:
         self.weather = self.weathers[0]
         self.weather_index = 0
         self.plan: EpisodePlan | None = None
-        building = ["--building", str(self.building.spec.path)] if config.building else []
-        self._starter = EpisodeStarter(self.output_dir, self.idf, config, [
-            "--model", self.model.name, *building, "--steps", str(self.steps_per_episode),
-            "--initial-action", *map(str, self.initial_action),
-        ])  # fmt: skip
+        self._starter = EpisodeStarter(self.output_dir, self.idf, config, s.process_args())
         self._prepare_due = False  # the next episode is prepared at the first action (reset returns first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
@@ -202,11 +150,7 @@ class Simulation:
         self.records = StepRecorder(self.action_names, self.sensor_names)
         self._action = self.initial_action.tolist()
         self.last_summary = None
-        if self.config.residual_scale:  # a fresh integral state per episode
-            target = self.config.rbc_target_c
-            # Its feed-forward reads the IT schedule of the model actually run, as the schedule features do.
-            rbc = {"schedule": it_load_schedule(self.idf)} | ({} if target is None else {"target_c": target})
-            self.base = RuleBasedController(RBCConfig(**rbc))
+        self.base = self.setup.residual_base()  # a fresh integral state per episode
 
     def prepare(self, plan: EpisodePlan | None = None) -> None:
         """Start the next episode (`plan`, default: the rotation's next) in the spare process, to be swapped in
@@ -291,55 +235,13 @@ class Simulation:
 
     # -- internals ----------------------------------------------------------------------------
     def _episode_weather(self, plan: EpisodePlan, episode_dir: Path, number: int) -> tuple[Path, tuple]:
-        """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file), and
-        (its seed and noise parameters for its records, its forecasts, which read that same file)."""
-        seed = plan.seed
-        if seed is None and self.config.fixed_seed:
-            seed = self.config.seed
-        if seed is None:
-            seed = int(np.random.SeedSequence([self.config.seed, zlib.crc32(self.name.encode()), number])
-                       .generate_state(1)[0])  # fmt: skip
-        target = episode_dir / plan.epw.name
-        if self.noise is None:
-            link_or_copy(plan.epw, target)
-            params = {}
-        else:
-            params = {"weather_seed": seed, **perturb_epw(plan.epw, target, self.noise, seed)}
-        if self.forecasts and any(f.error for f in self.forecasts):
-            params.setdefault("weather_seed", seed)
-        per_hour, days = self.building.steps_per_day // 24, self.config.run_days
-        forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
-        return target, (params, forecaster)
+        return self.setup.episode_weather(plan, episode_dir, number, self.name)
 
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
-        if len(values) != pipe.TIME_FIELDS + len(self.sensor_names):
+        if len(values) != self.observer.width:
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
-        # Per step, Python floats are cheaper than numpy scalars and small-array ops (docs/speed.md)
-        fields = values.tolist()
-        sensed = fields[pipe.TIME_FIELDS :]
-        info = dict(zip(self.sensor_names, sensed, strict=True))
-        info["time"] = pipe.frame_time(fields)
-        info["weather"] = self.weather
-        if self._hidden:  # thermostat schedules, HVAC meters: in `info` and the step table, not the observation
-            raw = values[pipe.TIME_FIELDS : pipe.TIME_FIELDS + self._observed]
-            observed = sensed[: self._observed]
-        else:
-            raw, observed = values[pipe.TIME_FIELDS :], sensed
-        obs = raw.astype(np.float32)
-        for lo, v, hi in zip(self._lows, observed, self._highs, strict=True):
-            if not lo <= v <= hi:  # (NaN too)
-                info["raw_observation"] = raw.copy()
-                obs = np.clip(obs, self.obs_low, self.obs_high)
-                break
-        if self.config.time_features or self._schedule or self._forecaster:
-            extra = time_features(info["time"]) if self.config.time_features else ()
-            if self._schedule:
-                extra += schedule_features(info["time"], self._schedule)
-            if self._forecaster:  # the spec's forecasts, then --forecast's
-                extra += self._forecaster(info["time"])
-            obs = np.concatenate([obs, np.array(extra, np.float32)])
-        self._info, self._sensed = info, sensed
-        return obs, info
+        obs, self._info, self._sensed = self.observer(values, self.weather, self._forecaster)
+        return obs, self._info
 
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
         """The frame awaited next, by `self.deadline` (set `limit_s` after the launch or the action)."""
@@ -378,24 +280,10 @@ class Simulation:
     def _write_records(self, complete: bool, prune: bool = True) -> None:
         if self.records is None or self.episode_dir is None:
             return
-        extra = {
-            "episode": self.episode,
-            "worker": self.name,
-            "weather": weather_label(self.weather),
-            "model": self.model.name,
-            "run_days": self.config.run_days,
-            "complete": complete,
-            **self.weather_params,
-        }
-        if self.config.building:  # what `plot` reads the episode's signals from (none: the data center)
-            extra["building"] = str(self.building.spec.path)
+        extra = {"episode": self.episode, "worker": self.name, "weather": weather_label(self.weather),
+                 "complete": complete, **self.weather_params}  # fmt: skip
         steps = self.records.frame()
-        scored = None
-        if self.config.warmup_days:  # a test period: its figures leave out the warm-up before it
-            scored = steps.iloc[self.config.warmup_days * self.building.steps_per_day :]
-            if len(scored):
-                extra |= {"warmup_days": self.config.warmup_days, "period_start": str(scored["time"].iloc[0]),
-                          "period_end": str(scored["time"].iloc[-1])}  # fmt: skip
+        scored = self.setup.scored_steps(steps, extra)
         self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored)
         self.records = None
         if prune:

@@ -1,0 +1,148 @@
+"""What every episode of one worker shares, resolved once from its config and building before anything is spawned.
+
+The model variant and its IDF, the sensors and their bounds, the comfort signals under the run's objective, the
+action elements and their bounds, the weathers, the weather noise and forecasts: each checked here, so a bad option
+fails in the learner with a clear message rather than in a worker's EnergyPlus process.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from parallel_eplus.buildings.building import Building, load_building
+from parallel_eplus.buildings.comfort import Comfort
+from parallel_eplus.buildings.forecast import Forecaster, ForecastSpec
+from parallel_eplus.buildings.model import ACTIONS, ActionElement, ControlModel, control_model, it_load_schedule
+from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
+from parallel_eplus.buildings.spec import OBJECTIVES
+from parallel_eplus.buildings.weather import resolve_weather
+from parallel_eplus.buildings.weather_noise import parse_noise, perturb_epw
+from parallel_eplus.engine.config import SimulationConfig, forecast_specs, policy_action_names
+from parallel_eplus.engine.episode import link_or_copy
+from parallel_eplus.engine.prepared import EpisodePlan
+
+if TYPE_CHECKING:  # the EnergyPlus side imports no pandas (tests/test_packaging.py)
+    import pandas as pd
+
+
+@dataclass(frozen=True)
+class WorkerSetup:
+    """One worker's fixed facts (`resolve` checks them); `Simulation` reads its hot-path ones as attributes."""
+
+    config: SimulationConfig
+    building: Building
+    model: ControlModel
+    comfort: Comfort  # zones, band, when it applies, energy under the run's objective (buildings/comfort.py)
+    idf: Path
+    obs_low: np.ndarray  # float32
+    obs_high: np.ndarray
+    observed: int  # the sensors after these are read for the figures only (thermostat schedules, HVAC meters)
+    schedule: object | None  # the IT-load schedule, for the schedule features
+    noise: object | None  # the weather noise (buildings/weather_noise.py)
+    forecasts: tuple[ForecastSpec, ...]
+    weathers: list[str]
+    weather_paths: list[Path]
+    steps_per_episode: int
+    initial_action: np.ndarray  # physical units
+    policy_names: tuple[str, ...]  # what `Simulation.send` takes; `action_names`: what EnergyPlus gets
+
+    @property
+    def elements(self) -> tuple[ActionElement, ...]:
+        return self.model.actions
+
+    def process_args(self) -> list[str]:
+        """The EnergyPlus-side program's arguments that every episode of this worker shares."""
+        building = ["--building", str(self.building.spec.path)] if self.config.building else []
+        return ["--model", self.model.name, *building, "--steps", str(self.steps_per_episode),
+                "--initial-action", *map(str, self.initial_action)]  # fmt: skip
+
+    def residual_base(self) -> RuleBasedController | None:
+        """With `residual_scale`, the rule-based controller a residual action corrects (one per episode: it keeps an
+        integral state); its feed-forward reads the IT schedule of the model actually run, as the schedule features
+        do. None without."""
+        if not self.config.residual_scale:
+            return None
+        target = self.config.rbc_target_c
+        rbc = {"schedule": it_load_schedule(self.idf)} | ({} if target is None else {"target_c": target})
+        return RuleBasedController(RBCConfig(**rbc))
+
+    def scored_steps(self, steps: pd.DataFrame, extra: dict) -> pd.DataFrame | None:
+        """The steps an episode's figures count (a test period leaves out its warm-up; None: all), adding to `extra`
+        (its summary's fields) the model, run length, building and period."""
+        config = self.config
+        extra |= {"model": self.model.name, "run_days": config.run_days}
+        if config.building:  # what `plot` reads the episode's signals from (none: the data center)
+            extra["building"] = str(self.building.spec.path)
+        if not config.warmup_days:
+            return None
+        scored = steps.iloc[config.warmup_days * self.building.steps_per_day :]
+        if len(scored):
+            extra |= {"warmup_days": config.warmup_days, "period_start": str(scored["time"].iloc[0]),
+                      "period_end": str(scored["time"].iloc[-1])}  # fmt: skip
+        return scored
+
+    @classmethod
+    def resolve(cls, config: SimulationConfig, weathers: list[str] | None = None) -> WorkerSetup:
+        building = load_building(config.building)  # None: the data center, whose variants `model` names
+        model = building.control(config.model) if config.building else control_model(config.model)
+        comfort = building.comfort
+        if config.objective and config.objective != comfort.objective:
+            if config.objective not in OBJECTIVES:
+                raise ValueError(f"objective {config.objective!r} is not one of {list(OBJECTIVES)}")
+            if comfort.kpis is None and config.objective != "energy":
+                raise ValueError(f"objective {config.objective!r} needs the building's HVAC signals ([kpis] hvac)")
+            comfort = dataclasses.replace(comfort, objective=config.objective)
+        idf = Path(config.idf) if config.idf else model.idf
+        if not idf.is_file():
+            raise FileNotFoundError(f"model file not found: {idf}")
+        weathers = weathers or [config.weather]
+        named = building.spec.weathers  # the spec's short names, then codes and .epw paths
+        if config.warmup_days >= config.run_days and config.warmup_days:
+            raise ValueError(f"warmup_days ({config.warmup_days}) must be fewer than run_days ({config.run_days})")
+        elements = model.actions
+        initial = np.array(config.initial_action or [e.initial for e in elements], float)
+        if len(initial) != len(elements):
+            raise ValueError(f"initial_action needs {len(elements)} values in physical units")
+        if config.residual_scale < 0:
+            raise ValueError("residual_scale must be >= 0")
+        if config.residual_scale and elements != ACTIONS:
+            raise ValueError(f"residual control corrects all four actions; model {config.model!r} has {len(elements)}")
+        low, high = (np.array(b, dtype=np.float32) for b in building.bounds())
+        return cls(
+            config, building, model, comfort, idf, low, high, len(building.observed),
+            it_load_schedule(idf) if config.schedule_features else None,
+            parse_noise(config.weather_noise),  # a malformed option fails before anything is spawned
+            tuple(forecast_specs(config)), weathers,
+            [named.get(w) or resolve_weather(w) for w in weathers],  # fail before spawning
+            config.run_days * building.steps_per_day, initial, tuple(policy_action_names(config)),
+        )  # fmt: skip
+
+    def episode_weather(self, plan: EpisodePlan, episode_dir: Path, number: int, worker: str) -> tuple[Path, tuple]:
+        """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file), and
+        (its seed and noise parameters for its records, its forecasts, which read that same file).
+
+        The seed: the plan's, else the config's with `fixed_seed`, else drawn from the config's seed, the worker's
+        name and the episode's number (the same episode gets the same year however it was started)."""
+        seed, config = plan.seed, self.config
+        if seed is None and config.fixed_seed:
+            seed = config.seed
+        if seed is None:
+            seed = int(np.random.SeedSequence([config.seed, zlib.crc32(worker.encode()), number])
+                       .generate_state(1)[0])  # fmt: skip
+        target = episode_dir / plan.epw.name
+        if self.noise is None:
+            link_or_copy(plan.epw, target)
+            params = {}
+        else:
+            params = {"weather_seed": seed, **perturb_epw(plan.epw, target, self.noise, seed)}
+        if self.forecasts and any(f.error for f in self.forecasts):
+            params.setdefault("weather_seed", seed)
+        per_hour, days = self.building.steps_per_day // 24, config.run_days
+        forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
+        return target, (params, forecaster)
