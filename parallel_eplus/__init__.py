@@ -1,18 +1,22 @@
 """Reinforcement-learning control of a data center's cooling against parallel EnergyPlus simulations.
 
-Importing the package registers `parallel_eplus/DataCenter-v0`; everything else loads on first use,
-so the EnergyPlus-side process (which imports `parallel_eplus.buildings.model`) stays small and starts fast.
+Importing the package registers `parallel_eplus/DataCenter-v0` (with Gymnasium: the `train` extra); everything else
+loads on first use, so the EnergyPlus-side process (which imports `parallel_eplus.buildings.model`) stays small and
+starts fast.
 """
-
-from gymnasium.envs.registration import register, registry
 
 ENV_ID = "parallel_eplus/DataCenter-v0"
 
 BUILDING_ENV_ID = "parallel_eplus/Building-v0"  # the same env; pass building=SPEC
 
-for _id in (ENV_ID, BUILDING_ENV_ID):
-    if _id not in registry:
-        register(id=_id, entry_point="parallel_eplus.envs.env:EnergyPlusEnv", disable_env_checker=True)
+try:  # a controller server's install (`pip install parallel-eplus[serve]`) has no Gymnasium and needs no env
+    from gymnasium.envs.registration import register, registry
+except ModuleNotFoundError:
+    pass
+else:
+    for _id in (ENV_ID, BUILDING_ENV_ID):
+        if _id not in registry:
+            register(id=_id, entry_point="parallel_eplus.envs.env:EnergyPlusEnv", disable_env_checker=True)
 
 _LAZY = {
     "EnergyPlusEnv": "envs.env",

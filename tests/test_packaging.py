@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
+import socket
 import subprocess
 import sys
 import sysconfig
+import time
 import tomllib
+import urllib.request
 import zipfile
 from pathlib import Path
 
@@ -79,8 +83,10 @@ def test_spec_file_by_path_or_builtin_name(tmp_path):
         resources.spec_file("datacenter-crc")
 
 
-def _wheel(tmp_path: Path) -> Path:
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
     """Build from a copy of the tracked sources, as a release would, leaving the checkout untouched."""
+    tmp_path = tmp_path_factory.mktemp("wheel")
     src = tmp_path / "src"
     files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
     for name in files:
@@ -99,8 +105,7 @@ def _wheel(tmp_path: Path) -> Path:
 
 
 @pytest.mark.slow
-def test_wheel_installs_and_runs_an_episode_from_another_directory(tmp_path, no_leaks):
-    wheel = _wheel(tmp_path)
+def test_wheel_installs_and_runs_an_episode_from_another_directory(wheel, tmp_path, no_leaks):
     names = zipfile.ZipFile(wheel).namelist()
     assert "parallel_eplus/buildings/models/2ZoneDataCenterHVAC_wEconomizer_agent.idf" in names
     assert "parallel_eplus/buildings/specs/datacenter-2zone.toml" in names
@@ -143,3 +148,100 @@ def test_the_energyplus_side_process_imports_no_data_or_learning_libraries():
     )
     heavy = {"pandas", "pyarrow", "torch", "ray", "stable_baselines3", "sb3_contrib", "matplotlib", "scipy"}
     assert not heavy & loaded, f"the EnergyPlus side imports {sorted(heavy & loaded)}"
+
+
+def _resolve(requirement: str) -> dict[str, str]:
+    """What `pip install REQUIREMENT` would install into an empty environment: name -> version, from PyPI's
+    metadata (nothing is downloaded beyond it, nothing installed)."""
+    cmd = [sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed", "--quiet", "--report", "-"]
+    run = subprocess.run([*cmd, requirement], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    return {i["metadata"]["name"].lower(): i["metadata"]["version"] for i in json.loads(run.stdout)["install"]}
+
+
+@pytest.mark.slow
+def test_the_serve_extra_installs_a_controller_server_without_the_training_stack(wheel):
+    """`pip install parallel-eplus[serve]` in a plant room: onnxruntime, FastAPI and uvicorn, never torch, SB3 or
+    EnergyPlus (issue 41). The base dependencies are what the server needs; the rest is the `train` extra."""
+    serve = _resolve(f"{wheel}[serve]")
+    assert {"onnxruntime", "fastapi", "uvicorn", "numpy", "parallel-eplus"} <= set(serve), sorted(serve)
+    heavy = {"torch", "stable-baselines3", "sb3-contrib", "pyenergyplus-lbnl", "gymnasium", "pandas", "matplotlib"}
+    assert not heavy & set(serve), f"the serve extra pulls {sorted(heavy & set(serve))}"
+    extras = PYPROJECT["project"]["optional-dependencies"]
+    assert any(r.startswith("torch==") for r in extras["train"]) and "parallel-eplus[train]" in extras["export"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_a_serve_only_install_serves_a_controller_and_other_commands_name_the_extra(wheel, tmp_path):
+    """A fresh venv with only the wheel's [serve] extra (from PyPI): `parallel-eplus serve` answers POST /act with
+    the setpoints the in-process policy gives, with no torch in the process; `simulate` says which extra it needs."""
+    from parallel_eplus.deploy.contract import Contract
+    from parallel_eplus.deploy.export import export, reference_actions
+
+    model = ROOT / "results" / "paper" / "models" / "paper-ca-co-fl-time"
+    controller = tmp_path / "controller"
+    export(model, controller)
+    venv = tmp_path / "plant-room"
+    subprocess.run([sys.executable, "-m", "venv", venv], check=True, capture_output=True)
+    py, env = venv / "bin" / "python", {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    install = [py, "-m", "pip", "install", "-q", "--disable-pip-version-check", f"{wheel}[serve]"]
+    run = subprocess.run(install, capture_output=True, text=True, env=env, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    probe = (
+        "import importlib.util as u; print(*(u.find_spec(m) is None for m in ('torch', 'gymnasium', 'pyenergyplus')))"
+    )
+    missing = subprocess.run([py, "-c", probe], capture_output=True, text=True, env=env, check=True).stdout.split()
+    assert missing == ["True", "True", "True"]
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    simulate = subprocess.run(
+        [venv / "bin" / "parallel-eplus", "simulate", "--days", "1"],
+        cwd=elsewhere, env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert simulate.returncode == 2 and "Traceback" not in simulate.stderr, simulate.stderr[-2000:]
+    assert "is not installed: pip install 'parallel-eplus[train]'" in simulate.stderr
+
+    port = _free_port()
+    log = tmp_path / "server.log"
+    server = subprocess.Popen(
+        [venv / "bin" / "parallel-eplus", "serve", controller, "--port", str(port)],
+        cwd=elsewhere, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT,
+    )  # fmt: skip
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                with urllib.request.urlopen(url + "/health", timeout=5) as r:
+                    health = json.loads(r.read())
+                break
+            except OSError:
+                if server.poll() is not None or time.monotonic() > deadline:
+                    raise AssertionError(f"the server did not start: {log.read_text()}") from None
+                time.sleep(0.2)
+        readings = {
+            "outdoor_temp_c": 12.5, "west_temp_c": 23.1, "east_temp_c": 23.4,
+            "power_w": 95000.0, "it_power_w": 70000.0, "hvac_power_w": 25000.0,
+        }  # fmt: skip
+        body = {"time": "2013-07-02T14:15:00", "sensors": readings}
+        request = urllib.request.Request(
+            url + "/act", data=json.dumps(body).encode(), headers={"Content-Type": "application/json"}
+        )
+        with urllib.request.urlopen(request, timeout=10) as r:
+            setpoints = json.loads(r.read())["setpoints"]
+        with urllib.request.urlopen(url + "/health", timeout=5) as r:
+            health = json.loads(r.read())
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    expected = reference_actions(model / "model.zip", Contract.read(controller).observation(body))[0]
+    assert [s["value"] for s in setpoints.values()] == pytest.approx(expected, abs=1e-5)
+    assert health["loaded"] == {"onnxruntime": True, "torch": False, "stable_baselines3": False}
+    assert (health["act"], health["refused"]) == (1, 0)

@@ -6,13 +6,12 @@ turns them into the names the env, the EnergyPlus-side callback and the rule-bas
 
 from __future__ import annotations
 
-import datetime as dt
 import functools
-import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from parallel_eplus.buildings.clock import SCHEDULE_FEATURES, TIME_FEATURES, schedule_features, time_features  # noqa: F401
 from parallel_eplus.buildings.resources import SOURCE_ROOT as ROOT  # noqa: F401 (scripts and tests in a checkout)
 from parallel_eplus.buildings.resources import model_file
 from parallel_eplus.buildings.spec import BuildingSpec, load_spec
@@ -74,22 +73,7 @@ SENSORS: tuple[Sensor, ...] = tuple(
 SENSOR_NAMES = tuple(s.name for s in SENSORS)
 ZONE_TEMP_NAMES = DEFAULT.reward.temperatures
 
-# Opt-in observation features (off for the paper's reproduction): the IT load follows a fixed daily
-# schedule with steps at 00:00, 06:00, 08:00 and 18:00 that the six sensors cannot anticipate. They
-# describe the start of the 15 minutes the next action controls; all lie in [-1, 1].
-TIME_FEATURES = ("hour_sin", "hour_cos", "weekday_sin", "weekday_cos")
-# The schedule itself, as the operator knows it: the load the next step runs at, the last and the next
-# step in it, and how far away they are (in days). A step's effect on the zones is sharp in time, which
-# hour sine/cosine features describe only through a sharp function a small network learns slowly.
-SCHEDULE_FEATURES = ("it_load", "it_load_last_change", "days_since_change", "it_load_next_change", "days_to_change")
 IT_SCHEDULE = "Data Center CPU Loading Schedule"
-
-
-def time_features(t: dt.datetime) -> tuple[float, ...]:
-    """Hour of day and day of week as sine/cosine pairs, each in [-1, 1]."""
-    hour = 2 * math.pi * (t.hour + t.minute / 60) / 24
-    day = 2 * math.pi * t.weekday() / 7
-    return math.sin(hour), math.cos(hour), math.sin(day), math.cos(day)
 
 
 @functools.cache
@@ -104,15 +88,6 @@ def it_load_schedule(idf: Path = AGENT_IDF, name: str = IT_SCHEDULE) -> tuple[tu
     ordinary = next(d for d in days if "AllOtherDays" in d or "AllDays" in d)
     pairs = re.findall(r"Until:\s*(\d+):(\d+)\s*,\s*([-\d.]+)", ordinary)
     return tuple((int(h) + int(mi) / 60, float(v)) for h, mi, v in pairs)
-
-
-def schedule_features(t: dt.datetime, schedule: tuple[tuple[float, float], ...]) -> tuple[float, ...]:
-    """`SCHEDULE_FEATURES` at time t; every day runs the same schedule, so it wraps at midnight."""
-    hour = t.hour + t.minute / 60
-    i = next((k for k, (until, _) in enumerate(schedule) if hour < until), len(schedule) - 1)
-    start = schedule[i - 1][0] if i else 0.0
-    load, before, after = schedule[i][1], schedule[i - 1][1], schedule[(i + 1) % len(schedule)][1]
-    return load, load - before, (hour - start) / 24, after - load, (schedule[i][0] - hour) / 24
 
 
 def observation_names(with_time: bool = False, with_schedule: bool = False) -> tuple[str, ...]:

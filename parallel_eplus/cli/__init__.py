@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 
+from parallel_eplus.cli import extras
 from parallel_eplus.cli.parser import build_parser
 
 log = logging.getLogger("parallel_eplus")
@@ -23,6 +24,10 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
+    needs = getattr(args, "needs", "train")  # every command but `serve`, `export` and `clean` runs the training stack
+    if (absent := extras.missing(needs)) is not None:
+        log.error("%s", extras.install_hint(absent, needs))
+        return 2
     from parallel_eplus.errors import EnergyPlusError, Interrupts
     from parallel_eplus.io import DiskFullError
 
@@ -31,6 +36,11 @@ def main(argv: list[str] | None = None) -> int:
             return args.func(args)
     except (EnergyPlusError, ValueError, FileNotFoundError, DiskFullError) as e:
         log.error("%s", e.strerror if isinstance(e, DiskFullError) else e)
+        return 2
+    except ModuleNotFoundError as e:
+        if (extra := extras.extra_for(e.name or "")) is None:
+            raise
+        log.error("%s", extras.install_hint(e.name, extra))
         return 2
     except KeyboardInterrupt:
         log.warning("interrupted")

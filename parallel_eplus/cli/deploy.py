@@ -11,12 +11,12 @@ def add_commands(sub) -> None:
     ex = sub.add_parser("export", help="a trained policy as controller.onnx and its contract controller.json")
     ex.add_argument("policy", type=Path, metavar="RUN_OR_MODEL", help="a run folder, its model.zip or a checkpoint")
     ex.add_argument("-o", "--out", type=Path, default=Path("controller"), help="folder to write (default controller)")
-    ex.set_defaults(func=cmd_export)
+    ex.set_defaults(func=cmd_export, needs="export")
     se = sub.add_parser("serve", help="serve an exported controller over HTTP: POST /act, GET /health, GET /contract")
     se.add_argument("controller", type=Path, metavar="DIR", help="a folder written by `export`")
     se.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
     se.add_argument("--port", type=int, default=8000)
-    se.set_defaults(func=cmd_serve)
+    se.set_defaults(func=cmd_serve, needs="serve")  # not `train`: a plant room's install
 
 
 def _needs(extra: str, error: ImportError) -> ValueError:

@@ -268,7 +268,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cl.add_argument("--dry-run", action="store_true", help="only list the stale pipe directories")
     cl.add_argument("--kill", action="store_true", help="also stop leftover EnergyPlus processes (SIGKILL)")
-    cl.set_defaults(func=c.cmd_clean)
+    cl.set_defaults(func=c.cmd_clean, needs=None)
     return parser
 
 

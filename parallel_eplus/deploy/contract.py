@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES, schedule_features, time_features
+from parallel_eplus.buildings.clock import SCHEDULE_FEATURES, TIME_FEATURES, schedule_features, time_features
 
 FORMAT = 1
 CONTRACT_FILE = "controller.json"

@@ -2,7 +2,7 @@
 
 Code travels with the job (Ray's runtime environment), not by "the same checkout at the same path on
 every machine": each node needs only the dependencies installed (`scripts/setup.sh`, or
-`pip install parallel-eplus`), and a change on the driver reaches every node at the next run, so a
+`pip install 'parallel-eplus[train]'`), and a change on the driver reaches every node at the next run, so a
 cluster never runs yesterday's code. The package goes as a `py_modules` entry laid out as its wheel is,
 the built-in buildings' EnergyPlus models inside it (buildings/resources.py finds them there).
 """
