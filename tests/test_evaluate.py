@@ -58,6 +58,10 @@ def test_sweep_writes_table_and_figures(tmp_path, policy, no_leaks):
 
     md = (tmp_path / "results.md").read_text()
     assert "| **Average** |" in md and "TRPO (CA): power (kW)" in md and "%" in md
+    # BOPTEST's figures ([kpis]): the cooling's electricity per m², each over the built-in's on the same weather
+    assert "BOPTEST's figures" in md and "HVAC energy (kWh/m²)" in md
+    assert np.allclose(results.hvac_energy_kwh_m2 * results.floor_area_m2, results.hvac_energy_kwh)
+    assert np.allclose(results[results.controller == BASELINE_LABEL].hvac_energy_kwh_vs_builtin, 1.0)
     for name in ("temperatures.png", "power.png", "west_zone_histogram.png"):
         assert is_png(tmp_path / name), name
     assert len(files) == 5
