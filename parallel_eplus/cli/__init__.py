@@ -1,5 +1,5 @@
 """`parallel-eplus`: the command line. `parser.py` declares it, `commands.py` runs each subcommand
-(`many_runs.py`: seeds, sweeps and the run registry).
+(`evaluate.py` the evaluation, `deploy.py` export and serve, `many_runs.py` seeds, sweeps and the run registry).
 
 The top layer: it may import every other folder; nothing imports it.
 """

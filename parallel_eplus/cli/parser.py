@@ -8,6 +8,7 @@ from pathlib import Path
 
 from parallel_eplus.cli import commands as c
 from parallel_eplus.cli import deploy, many_runs
+from parallel_eplus.cli.evaluate import cmd_evaluate
 
 DESCRIPTION = "Train and evaluate RL controllers for buildings against parallel EnergyPlus simulations."
 
@@ -207,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--controller-url", action="append", metavar="URL",
         help="a controller served by `parallel-eplus serve` (e.g. http://127.0.0.1:8000): each step goes over HTTP",
     )  # fmt: skip
-    ev.set_defaults(func=c.cmd_evaluate)
+    ev.set_defaults(func=cmd_evaluate)
     deploy.add_commands(sub)
 
     be = sub.add_parser("bench", help="measure our overhead against raw EnergyPlus on this machine")
