@@ -149,6 +149,15 @@ def test_a_residual_policy_is_refused_with_the_reason(tmp_path):
     assert not (tmp_path / "out" / "controller.onnx").exists()
 
 
+def test_a_model_based_planner_is_refused_and_its_distilled_policy_named(tmp_path):
+    run = Path(__file__).resolve().parents[1] / "results/model-based/pilot-datacenter-14d/run"
+    for given in (run / "planner", run / "planner" / "planner.pt"):
+        refused = f"model-based planner.*Export its distilled policy instead: parallel-eplus export {run}$"
+        with pytest.raises(ValueError, match=refused):
+            export(given, tmp_path / "out")
+    assert not (tmp_path / "out" / "controller.onnx").exists()
+
+
 def test_a_policy_observing_forecasts_is_refused_with_the_reason(tmp_path):
     import shutil
 

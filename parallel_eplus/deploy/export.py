@@ -29,7 +29,15 @@ PARITY_TOLERANCE = 1e-5  # physical units: the most a setpoint may differ from t
 
 def model_file(path: Path) -> Path:
     """A model.zip, a checkpoint .zip, or a run folder (its model.zip)."""
+    from parallel_eplus.learning.model_based.control import PLANNER_FILE
+
     path = Path(path)
+    if path.name == PLANNER_FILE or (path / PLANNER_FILE).is_file():
+        raise ValueError(
+            f"{path} is a model-based planner: it plans on a learned model of the building with the weather file's "
+            "coming hours, which no controller file can carry. Export its distilled policy instead: "
+            f"parallel-eplus export {path.parent.parent if path.name == PLANNER_FILE else path.parent}"
+        )
     if path.is_dir():
         path = path / "model.zip"
     if not path.is_file():
