@@ -107,3 +107,25 @@ def test_a_worker_killed_mid_plan_ends_the_run_with_a_checkpoint_and_it_resumes(
     final = train(resumed, resume=run, progress=False)
     assert final == run / "model.zip" and (run / "planner" / "planner.pt").is_file()
     assert json.loads((run / "status.json").read_text())["state"] == "finished"
+
+
+@pytest.mark.slow
+def test_eval_every_measures_the_frozen_planner_keeps_the_best_and_records_the_target(tmp_path, no_leaks):
+    import pandas as pd
+
+    from parallel_eplus.runs.run_files import BEST_DIR, EVALUATIONS_FILE, TARGET_FILE
+    from parallel_eplus.training.eval_target import EvalSettings
+
+    evaluation = EvalSettings(every=384, days=1, target="in_band_pct>=50")
+    train(mpc_config(tmp_path, "evaluated", evaluation=evaluation), progress=False)
+    run = tmp_path / "runs" / "evaluated"
+    table = pd.read_csv(run / EVALUATIONS_FILE)
+    assert sorted(set(table.timesteps)) == [384, 768]
+    assert set(table.weather) == {"all", "CA", "FL"}
+    assert (run / BEST_DIR / "planner" / "planner.pt").is_file()
+    best = json.loads((run / BEST_DIR / "evaluation.json").read_text())
+    means = table[table.weather == "all"].set_index("timesteps")
+    assert best["timesteps"] == means["score"].idxmax()
+    target = json.loads((run / TARGET_FILE).read_text())
+    met = means[means["in_band_pct"] >= 50]
+    assert target["timesteps"] == met.index.min()  # the planner holds the band (the test above): met at once

@@ -21,6 +21,7 @@ state element on held-out blocks against persistence, planner cost and milliseco
 from __future__ import annotations
 
 import logging
+import shutil
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -35,10 +36,11 @@ from parallel_eplus.buildings.building import load_building
 from parallel_eplus.errors import EnergyPlusError, Interrupts
 from parallel_eplus.learning.lagrangian import Lagrangian
 from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
-from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
+from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE, planner_controller
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.distill import act, distill, fit
 from parallel_eplus.learning.model_based.sources import Explorer, add_baseline
+from parallel_eplus.runs.run_files import BEST_DIR
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import EpisodeMetrics, tensorboard_logger
 from parallel_eplus.training.config import TrainConfig
@@ -57,24 +59,28 @@ class _Model:
 
 
 def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool, make_vec_env, new_model,
-              callbacks: Sequence[BaseCallback] = ()) -> Path:  # fmt: skip
+              callbacks: Sequence[BaseCallback] = (), evaluator=None) -> Path:  # fmt: skip
     """Run (or resume from `checkpoint`) the Dyna loop; returns the distilled policy's model.zip (or the planner's
     file without distillation). Ctrl-C, SIGTERM or a worker's failure saves a checkpoint first.
 
     `make_vec_env(cfg)`: the workers, as every algorithm gets them; `new_model(cfg, env)`: the policy to distil
     into (train.py's, passed in so the two modules do not import each other). `callbacks` see every vector step, and
-    each refit as the end of a batch (a sweep's trial reports then: experiments/tune_trial.py)."""
+    each refit as the end of a batch (a sweep's trial reports then: experiments/tune_trial.py). `evaluator`
+    (`--eval-every`, training/periodic_eval.py): the planner as it stands, frozen, on the validation weathers every
+    `every` steps, its best kept as best/planner/."""
     th.set_num_threads(1)
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
         venv = make_vec_env(cfg)
         try:
-            return _Loop(cfg, venv, status, progress, new_model, callbacks).run(checkpoint)
+            return _Loop(cfg, venv, status, progress, new_model, callbacks, evaluator).run(checkpoint)
         finally:
             venv.close()
 
 
 class _Loop:
-    def __init__(self, cfg: TrainConfig, venv, status: RunStatus, progress: bool, new_model, callbacks=()):
+    def __init__(self, cfg: TrainConfig, venv, status: RunStatus, progress: bool, new_model, callbacks=(),
+                 evaluator=None):  # fmt: skip
+        self.evaluator, self._t0 = evaluator, time.monotonic()
         self.cfg, self.venv, self.s, self.new_model = cfg, venv, cfg.mpc, new_model
         self.building = load_building(cfg.building)
         self.mpc = MPC(cfg.building, self.s, cfg.comfort.margin_c, cfg.reward.power_weight, venv.num_envs, cfg.seed)
@@ -116,8 +122,7 @@ class _Loop:
         finally:
             self.bar.close()
         self.data.save(self.cfg.run_dir / "transitions.npz")
-        planner = self.mpc.save(self.cfg.run_dir / "planner" / PLANNER_FILE)
-        io.write_text(planner.parent / "config.json", self.cfg.to_json())  # `evaluate` reads its building
+        planner = self._save_planner() / PLANNER_FILE
         self._save_checkpoint()
         if not self.s.distill or not self.policy_obs:
             return planner
@@ -205,9 +210,34 @@ class _Loop:
                     cb.on_rollout_end()
             if self.steps // self.cfg.checkpoint_every != (self.steps - n) // self.cfg.checkpoint_every:
                 self._save_checkpoint()
+            every = self.evaluator.settings.every if self.evaluator else 0
+            if every and self.steps // every != (self.steps - n) // every:
+                self._evaluate()
             if planning:
                 self.logger.record_mean("planner/ms_per_step", self.mpc.planner.last_ms)
                 self.logger.record_mean("planner/cost", float(self.mpc.planner.last_cost.mean()))
+
+    def _evaluate(self) -> None:
+        """`--eval-every`: the planner as it stands, saved and run frozen through `evaluate`'s own code."""
+        from parallel_eplus.training.periodic_eval import record
+
+        folder = self._save_planner()
+        result = self.evaluator.evaluate_controller(
+            planner_controller(str(folder)), self.steps, time.monotonic() - self._t0
+        )
+        best = self.cfg.run_dir / BEST_DIR / "planner"
+
+        def save_best() -> None:
+            shutil.rmtree(best, ignore_errors=True)
+            shutil.copytree(folder, best)
+
+        record(result, self.logger, save_best, self.cfg.run_dir)
+
+    def _save_planner(self) -> Path:
+        """runs/<name>/planner/: the planner and the run's settings (`evaluate` reads its building there)."""
+        planner = self.mpc.save(self.cfg.run_dir / "planner" / PLANNER_FILE)
+        io.write_text(planner.parent / "config.json", self.cfg.to_json())
+        return planner.parent
 
     def _add(self, obs, nxt, a_prev, a, after: dict, episode: int, step: int, planning: bool) -> None:
         layout = self.mpc.layout

@@ -123,7 +123,6 @@ class Evaluator:
     def evaluate(self, act: Callable[[np.ndarray], np.ndarray], steps: int, wall_s: float,
                  features: tuple[bool, bool]) -> EvalResult:  # fmt: skip
         """`act`: a batch of raw observations (n, obs) -> actions (n, act), deterministic."""
-        base = self.baseline()
         controller = Controller(
             "Policy", "policy", time_features=features[0], schedule_features=features[1],
             rbc_target_c=self.sim.rbc_target_c, residual_scale=self.sim.residual_scale,
@@ -131,6 +130,11 @@ class Evaluator:
             forecast_hours=self.sim.forecast_hours, forecast_error=self.sim.forecast_error,
             act=lambda obs, info: act(obs[None, :])[0],
         )  # fmt: skip
+        return self.evaluate_controller(controller, steps, wall_s)
+
+    def evaluate_controller(self, controller: Controller, steps: int, wall_s: float) -> EvalResult:
+        """Any frozen controller on the validation weathers (a model-based run's planner: training/mpc.py)."""
+        base = self.baseline()
         out = self.run_dir / "eval-episodes" / "latest"
         shutil.rmtree(out, ignore_errors=True)
         t0 = time.monotonic()
@@ -163,6 +167,22 @@ class Evaluator:
         log.info("evaluation at step %d: %s%s", steps, ", ".join(f"{k} {means[k]:.2f}" for k in
                  ("in_band_pct", ENERGY, "reward_mean") if k in means), " (best so far)" if best else "")  # fmt: skip
         return EvalResult(steps, means, per_weather, best, first)
+
+
+def record(result: EvalResult, logger, save_best: Callable[[], None], run_dir: Path) -> None:
+    """An evaluation's figures to TensorBoard (`eval/...`, each weather's under its name); the best so far saved by
+    `save_best` into best/ with its figures (best/evaluation.json)."""
+    for key, value in result.kpis.items():
+        logger.record(f"eval/{key}", value)
+    for weather, kpis in result.per_weather.items():
+        for key in ("in_band_pct", ENERGY, "reward_mean", "power_kw"):
+            if key in kpis:
+                logger.record(f"eval/{weather}/{key}", kpis[key])
+    logger.dump(result.steps)
+    if result.best:
+        save_best()
+        io.write_text(run_dir / BEST_DIR / "evaluation.json",
+                      json.dumps({"timesteps": result.steps, **result.kpis}, indent=2))  # fmt: skip
 
 
 class _NoBar:
@@ -213,17 +233,8 @@ class PeriodicEval(BaseCallback):
         wall = self._wall0 + time.monotonic() - self._t0
         result = self.evaluator.evaluate(act, int(self.num_timesteps), wall, self.features)
         self.latest = result.kpis
-        for key, value in result.kpis.items():
-            self.logger.record(f"eval/{key}", value)
-        for weather, kpis in result.per_weather.items():
-            for key in ("in_band_pct", ENERGY, "reward_mean", "power_kw"):
-                if key in kpis:
-                    self.logger.record(f"eval/{weather}/{key}", kpis[key])
-        self.logger.dump(self.num_timesteps)
-        if result.best:
-            self.save_best(self.evaluator.run_dir / BEST_DIR / "model.zip")
-            io.write_text(self.evaluator.run_dir / BEST_DIR / "evaluation.json",
-                          json.dumps({"timesteps": result.steps, **result.kpis}, indent=2))  # fmt: skip
+        record(result, self.logger, lambda: self.save_best(self.evaluator.run_dir / BEST_DIR / "model.zip"),
+               self.evaluator.run_dir)  # fmt: skip
         return result
 
     def _on_step(self) -> bool:

@@ -116,7 +116,7 @@ def train(
     if cfg.algorithm == "mpc":  # the model-based learner drives the same workers itself
         from parallel_eplus.training.mpc import train_mpc
 
-        return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model, callbacks)
+        return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model, callbacks, _evaluator(cfg))
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
         return _learn(cfg, checkpoint, progress, timer, status, callbacks)
 
@@ -227,11 +227,19 @@ def _evaluation(cfg: TrainConfig, model, env: VecNormalize) -> list[BaseCallback
     """`--eval-every`: the frozen policy on the validation weathers between batches (training/periodic_eval.py)."""
     if not cfg.evaluation.every:
         return []
-    from parallel_eplus.training.periodic_eval import Evaluator, PeriodicEval
+    from parallel_eplus.training.periodic_eval import PeriodicEval
 
-    evaluator = Evaluator(cfg.run_dir, cfg.evaluation, sim_config(cfg), cfg.weathers, cfg.workers)
-    return [PeriodicEval(evaluator, (cfg.time_features, cfg.schedule_features),
+    return [PeriodicEval(_evaluator(cfg), (cfg.time_features, cfg.schedule_features),
                          lambda path: save_checkpoint(model, env, path))]  # fmt: skip
+
+
+def _evaluator(cfg: TrainConfig):
+    """`--eval-every`'s evaluator (training/periodic_eval.py), for any algorithm; None without the option."""
+    if not cfg.evaluation.every:
+        return None
+    from parallel_eplus.training.periodic_eval import Evaluator
+
+    return Evaluator(cfg.run_dir, cfg.evaluation, sim_config(cfg), cfg.weathers, cfg.workers)
 
 
 def _load_replay_buffer(model, checkpoint: Path) -> None:
