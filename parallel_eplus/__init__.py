@@ -5,18 +5,23 @@ loads on first use, so the EnergyPlus-side process (which imports `parallel_eplu
 starts fast.
 """
 
+import os as _os
+
 ENV_ID = "parallel_eplus/DataCenter-v0"
 
 BUILDING_ENV_ID = "parallel_eplus/Building-v0"  # the same env; pass building=SPEC
 
-try:  # a controller server's install (`pip install parallel-eplus[serve]`) has no Gymnasium and needs no env
-    from gymnasium.envs.registration import register, registry
-except ModuleNotFoundError:
-    pass
-else:
-    for _id in (ENV_ID, BUILDING_ENV_ID):
-        if _id not in registry:
-            register(id=_id, entry_point="parallel_eplus.envs.env:EnergyPlusEnv", disable_env_checker=True)
+ENGINE_SIDE = "PARALLEL_EPLUS_ENGINE_SIDE"  # set for the EnergyPlus-side process (engine/process.py), which has no env
+
+if not _os.environ.get(ENGINE_SIDE):  # Gymnasium would cost that process ~50 ms of start-up per worker (issue 39)
+    try:  # a controller server's install (`pip install parallel-eplus[serve]`) has no Gymnasium and needs no env
+        from gymnasium.envs.registration import register, registry
+    except ModuleNotFoundError:
+        pass
+    else:
+        for _id in (ENV_ID, BUILDING_ENV_ID):
+            if _id not in registry:
+                register(id=_id, entry_point="parallel_eplus.envs.env:EnergyPlusEnv", disable_env_checker=True)
 
 _LAZY = {
     "EnergyPlusEnv": "envs.env",

@@ -117,11 +117,14 @@ def write_records(
     extra: dict,
     comfort: Comfort | None = None,
     scored: pd.DataFrame | None = None,
+    table: bool = True,
 ) -> dict:
     """Write the step table and summary.json; returns the summary. Per-m² figures divide by the spec's floor area,
     else the model's own (its eplusout.eio, written before the first step). `scored`: the steps the figures count
-    (a test period without its warm-up); None: all."""
-    steps.to_parquet(episode_dir / STEPS_FILE, index=False)
+    (a test period without its warm-up); None: all. `table=False`: the summary only (an episode about to be pruned
+    to its summary)."""
+    if table:
+        steps.to_parquet(episode_dir / STEPS_FILE, index=False)
     summary = {**extra, **summarize(steps if scored is None else scored, comfort)}
     if comfort is not None and comfort.kpis is not None:
         area = comfort.kpis.floor_area_m2 or floor_area(episode_dir / "eplusout.eio")

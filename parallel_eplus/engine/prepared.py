@@ -12,7 +12,6 @@ same arguments, the same process code, so a prepared episode equals a cold one b
 from __future__ import annotations
 
 import logging
-import select
 import shutil
 import time
 from collections.abc import Callable
@@ -96,8 +95,7 @@ class PreparedEpisode:
 
     def parked(self) -> bool:
         """Observation 0 is written: EnergyPlus waits at its first control step."""
-        pipes = self.process.pipes
-        return pipes is not None and (pipes.has_frame() or bool(select.select([pipes.obs_fd], [], [], 0)[0]))
+        return self.process.has_frame()
 
     def usable(self, start_timeout_s: float) -> bool:
         """Alive, and either parked or still within its start-up deadline: a dead or hung one is replaced."""

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.engine import pipe, spin
-from parallel_eplus.engine.warm_process import Episode, WarmProcess
+from parallel_eplus.engine.warm_process import Episode, WarmProcess, engine_side_env
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,7 @@ class EnergyPlusProcess:
             with open(log_path, "wb") as logf:
                 self.proc = subprocess.Popen(
                     [sys.executable, "-m", "parallel_eplus.engine.eplus_callback", *argv],
-                    stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT,
+                    stdin=subprocess.DEVNULL, stdout=logf, stderr=subprocess.STDOUT, env=engine_side_env(),
                     start_new_session=True,  # Ctrl-C reaches the learner, which stops us cleanly
                 )  # fmt: skip
         alive = lambda: self.proc is not None and self.proc.poll() is None  # noqa: E731
@@ -115,6 +115,11 @@ class EnergyPlusProcess:
         if proc.poll() is None:
             proc.kill()
         proc.wait()
+
+    def has_frame(self) -> bool:
+        """A frame is waiting to be read (EnergyPlus parked at a control step), without reading it."""
+        p = self.pipes
+        return p is not None and (p.has_frame() or bool(select.select([p.obs_fd], [], [], 0)[0]))
 
     def running(self) -> bool:
         """Whether EnergyPlus is alive (it exits on its own only after its last step)."""

@@ -127,7 +127,8 @@ class Simulation:
 
     def launch(self, weather_index: int | None = None, plan: EpisodePlan | None = None) -> None:
         """Start the next episode without waiting for its first observation (the vector env starts many at once):
-        the prepared one if it was prepared for `plan` and is alive, else a new process."""
+        the prepared one if it was prepared for `plan` and is alive, else a new process. The one after it starts
+        preparing here if this one was prepared but is not parked yet, else at its first action (`send`)."""
         self.stop()
         plan = plan or self.next_plan(weather_index)
         ready, self.prepared = self.prepared, None
@@ -151,6 +152,10 @@ class Simulation:
         self._action = self.initial_action.tolist()
         self.last_summary = None
         self.base = self.setup.residual_base()  # a fresh integral state per episode
+        if self._from_prepared and not self.process.has_frame():
+            self.prepare()  # it is still warming up and the spare is idle: the next starts now (back-to-back short
+            # episodes); else at this episode's first action, so a reset that finds it parked returns at once, and a
+            # cold start (its spare process still starting up too) gets the cores to itself
 
     def prepare(self, plan: EpisodePlan | None = None) -> None:
         """Start the next episode (`plan`, default: the rotation's next) in the spare process, to be swapped in
@@ -169,8 +174,7 @@ class Simulation:
             self.prepared = None
 
     def first_observation(self) -> tuple[np.ndarray, dict]:
-        """Wait through sizing and warmup for observation 0 of the launched episode (its first action then starts
-        preparing the next one).
+        """Wait through sizing and warmup for observation 0 of the launched episode.
 
         A prepared episode that fails before its first observation is replaced by a cold start of the same plan
         (the cold one's failure is the episode's)."""
@@ -186,7 +190,7 @@ class Simulation:
         if code != pipe.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
         obs, info = self._observation(values)
-        self._prepare_due = self.prepare_next
+        self._prepare_due = self.prepare_next and self.prepared is None
         return obs, info
 
     def send(self, action) -> None:
@@ -284,7 +288,8 @@ class Simulation:
                  "complete": complete, **self.weather_params}  # fmt: skip
         steps = self.records.frame()
         scored = self.setup.scored_steps(steps, extra)
-        self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored)
+        table = not (complete and self.config.keep_episodes == 0)  # pruned at once: ~8 ms an episode saved
+        self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored, table)
         self.records = None
         if prune:
             self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)
