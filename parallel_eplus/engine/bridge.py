@@ -88,6 +88,7 @@ class Bridge:
         self.counters: dict[str, float] = {}  # the C side's, once armed: time waited for actions, calls
         self.native: ctypes.CDLL | None = None  # the C bridge (set by `register`) until it is armed
         self._armed: ctypes.CDLL | None = None  # the C bridge once it steps EnergyPlus
+        self._holding = False  # the C bridge holds the initial action through sizing and warm-up (`_hold`)
 
     # -- setup --------------------------------------------------------------------------------
     def _handles_ready(self, state) -> bool:
@@ -180,6 +181,8 @@ class Bridge:
     def _apply_action(self, state) -> None:
         if not self._handles_ready(state):
             return
+        if self._holding:  # the C bridge held the warm-up and hands back the run period's first control step
+            self._unhold()
         if not self.started and self._in_run_period(state):
             self.started = True
             self.started_at = time.monotonic()
@@ -194,6 +197,28 @@ class Bridge:
                 set_value(state, h, action[i])
         if self.native is not None and self.started and not self.python_only:
             self._arm()
+        elif not self.started:
+            self._hold()
+
+    def _hold(self) -> None:
+        """Sizing and warm-up in C (`bridge_hold`): what `_apply_action` and `_observe` do there (write the held
+        action once per zone timestep, keep the latest sensors) without ~2,700 Python callbacks an episode."""
+        if self.native is None or self.python_only or self._holding:
+            return
+        ints = lambda xs: (ctypes.c_int * len(xs))(*xs)  # noqa: E731
+        doubles = lambda xs: (ctypes.c_double * len(xs))(*xs)  # noqa: E731
+        handles = [h for h, _ in self.actuator_handles]
+        indices = [i for _, i in self.actuator_handles]
+        self._holding = 0 == self.native.bridge_hold(
+            len(self.sensor_handles), ints(self.sensor_handles), len(handles), ints(handles), ints(indices),
+            len(self.action), doubles(self.action), int(self.pending), doubles(self.last_obs),
+        )  # fmt: skip
+
+    def _unhold(self) -> None:
+        last = (ctypes.c_double * len(self.sensors))()
+        self.pending = bool(self.native.bridge_unhold(last))
+        self.last_obs = list(last)
+        self._holding = False
 
     def _arm(self) -> None:
         """Hand every later step to the C callbacks, in the state this Bridge has reached."""
@@ -238,6 +263,7 @@ class Bridge:
         if not self.started:  # warmup or sizing: keep the latest state for observation 0
             self.last_obs = sensors
             self.pending = True  # re-assert the held action each zone timestep until the run starts
+            self._hold()  # the C bridge does this from here on, where there is one
             return
         self.step += 1
         values = self._time(state) + sensors

@@ -39,10 +39,16 @@ struct api {
     set_fn set_actuator;
     int_fn year, day_of_year, hour, zone_timestep;
     stop_fn stop;
+    int_fn warmup_flag, kind_of_sim, data_ready;
 };
+
+#define KIND_RUN_PERIOD_WEATHER 3 /* bridge.py's: kindOfSim during a weather-file run period */
 
 static struct {
     int armed, done, pending;
+    int seen_ready; /* EnergyPlus's API data was ready once: until then no call reaches Python (it does nothing) */
+    int holding; /* sizing and warm-up: the initial action held and the sensors kept, until the run period */
+    double last_obs[MAX_VALUES]; /* while holding: the sensors at the latest zone timestep, for observation 0 */
     int awaiting; /* an observation is out and its action not yet read: it is read where it is applied */
     callback_fn slow_apply, slow_observe; /* the Python Bridge's callbacks, until armed */
     struct api api;
@@ -160,9 +166,33 @@ static int take_action(State state) {
     return 0;
 }
 
+/* While holding: what Bridge._apply_action does before the run period (write the held action once per zone
+ * timestep); 0 once the run period has begun (Python's first exchange takes over). */
+static int hold_apply(State state) {
+    if (!(b.api.warmup_flag(state) == 0 && b.api.kind_of_sim(state) == KIND_RUN_PERIOD_WEATHER)) {
+        if (b.pending) {
+            b.pending = 0;
+            for (int i = 0; i < b.n_actuators; i++)
+                b.api.set_actuator(state, b.actuators[i], b.action[b.actuator_action[i]]);
+        }
+        return 1;
+    }
+    return 0;
+}
+
+/* Before the API data is ready the Python Bridge's callbacks return at once (_handles_ready): skip them. */
+static int not_ready(State state) {
+    if (!b.seen_ready)
+        b.seen_ready = b.api.data_ready(state) != 0;
+    return !b.seen_ready;
+}
+
 void *bridge_apply_action(State state) {
-    if (!b.armed)
+    if (!b.armed) {
+        if (b.holding ? hold_apply(state) : not_ready(state))
+            return NULL;
         return b.slow_apply(state);
+    }
     b.apply_calls++;
     if (b.done || b.error[0])
         return NULL;
@@ -177,8 +207,14 @@ void *bridge_apply_action(State state) {
 }
 
 void *bridge_observe(State state) {
-    if (!b.armed)
-        return b.slow_observe(state);
+    if (!b.armed) {
+        if (!b.holding)
+            return not_ready(state) ? NULL : b.slow_observe(state);
+        for (int i = 0; i < b.n_sensors; i++) /* Bridge._observe before the run: keep the state, re-assert */
+            b.last_obs[i] = b.api.get_variable(state, b.sensors[i]);
+        b.pending = 1;
+        return NULL;
+    }
     b.observe_calls++;
     if (b.done || b.error[0])
         return NULL;
@@ -221,11 +257,44 @@ void *bridge_observe(State state) {
 
 /* Before the run: where to hand calls until armed, and the API functions to use once armed. */
 void bridge_init(callback_fn slow_apply, callback_fn slow_observe, get_fn get_variable, set_fn set_actuator,
-                 int_fn year, int_fn day_of_year, int_fn hour, int_fn zone_timestep, stop_fn stop) {
+                 int_fn year, int_fn day_of_year, int_fn hour, int_fn zone_timestep, stop_fn stop,
+                 int_fn warmup_flag, int_fn kind_of_sim, int_fn data_ready) {
     memset(&b, 0, sizeof b);
     b.slow_apply = slow_apply;
     b.slow_observe = slow_observe;
-    b.api = (struct api){get_variable, set_actuator, year, day_of_year, hour, zone_timestep, stop};
+    b.api = (struct api){get_variable, set_actuator, year, day_of_year, hour, zone_timestep, stop, warmup_flag,
+                         kind_of_sim, data_ready};
+}
+
+/* Sizing and warm-up in C (~2,700 Python callbacks an episode, ~5-10 ms, before: issue 39): from the first call
+ * with the handles known until the run period's first control step, which goes back to Python with the state
+ * (bridge_unhold). */
+int bridge_hold(int n_sensors, const int *sensors, int n_actuators, const int *actuators,
+                const int *actuator_action, int n_actions, const double *action, int pending,
+                const double *last_obs) {
+    if (n_sensors > MAX_VALUES || n_actuators > MAX_VALUES || n_actions > MAX_VALUES)
+        return -1;
+    for (int i = 0; i < n_actuators; i++)
+        if (actuator_action[i] < 0 || actuator_action[i] >= n_actions)
+            return -1;
+    b.n_sensors = n_sensors;
+    memcpy(b.sensors, sensors, sizeof(int) * (size_t)n_sensors);
+    b.n_actuators = n_actuators;
+    memcpy(b.actuators, actuators, sizeof(int) * (size_t)n_actuators);
+    memcpy(b.actuator_action, actuator_action, sizeof(int) * (size_t)n_actuators);
+    b.n_actions = n_actions;
+    memcpy(b.action, action, sizeof(double) * (size_t)n_actions);
+    memcpy(b.last_obs, last_obs, sizeof(double) * (size_t)n_sensors);
+    b.pending = pending;
+    b.holding = 1;
+    return 0;
+}
+
+/* Back to Python: the latest sensors into `last_obs`; returns whether the held action is still to be written. */
+int bridge_unhold(double *last_obs) {
+    b.holding = 0;
+    memcpy(last_obs, b.last_obs, sizeof(double) * (size_t)b.n_sensors);
+    return b.pending;
 }
 
 /* Take over from Python after its first exchange: from here on every call stays in C. */

@@ -96,8 +96,12 @@ def register(api, state, bridge, native: str | None) -> list:
         rt.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
         return []
     lib = ctypes.CDLL(native)
-    lib.bridge_init.argtypes = [ctypes.c_void_p] * 9
+    lib.bridge_init.argtypes = [ctypes.c_void_p] * 12
     lib.bridge_init.restype = None
+    ints, doubles = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
+    lib.bridge_hold.argtypes = [ctypes.c_int, ints, ctypes.c_int, ints, ints, ctypes.c_int, doubles, ctypes.c_int,
+                                doubles]  # fmt: skip
+    lib.bridge_unhold.argtypes = [doubles]
     lib.bridge_arm.argtypes = [
         ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.c_int,
         ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int), ctypes.c_int,
@@ -113,8 +117,9 @@ def register(api, state, bridge, native: str | None) -> list:
     callback = rt.py_state_callback_type  # void *(*)(void *state), as EnergyPlus calls it
     slow = [callback(bridge.apply_action), callback(bridge.observe)]
     x, r = api.exchange.api, rt.api
-    functions = [x.getVariableValue, x.setActuatorValue, x.calendarYear, x.dayOfYear, x.hour, x.zoneTimeStepNum]
-    lib.bridge_init(*(ctypes.cast(f, ctypes.c_void_p) for f in [*slow, *functions, r.stopSimulation]))
+    functions = [x.getVariableValue, x.setActuatorValue, x.calendarYear, x.dayOfYear, x.hour, x.zoneTimeStepNum,
+                 r.stopSimulation, x.warmupFlag, x.kindOfSim, x.apiDataFullyReady]  # fmt: skip
+    lib.bridge_init(*(ctypes.cast(f, ctypes.c_void_p) for f in [*slow, *functions]))
     fast = [callback(("bridge_apply_action", lib)), callback(("bridge_observe", lib))]
     r.callbackAfterPredictorAfterHVACManagers(state, fast[0])
     r.callbackEndOfZoneTimeStepAfterZoneReporting(state, fast[1])

@@ -141,6 +141,8 @@ class Simulation:
             self.episode_dir, self._number = ready.episode_dir, ready.number
             self.weather_params, self._forecaster = ready.weather
         else:
+            if self.prepare_next:  # its Python start-up runs while the model is written (the first: ~25 ms)
+                self.process.warm_up()
             started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather)
             self.episode_dir, self._number, (self.weather_params, self._forecaster) = started
         if self.prepare_next:
