@@ -1,4 +1,5 @@
 """EnergyPlus alone, ten 1-day periods in one process: wall and each run's seconds (for the timeline's comparison)."""
+
 import sys
 import tempfile
 from pathlib import Path

@@ -17,6 +17,7 @@ then the same offset), and chdir()s so that files EnergyPlus opens by a relative
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import os
@@ -117,10 +118,8 @@ FORKED: dict = {}
 def open_files() -> list[str]:
     out = []
     for n in os.listdir("/proc/self/fd"):
-        try:
+        with contextlib.suppress(OSError):
             out.append(os.readlink(f"/proc/self/fd/{n}"))
-        except OSError:
-            pass
     return out
 
 
@@ -244,15 +243,16 @@ def main() -> None:
         for mode in ("fresh", "fork", "fresh", "fork"):  # interleaved, each in its own process
             wd = work / f"{mode}{len([k for k in rep if k.startswith(mode)])}"
             wd.mkdir()
-            done = subprocess.run([sys.executable, __file__, "--mode", mode, "--work", str(wd), "--episodes",
-                                   str(args.episodes), "--days", str(args.days)], capture_output=True, text=True)  # fmt: skip
+            cmd = [sys.executable, __file__, "--mode", mode, "--work", str(wd), "--episodes", str(args.episodes),
+                   "--days", str(args.days)]  # fmt: skip
+            done = subprocess.run(cmd, capture_output=True, text=True)
             line = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
             if not line:
                 sys.exit(f"{mode} failed: {done.stderr[-3000:]}")
             rep[wd.name] = json.loads(line[-1])
             rep[wd.name]["dir"] = str(wd)
         summarize(rep)
-        print(json.dumps(rep, indent=1)[:200000], file=open(work / "report.json", "w"))
+        (work / "report.json").write_text(json.dumps(rep, indent=1))
         print("work:", work)
         return
     work = args.work
@@ -267,28 +267,33 @@ def main() -> None:
 
 def summarize(rep: dict) -> None:
     med = statistics.median
+
+    def ms(xs) -> str:
+        xs = list(xs)
+        return f"{med(xs) * 1e3:.0f} ms [{min(xs) * 1e3:.0f}-{max(xs) * 1e3:.0f}]"
+
     fresh_digests = set()
     for name, r in rep.items():
         if "fresh" in r:
             warm = r["fresh"][1:]
             fresh_digests |= set(r["digests"])
-            print(f"{name}: fresh state in a warm process, {len(warm)} episodes: total (new_state+run+delete) "
-                  f"median {med(x['total_s'] for x in warm) * 1e3:.0f} ms [{min(x['total_s'] for x in warm) * 1e3:.0f}-"
-                  f"{max(x['total_s'] for x in warm) * 1e3:.0f}]; new_state {med(x['new_state_s'] for x in warm) * 1e3:.0f},"
-                  f" run {med(x['run_s'] for x in warm) * 1e3:.0f}, delete {med(x['delete_s'] for x in warm) * 1e3:.0f} ms;"
-                  f" first (fresh address space) {r['fresh'][0]['total_s'] * 1e3:.0f} ms")  # fmt: skip
+            print(f"{name}: fresh state in a warm process, {len(warm)} episodes: new_state+run+delete "
+                  f"{ms(x['total_s'] for x in warm)}; new_state {ms(x['new_state_s'] for x in warm)}, "
+                  f"run {ms(x['run_s'] for x in warm)}, delete {ms(x['delete_s'] for x in warm)}; "
+                  f"first (fresh address space) {r['fresh'][0]['total_s'] * 1e3:.0f} ms")  # fmt: skip
     for name, r in rep.items():
         if "fork" in r:
             f = r["fork"]
+            faults = med(x["minflt"] for x in f)
             print(f"{name}: parked after {r['parked_after_s'] * 1e3:.0f} ms (threads {r['threads_at_park']}); "
-                  f"{len(f)} forked episodes: fork->exit median {med(x['wall_s'] for x in f) * 1e3:.0f} ms "
-                  f"[{min(x['wall_s'] for x in f) * 1e3:.0f}-{max(x['wall_s'] for x in f) * 1e3:.0f}], fork->end of run "
-                  f"{med(x['to_end_s'] for x in f) * 1e3:.0f} ms, cpu {med(x['cpu_s'] for x in f) * 1e3:.0f} ms, "
-                  f"minor faults {med(x['minflt'] for x in f):.0f} (~{med(x['minflt'] for x in f) * 4 / 1024:.0f} MiB)")  # fmt: skip
+                  f"{len(f)} forked episodes: fork->exit {ms(x['wall_s'] for x in f)}, fork->end of run "
+                  f"{ms(x['to_end_s'] for x in f)}, cpu {ms(x['cpu_s'] for x in f)}, "
+                  f"minor faults {faults:.0f} (~{faults * 4 / 1024:.0f} MiB)")  # fmt: skip
             same = all(x.get("digest") in fresh_digests for x in f)
-            print(f"   observations equal to a fresh run's, bit for bit: {same} ({len({x.get('digest') for x in f})} "
-                  f"distinct among children); steps {[x.get('steps') for x in f][:3]}...; moved {f[0].get('moved')}; open in the parent's "
-                  f"output dir at park: {r['open_in_parent_out']}; files the children added there: "
+            print(f"   observations equal to a fresh run's, bit for bit: {same} "
+                  f"({len({x.get('digest') for x in f})} distinct among children); steps "
+                  f"{[x.get('steps') for x in f][:3]}...; moved {f[0].get('moved')}; open in the parent's "
+                  f"output dir at park: {r['open_in_parent_out']}; new there after the children: "
                   f"{r['new_files_in_parent_out']}")  # fmt: skip
 
 

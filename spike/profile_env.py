@@ -40,9 +40,15 @@ finally:
 def patch(out: Path) -> None:
     def start(self, pipe_dir):
         code = f"OUT = {str(out)!r}\n" + WRAP
-        self.proc = subprocess.Popen([sys.executable, "-c", code, "x", str(pipe_dir)], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", code, "x", str(pipe_dir)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
         import os
+
         os.set_blocking(self.proc.stdout.fileno(), False)
 
     warm_process.WarmProcess.start = start
@@ -61,8 +67,9 @@ def main() -> None:
     prof = cProfile.Profile()
     t0 = time.perf_counter()
     prof.enable()
-    env = EnergyPlusEnv(weather="CA", run_days=args.days, output_dir=args.out / "eps", keep_episodes=0,
-                        energyplus_csv=False)
+    env = EnergyPlusEnv(
+        weather="CA", run_days=args.days, output_dir=args.out / "eps", keep_episodes=0, energyplus_csv=False
+    )
     a = np.zeros(env.action_space.shape, dtype=np.float32)
     marks = []
     try:
@@ -81,7 +88,7 @@ def main() -> None:
     prof.disable()
     print(f"wall {time.perf_counter() - t0:.3f} s")
     for m in marks:
-        print("at %.3f reset %.1f ms steps %.1f ms (%d)" % (m[0], m[1] * 1e3, m[2] * 1e3, m[3]))
+        print(f"at {m[0]:.3f} reset {m[1] * 1e3:.1f} ms steps {m[2] * 1e3:.1f} ms ({m[3]})")
     prof.dump_stats(args.out / "env.prof")
     pstats.Stats(prof).sort_stats("cumulative").print_stats(45)
 

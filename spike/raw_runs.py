@@ -1,5 +1,6 @@
 """Eight 1-day raw episodes (our EnergyPlus side, C bridge, no pipes) in one process: the median episode seconds.
 For farm-bench pairs between two trees (the warm-up held in C or in Python callbacks)."""
+
 import statistics
 import tempfile
 import time

@@ -1,7 +1,8 @@
 """Ten consecutive 1-day episodes in one env (prepared), for farm-bench pairs between two trees' venvs.
 
-    farm-bench -n 6 -- .venv/bin/python spike/ten.py --vs '/work/main/.venv/bin/python spike/ten.py'
+farm-bench -n 6 -- .venv/bin/python spike/ten.py --vs '/work/main/.venv/bin/python spike/ten.py'
 """
+
 import sys
 import tempfile
 import time
@@ -13,4 +14,5 @@ from parallel_eplus.bench.short import env_episodes
 days = int(sys.argv[1]) if len(sys.argv) > 1 else 1
 with tempfile.TemporaryDirectory() as tmp:
     r = env_episodes(days, 10, "CA", True, Path(tmp))
-print(parallel_eplus.__file__, f"wall {r['wall_s']:.3f}", " ".join(f"{x * 1e3:.0f}" for x in r["resets_s"]), time.time())
+resets = " ".join(f"{x * 1e3:.0f}" for x in r["resets_s"])
+print(parallel_eplus.__file__, f"wall {r['wall_s']:.3f}", resets, time.time())

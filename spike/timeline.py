@@ -64,8 +64,13 @@ def mark(what: str, **kw) -> None:
 
 def patch(out: Path) -> None:
     def start(self, pipe_dir):
-        self.proc = subprocess.Popen([sys.executable, "-c", f"OUT = {str(out)!r}\n" + WRAP], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", f"OUT = {str(out)!r}\n" + WRAP],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
         os.set_blocking(self.proc.stdout.fileno(), False)
         mark("warm_start", child=self.proc.pid)
 
@@ -108,8 +113,9 @@ def main() -> None:
     patch(args.out)
     t0 = time.monotonic()
     mark("env_init")
-    env = EnergyPlusEnv(weather="CA", run_days=args.days, output_dir=args.out / "eps", keep_episodes=0,
-                        energyplus_csv=False)
+    env = EnergyPlusEnv(
+        weather="CA", run_days=args.days, output_dir=args.out / "eps", keep_episodes=0, energyplus_csv=False
+    )
     a = np.zeros(env.action_space.shape, dtype=np.float32)
     try:
         for k in range(args.episodes):
@@ -131,8 +137,10 @@ def main() -> None:
     for r in rows:
         col = pids.index(r["pid"])
         extra = {k: v for k, v in r.items() if k not in ("t", "pid", "what")}
-        print(f"{(r['t'] - t0) * 1e3:8.1f}  {'    ' * 0}{'env ' if r['pid'] == os.getpid() else f'E{col}  '}"
-              f"{'  ' * col}{r['what']} {extra if extra else ''}")
+        print(
+            f"{(r['t'] - t0) * 1e3:8.1f}  {'    ' * 0}{'env ' if r['pid'] == os.getpid() else f'E{col}  '}"
+            f"{'  ' * col}{r['what']} {extra if extra else ''}"
+        )
     print(f"wall {(time.monotonic() - t0):.3f} s")
 
 

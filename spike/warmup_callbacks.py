@@ -3,6 +3,7 @@
 Runs one 1-day data-center episode raw (no pipes, the initial action held) in this process several times and
 accumulates the wall time spent inside Bridge.apply_action / Bridge.observe until the run period starts.
 """
+
 import tempfile
 import time
 from pathlib import Path
@@ -39,5 +40,7 @@ with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         eplus_callback.main(["--idf", str(idf), "--epw", str(epw), "--output-dir", f"{tmp}/o{k}", "--steps", "96",
                              "--native", lib, "--initial-action", *init])  # fmt: skip
-        print(f"run {time.perf_counter() - t:.3f} s; python callbacks before the run period: {acc['calls']} calls, "
-              f"{acc['s'] * 1e3:.1f} ms")
+        print(
+            f"run {time.perf_counter() - t:.3f} s; python callbacks before the run period: {acc['calls']} calls, "
+            f"{acc['s'] * 1e3:.1f} ms"
+        )

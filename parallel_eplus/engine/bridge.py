@@ -209,10 +209,11 @@ class Bridge:
         doubles = lambda xs: (ctypes.c_double * len(xs))(*xs)  # noqa: E731
         handles = [h for h, _ in self.actuator_handles]
         indices = [i for _, i in self.actuator_handles]
-        self._holding = 0 == self.native.bridge_hold(
+        status = self.native.bridge_hold(
             len(self.sensor_handles), ints(self.sensor_handles), len(handles), ints(handles), ints(indices),
             len(self.action), doubles(self.action), int(self.pending), doubles(self.last_obs),
         )  # fmt: skip
+        self._holding = status == 0  # else (too many values for it) Python holds it, as before
 
     def _unhold(self) -> None:
         last = (ctypes.c_double * len(self.sensors))()

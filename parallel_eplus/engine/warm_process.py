@@ -78,7 +78,11 @@ class WarmProcess:
         # The pipes it serves name its owner: `parallel-eplus clean` finds it if its owner dies (pipe_sweep.py).
         cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--serve", "--pipes", str(pipe_dir)]
         self.proc = subprocess.Popen(
-            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True,
+            cmd,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
             env=engine_side_env(),
         )  # its own session, as the episodes' processes had: Ctrl-C reaches the learner, which closes us
         os.set_blocking(self.proc.stdout.fileno(), False)
