@@ -221,3 +221,38 @@ def test_a_prepared_episode_with_weather_noise_equals_a_cold_one(tmp_path, no_le
     for a, b in zip(expected, got, strict=True):
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(got[0][:, 0], got[1][:, 0])  # each episode its own perturbed outdoor temperature
+
+
+@pytest.mark.slow
+def test_a_prepared_episode_swapped_in_still_warming_up_starts_the_next_at_once(tmp_path, no_leaks):
+    """Back to back: the spare process starts the episode after next at the reset, not at the first action."""
+    env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path)
+    try:
+        env.reset()
+        obs, reward, terminated, _, _ = env.step(ZERO)  # the next episode (FL) starts preparing here
+        ready = env.sim.prepared
+        os.kill(ready.process.proc.pid, signal.SIGSTOP)  # held in its start-up: it cannot park before the reset
+        while not terminated:
+            obs, reward, terminated, _, _ = env.step(ZERO)
+        env.sim.launch()  # reset()'s first half: swap it in, not yet parked
+        assert env.sim._from_prepared and env.sim.process is ready.process
+        after = env.sim.prepared
+        assert after is not None and after.plan.weather == "CA"  # the one after it, already on its way
+        os.kill(ready.process.proc.pid, signal.SIGCONT)
+        env.sim.first_observation()
+        assert env.sim.prepared is after  # the first action does not start another
+        env.step(ZERO)
+        assert env.sim.prepared is after
+    finally:
+        env.close()
+
+
+def test_the_energyplus_side_imports_no_gymnasium():
+    """It registers no env: Gymnasium would cost each EnergyPlus-side process ~50 ms of start-up."""
+    from parallel_eplus import ENGINE_SIDE
+
+    code = "import sys, parallel_eplus.engine.eplus_callback; print('gymnasium' in sys.modules)"
+    for marked, expected in ((True, "False"), (False, "True")):
+        env = {k: v for k, v in os.environ.items() if k != ENGINE_SIDE} | ({ENGINE_SIDE: "1"} if marked else {})
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        assert out.stdout.strip() == expected
