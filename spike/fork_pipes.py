@@ -237,8 +237,10 @@ def bench(args) -> int:
         print("an episode's directory:", files, "; the template's:",
               sorted(p.name for p in (Path(tmp) / f"fork{args.rounds - 1}" / "template").iterdir()))  # fmt: skip
     med = statistics.median
-    print(f"medians of per-round ratios: fork/alone {med(f / a for a, f, _ in rows):.3f}, "
-          f"env/alone {med(e / a for a, _, e in rows):.3f}, fork/env {med(f / e for _, f, e in rows):.3f}")
+    print(
+        f"medians of per-round ratios: fork/alone {med(f / a for a, f, _ in rows):.3f}, "
+        f"env/alone {med(e / a for a, _, e in rows):.3f}, fork/env {med(f / e for _, f, e in rows):.3f}"
+    )
     return 0
 
 
