@@ -157,7 +157,7 @@ class _Loop:
         episode_of = np.arange(n) + 1000 * (1 + self.steps // 1000)  # unique episode keys for this session
         explorer = Explorer(self.replay, n, self.s.explore_increment, self.s.explore_offset, self.building.band,
                             [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures],
-                            self.cfg.seed + self.steps) if self.replay else None  # fmt: skip
+                            self.cfg.seed + self.steps, self.s.explore_hold) if self.replay else None  # fmt: skip
         rng = np.random.default_rng(self.cfg.seed + self.steps)
         out = zones = 0.0
         while self.steps < self.cfg.timesteps:

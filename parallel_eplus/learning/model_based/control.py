@@ -37,7 +37,7 @@ class MPC:
         self.step_minutes = 60 * 24 / b.steps_per_day
         self.forecasts = Forecasts(building)
         width = self.forecasts(next(iter(b.spec.weathers), "CA")).width
-        self.layout = Layout.of(b, width)
+        self.layout = model.layout if model is not None else Layout.of(b, width)  # a saved model keeps its own
         self.settings = settings
         self.model = model or Ensemble(self.layout, settings, seed)
         self.comfort_times = ComfortTimes(building, self.step_minutes)

@@ -1,10 +1,14 @@
 """The model's data: transitions (state, last action, action, exogenous inputs) -> next state, from every source.
 
-The state is what the model predicts: the spec's comfort temperatures and energy terms (the reward's signals),
-in physical units. A row pairs the state after step k with the action applied during step k+1 (normalized to
-[-1, 1], as the policy's), the action before it, the exogenous inputs at the end of step k+1 (exogenous.py)
-and the state then. Each row keeps its origin (the building's own controls, exploration, the planner), its
-episode and step, and whether the comfort band applied, so held-out days and H-step sequences can be drawn.
+The state is what the model predicts: the spec's comfort temperatures and energy terms (the reward's signals), in
+physical units. Where the spec's KPIs name the HVAC signals among the sensors (`[kpis] hvac`), the energy is
+predicted in parts: those signals, and the rest of the energy terms' sum (a data center's IT load, an office's
+lights and plugs), each with its own physics (the IT power falls as its inlet air gets colder, the fans' power
+with their flow); summed, they are the spec's energy again. A row pairs the state after step k with the action
+applied during step k+1 (normalized to [-1, 1], as the policy's), the action before it, the exogenous inputs at
+the end of step k+1 (exogenous.py) and the state then. Each row keeps its origin (the building's own controls,
+exploration, the planner), its episode and step, and whether the comfort band applied, so held-out days and
+H-step sequences can be drawn.
 """
 
 from __future__ import annotations
@@ -30,15 +34,20 @@ class Layout:
     energy: tuple[str, ...]
     n_actions: int
     n_exogenous: int
+    hvac: tuple[str, ...] = ()  # the energy's HVAC parts (sensors); the rest of `energy`'s sum is one more part
 
     @classmethod
     def of(cls, building: Building, n_exogenous: int) -> Layout:
         energy = tuple(e for e in building.comfort.energy if e not in building.temperatures)
-        return cls(building.sensor_names, building.temperatures, energy, len(building.actions), n_exogenous)
+        kpis = building.comfort.kpis
+        hvac = tuple(c for _, c in kpis.hvac) if kpis is not None else ()
+        if not all(c in building.sensor_names and c not in energy for c in hvac):
+            hvac = ()  # a meter outside the observation, or HVAC already one of the energy terms: no parts
+        return cls(building.sensor_names, building.temperatures, energy, len(building.actions), n_exogenous, hvac)
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        return self.temperatures + self.energy
+        return self.temperatures + (("non_hvac_w", *self.hvac) if self.hvac else self.energy)
 
     @property
     def n_state(self) -> int:
@@ -50,8 +59,13 @@ class Layout:
 
     def state(self, obs: np.ndarray) -> np.ndarray:
         """The state from observations (the sensors come first in the observation), [..., n_state]."""
-        idx = [self.sensors.index(n) for n in self.state_names]
-        return np.asarray(obs, np.float32)[..., idx]
+        obs = np.asarray(obs, np.float32)
+        if not self.hvac:
+            return obs[..., [self.sensors.index(n) for n in self.state_names]]
+        temps = obs[..., [self.sensors.index(n) for n in self.temperatures]]
+        hvac = obs[..., [self.sensors.index(n) for n in self.hvac]]
+        total = obs[..., [self.sensors.index(n) for n in self.energy]].sum(-1, keepdims=True)
+        return np.concatenate([temps, total - hvac.sum(-1, keepdims=True), hvac], axis=-1)
 
 
 @dataclass

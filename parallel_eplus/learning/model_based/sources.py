@@ -3,10 +3,17 @@
 1. The building's own controls, recorded as `--init-from-baseline` records them (training/imitation.py): every
    observation paired with what those controls set next. They cover the states the building normally visits.
 2. Exploration around them: each worker replays the recorded actions of its weather at the same step of the year
-   (the built-in controls are mostly feed-forward: schedule and weather) plus a bounded random walk (increments up
-   to `explore_increment`, at most `explore_offset` from the record). A free random walk drives the zones out of
-   EnergyPlus's range within a day (44 °C at mid-range setpoints); here a rail halves the offset at every step a
-   zone is more than 2 K outside the band, which brings the worker back to the record's behaviour.
+   (the built-in controls are mostly feed-forward: schedule and weather) plus an offset that walks toward a target
+   drawn uniformly from the actions within `explore_offset` of the record (the default: the whole action box),
+   held for 1-8 hours (`explore_hold` control steps at most), by at most `explore_increment` per step (the
+   planner's own bound). The savings of a data center sit in a corner (cold supply air, low fan flow) that a
+   walk of small random steps around the record never reached (a first version: increments of 0.05 within 0.4 of
+   the record kept the fans above 5.9 kg/s, and the planner, held within the data's support, never left the
+   built-in controls' corner). A free walk drives the zones out of EnergyPlus's range within a day (44 °C at
+   mid-range setpoints); here a rail halves the offset at every step a zone is more than 2 K outside the band and
+   makes the point it reached the new target, held for a few steps: the walk settles at the edge of what keeps
+   the band in the target's direction (where a first rail, back to the record and held there, kept the walk at
+   the record most of the time: most targets in the box are too warm for a data center).
 """
 
 from __future__ import annotations
@@ -44,19 +51,22 @@ def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: 
 
 
 class Explorer:
-    """The recorded actions of each worker's weather at its step, plus a bounded random walk of its own."""
+    """The recorded actions of each worker's weather at its step, plus an offset walking toward held targets."""
 
     def __init__(self, replay: dict[str, np.ndarray], workers: int, increment: float, offset: float,
-                 band: tuple[float, float], temperatures: list[int], seed: int = 0):  # fmt: skip
+                 band: tuple[float, float], temperatures: list[int], seed: int = 0, hold: int = 32):  # fmt: skip
         self.replay = replay
         self.rng = np.random.default_rng(seed)
-        self.increment, self.limit = increment, offset
+        self.increment, self.limit, self.hold = increment, offset, max(hold, 4)
         self.band, self.temperatures = band, temperatures
         n_actions = next(iter(replay.values())).shape[1]
         self.offset = np.zeros((workers, n_actions), np.float32)
+        self.target = np.zeros((workers, n_actions), np.float32)
+        self.left = np.zeros(workers, int)  # steps until the next target
 
     def reset(self, worker: int) -> None:
-        self.offset[worker] = 0.0
+        self.offset[worker] = self.target[worker] = 0.0
+        self.left[worker] = 0
 
     def act(self, obs: np.ndarray, infos: list[dict], steps: np.ndarray) -> np.ndarray:
         actions = []
@@ -66,8 +76,15 @@ class Explorer:
                 record = next(iter(self.replay.values()))
             base = record[min(int(steps[i]), len(record) - 1)]
             temps = obs[i, self.temperatures]
-            off_band = np.any((temps < self.band[0] - 2) | (temps > self.band[1] + 2))
-            step = self.rng.uniform(-self.increment, self.increment, base.shape)
-            self.offset[i] = np.clip(self.offset[i] * (0.5 if off_band else 1.0) + step, -self.limit, self.limit)
+            if np.any((temps < self.band[0] - 2) | (temps > self.band[1] + 2)):  # the rail: halfway back, and stay
+                self.offset[i] *= 0.5
+                self.target[i], self.left[i] = self.offset[i], max(self.left[i], 4)
+            elif self.left[i] <= 0:  # a new target: any action within `limit` of the record, uniformly
+                low, high = np.maximum(base - self.limit, -1.0), np.minimum(base + self.limit, 1.0)
+                self.target[i] = self.rng.uniform(low, high) - base
+                self.left[i] = self.rng.integers(4, self.hold + 1)
+            self.left[i] -= 1
+            move = np.clip(self.target[i] - self.offset[i], -self.increment, self.increment)
+            self.offset[i] += move
             actions.append(np.clip(base + self.offset[i], -1, 1))
         return np.array(actions, np.float32)
