@@ -77,6 +77,7 @@ class Simulation:
         self.episode_dir: Path | None = None
         self._number = 0  # the last episode directory's number (its folder may be shared)
         self._whole: list[Path] = []  # this Simulation's own episode directories still whole, oldest first
+        self._ended: tuple[EnergyPlusProcess, Path | None] | None = None  # an episode past its last step (`_settle`)
         self.weather = self.weathers[0]
         self.weather_index = 0
         self.plan: EpisodePlan | None = None
@@ -129,7 +130,8 @@ class Simulation:
         """Start the next episode without waiting for its first observation (the vector env starts many at once):
         the prepared one if it was prepared for `plan` and is alive, else a new process. The one after it starts
         preparing here if this one was prepared but is not parked yet, else at its first action (`send`)."""
-        self.stop()
+        if self._ended is None or self._ended[0] is not self.process:  # else it is over, its files being finished
+            self.stop()
         plan = plan or self.next_plan(weather_index)
         ready, self.prepared = self.prepared, None
         if ready is not None and (ready.plan != plan or not ready.usable(self.config.start_timeout_s)):
@@ -141,6 +143,7 @@ class Simulation:
             self.episode_dir, self._number = ready.episode_dir, ready.number
             self.weather_params, self._forecaster = ready.weather
         else:
+            self._settle()  # the process may still finish the last episode's files
             if self.prepare_next:  # its Python start-up runs while the model is written (the first: ~25 ms)
                 self.process.warm_up()
             started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather)
@@ -165,6 +168,7 @@ class Simulation:
         if self.prepared is not None or self._closed:
             return
         plan = plan or self.next_plan()
+        self._settle()  # the spare may still finish the episode before (a few ms, long over in training)
         self._spare.kill()
         episode_dir, number, weather = self._starter.start(plan, self._spare, self._number + 1, self._episode_weather)
         self._number = number  # numbers follow the order episodes began in
@@ -197,7 +201,7 @@ class Simulation:
 
     def send(self, action) -> None:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
-        if self.proc is None:
+        if self.proc is None or (self._ended is not None and self._ended[0] is self.process):  # over, not reset
             raise RuntimeError("no simulation running: call reset() first")
         if self._prepare_due:
             self._prepare_due = False
@@ -266,6 +270,7 @@ class Simulation:
     def _error(self, message: str, kind: type[EnergyPlusError] = EnergyPlusError) -> EnergyPlusError:
         """Stop the process first, so the error file is complete and nothing is left running (a prepared episode
         and an idle warm process neither: whoever handles the error starts afresh)."""
+        self._settle()
         self._kill()
         self.discard_prepared()
         self._spare.close()
@@ -274,14 +279,25 @@ class Simulation:
         return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))
 
     def _finish(self) -> None:
-        """The run period is over: write the records while EnergyPlus finishes its own files, then wait for
-        it to exit (older episodes are pruned after, so nothing is removed under a writing EnergyPlus)."""
+        """The run period is over: write the records while EnergyPlus finishes its own files. A long-lived process
+        is waited for when it is needed again (`_settle`), not here: the env's loop goes on meanwhile (~10-20 ms an
+        episode of EnergyPlus's end-of-run files and `delete_state`)."""
         try:
             self._write_records(complete=True, prune=False)
         finally:
-            self.process.finish()
-        if self.episode_dir is not None:
-            self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)
+            self._ended = (self.process, self.episode_dir)
+            if not self.prepare_next:  # a process per episode: wait for it now, as an evaluation expects
+                self._settle()
+
+    def _settle(self) -> None:
+        """Wait for the episode past its last step to finish (EnergyPlus's files written, its state freed), then
+        prune: older episodes are pruned after, so nothing is removed under a writing EnergyPlus."""
+        if self._ended is None:
+            return
+        (process, episode_dir), self._ended = self._ended, None
+        process.finish()
+        if episode_dir is not None:
+            self._whole = prune_episodes([*self._whole, episode_dir], self.config.keep_episodes)
 
     def _write_records(self, complete: bool, prune: bool = True) -> None:
         if self.records is None or self.episode_dir is None:
@@ -315,6 +331,7 @@ class Simulation:
         if self._closed:
             return
         self._closed = True
+        self._settle()  # the last episode's files whole
         self._kill()  # no need to stop EnergyPlus gracefully: its process goes too
         self._spare.kill()
         self.discard_prepared()
