@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 import torch as th
 
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.resources import builtin_specs
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
@@ -129,3 +131,17 @@ def test_eval_every_measures_the_frozen_planner_keeps_the_best_and_records_the_t
     target = json.loads((run / TARGET_FILE).read_text())
     met = means[means["in_band_pct"] >= 50]
     assert target["timesteps"] == met.index.min()  # the planner holds the band (the test above): met at once
+
+
+@pytest.mark.parametrize("name", sorted(builtin_specs()))
+def test_the_models_state_reads_only_what_the_agent_observes_and_its_parts_sum_to_the_energy(name):
+    """The office's HVAC gas is a meter the agent does not observe: splitting on it read past the observation."""
+    from parallel_eplus.learning.model_based.dataset import Layout
+
+    building = load_building(name)
+    layout = Layout.of(building, n_exogenous=5)
+    obs = np.random.default_rng(0).uniform(1e3, 1e5, (3, len(building.observed))).astype(np.float32)
+    state = layout.state(obs)
+    assert state.shape == (3, layout.n_state)
+    energy = obs[:, [layout.sensors.index(e) for e in layout.energy]].sum(1)
+    np.testing.assert_allclose(state[:, len(layout.temperatures) :].sum(1), energy, rtol=1e-5)
