@@ -98,6 +98,9 @@ evaluate)
         policies+=(--policy "${run%/}=Distilled")
     done
     [ ${#policies[@]} -gt 0 ] || { echo "no finished run of $b"; exit 1; }
+    for run in "$REPO"/results/learned/"$b"/runs/*/; do  # today's recipe (clone, then RL with the constraint)
+        [ -f "$run/model.zip" ] && policies+=(--policy "${run}model.zip=Recipe")
+    done
     case $period in
     jan) when=(--run-days 14) ;;
     year) when=($(recipe "$b" | grep -o -- "--run-days [0-9]*")) ;;
