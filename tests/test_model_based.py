@@ -141,7 +141,21 @@ def test_the_models_state_reads_only_what_the_agent_observes_and_its_parts_sum_t
     building = load_building(name)
     layout = Layout.of(building, n_exogenous=5)
     obs = np.random.default_rng(0).uniform(1e3, 1e5, (3, len(building.observed))).astype(np.float32)
+    assert layout.sensors == tuple(s.name for s in building.observed)
     state = layout.state(obs)
     assert state.shape == (3, layout.n_state)
     energy = obs[:, [layout.sensors.index(e) for e in layout.energy]].sum(1)
     np.testing.assert_allclose(state[:, len(layout.temperatures) :].sum(1), energy, rtol=1e-5)
+
+
+@pytest.mark.slow
+def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_path, no_leaks):
+    """The office: thermostat schedules and its HVAC gas are sensors the agent does not observe, and its band
+    applies when occupied; a first run failed on its recorded controls before any step."""
+    cfg = mpc_config(tmp_path, "office", building="office-small", weathers=["CA"], run_days=1, timesteps=192,
+                     checkpoint_every=96, mpc=MPCSettings(explore_steps=48, refit_every=96, epochs=5, candidates=32),
+                     comfort=ComfortConstraint(target_pct=97.5))  # fmt: skip
+    final = train(cfg, progress=False)
+    mpc = MPC.load(final.parent / "planner" / "planner.pt")
+    assert mpc.layout.state_names[-2:] == ("power_w", "gas_w")  # its gas meter is hidden: no HVAC parts
+    assert len(Transitions.load(final.parent / "transitions.npz", mpc.layout)) > 192

@@ -29,7 +29,7 @@ _FIELDS = ("s", "a_prev", "a", "x", "s_next", "applies", "episode", "step", "ori
 class Layout:
     """Where the state's elements sit in a building's observation, and the sizes the model needs."""
 
-    sensors: tuple[str, ...]  # the observation's sensor names, in order
+    sensors: tuple[str, ...]  # the observed sensors' names, in the observation's order
     temperatures: tuple[str, ...]
     energy: tuple[str, ...]
     n_actions: int
@@ -44,7 +44,7 @@ class Layout:
         observed = tuple(o.name for o in building.observed)
         if not all(c in observed and c not in energy for c in hvac):
             hvac = ()  # an HVAC meter the agent does not observe (the office's gas), or HVAC a term itself: no parts
-        return cls(building.sensor_names, building.temperatures, energy, len(building.actions), n_exogenous, hvac)
+        return cls(observed, building.temperatures, energy, len(building.actions), n_exogenous, hvac)
 
     @property
     def state_names(self) -> tuple[str, ...]:
