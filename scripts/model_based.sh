@@ -16,9 +16,9 @@
 # resumes every unfinished run from its newest checkpoint. Runs use a copy of the package at a fixed commit
 # ($COMMIT, git archive), so later edits to the working tree cannot disturb them.
 #
-# Budget knobs (environment): STEPS (default 105000 env steps per run: a year of each training weather, one
-# worker each), WORKERS (3), SEEDS ("0 1 2"), DAYS (episode length; default the year, the CRAC's 351),
-# EVAL_EVERY (35000: the planner frozen on the training weathers' January 1-14 for steps-to-goal; 0: off),
+# Budget knobs (environment): STEPS (default 52500 env steps per run: January to June of each training weather,
+# one worker each), WORKERS (3), SEEDS ("0 1 2"), DAYS (episode length; default the year, the CRAC's 351),
+# EVAL_EVERY (17500: the planner frozen on the training weathers' January 1-14 for steps-to-goal; 0: off),
 # CHUNK_MIN (110; CHUNK_S in seconds), MPC (extra --mpc settings), NICE (0).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,9 +26,9 @@ REPO=$PWD
 COMMIT=${COMMIT:-$(git rev-parse --short HEAD)}
 WORK=${WORK:-$REPO/../model-based}
 SEEDS=${SEEDS:-"0 1 2"}
-STEPS=${STEPS:-105000}
+STEPS=${STEPS:-52500}
 WORKERS=${WORKERS:-3}
-EVAL_EVERY=${EVAL_EVERY:-35000}
+EVAL_EVERY=${EVAL_EVERY:-17500}
 CHUNK_MIN=${CHUNK_MIN:-110}
 NICE=${NICE:-0}
 PY=$REPO/.venv/bin/python
@@ -98,12 +98,17 @@ evaluate)
         policies+=(--policy "${run%/}=Distilled")
     done
     [ ${#policies[@]} -gt 0 ] || { echo "no finished run of $b"; exit 1; }
+    for run in "$REPO"/results/learned/"$b"/runs/*/; do  # today's recipe (clone, then RL with the constraint)
+        [ -f "$run/model.zip" ] && policies+=(--policy "${run}model.zip=Recipe")
+    done
     case $period in
     jan) when=(--run-days 14) ;;
     year) when=($(recipe "$b" | grep -o -- "--run-days [0-9]*")) ;;
     *) when=(--scenario "$period") ;;
     esac
     rbc=(); [ "$b" = datacenter-2zone ] && rbc=(--rbc)
+    code="$WORK/code-$COMMIT"  # the runs' own code when it is there (COMMIT=<the run's> to pick it)
+    [ -d "$code" ] && export PYTHONPATH="$code"
     "$PY" -m parallel_eplus.cli evaluate --building "$b" --baseline "${rbc[@]}" "${policies[@]}" \
         --weathers CA,CO,FL,IL,VA --workers 2 "${when[@]}" --out "$SAVED/$b/$period" --quiet
     ;;

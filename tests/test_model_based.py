@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 import torch as th
 
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.resources import builtin_specs
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
@@ -129,3 +131,31 @@ def test_eval_every_measures_the_frozen_planner_keeps_the_best_and_records_the_t
     target = json.loads((run / TARGET_FILE).read_text())
     met = means[means["in_band_pct"] >= 50]
     assert target["timesteps"] == met.index.min()  # the planner holds the band (the test above): met at once
+
+
+@pytest.mark.parametrize("name", sorted(builtin_specs()))
+def test_the_models_state_reads_only_what_the_agent_observes_and_its_parts_sum_to_the_energy(name):
+    """The office's HVAC gas is a meter the agent does not observe: splitting on it read past the observation."""
+    from parallel_eplus.learning.model_based.dataset import Layout
+
+    building = load_building(name)
+    layout = Layout.of(building, n_exogenous=5)
+    obs = np.random.default_rng(0).uniform(1e3, 1e5, (3, len(building.observed))).astype(np.float32)
+    assert layout.sensors == tuple(s.name for s in building.observed)
+    state = layout.state(obs)
+    assert state.shape == (3, layout.n_state)
+    energy = obs[:, [layout.sensors.index(e) for e in layout.energy]].sum(1)
+    np.testing.assert_allclose(state[:, len(layout.temperatures) :].sum(1), energy, rtol=1e-5)
+
+
+@pytest.mark.slow
+def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_path, no_leaks):
+    """The office: thermostat schedules and its HVAC gas are sensors the agent does not observe, and its band
+    applies when occupied; a first run failed on its recorded controls before any step."""
+    cfg = mpc_config(tmp_path, "office", building="office-small", weathers=["CA"], run_days=1, timesteps=192,
+                     checkpoint_every=96, mpc=MPCSettings(explore_steps=48, refit_every=96, epochs=5, candidates=32),
+                     comfort=ComfortConstraint(target_pct=97.5))  # fmt: skip
+    final = train(cfg, progress=False)
+    mpc = MPC.load(final.parent / "planner" / "planner.pt")
+    assert mpc.layout.state_names[-2:] == ("power_w", "gas_w")  # its gas meter is hidden: no HVAC parts
+    assert len(Transitions.load(final.parent / "transitions.npz", mpc.layout)) > 192

@@ -199,3 +199,14 @@ class UpdateTimer(BaseCallback):
 
     def _on_step(self) -> bool:
         return True
+
+
+class CallbackHost:
+    """What SB3's callbacks read of a model (EpisodeMetrics, RunStatus): the env, the logger, the step count; for a
+    learner that is not an SB3 model (training/mpc.py's Dyna loop)."""
+
+    def __init__(self, env, logger):
+        self.env, self.logger, self.num_timesteps = env, logger, 0
+
+    def get_env(self):
+        return self.env

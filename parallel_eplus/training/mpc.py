@@ -8,14 +8,9 @@ The Dyna loop (Sutton 1991) over the service's workers and vector env (local or 
    every worker per vector step), refitting the model every `refit_every` steps on everything seen so far;
 3. at the end, distil the planner into the usual policy network (distill.py): runs/<name>/model.zip.
 
-The comfort weight of the planner is the run's Lagrange multiplier (`--comfort-target`, training/lagrangian.py),
-updated at every refit from the share of zone samples in band the planner achieved since the last one; without
-a target it stays at its start (10: a sample out of band costs about ten steps' energy).
-
-What a run leaves: runs/<name>/planner/planner.pt (`evaluate --policy runs/<name>/planner` runs the planner),
-model.zip (the distilled policy), transitions.npz (every row the model saw), episodes.csv, status.json,
-checkpoints/mpc_<steps>_steps.{pt,npz} (`--resume` continues from the newest), TensorBoard's model error per
-state element on held-out blocks against persistence, planner cost and milliseconds per step, comfort multiplier.
+The comfort weight of the planner is the run's Lagrange multiplier (`--comfort-target`, learning/lagrangian.py),
+updated at every refit from the share of zone samples in band the planner achieved since the last one. What a run
+leaves, and what TensorBoard shows: docs/model-based.md.
 """
 
 from __future__ import annotations
@@ -39,23 +34,14 @@ from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_ch
 from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE, planner_controller
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.distill import act, distill, fit
-from parallel_eplus.learning.model_based.sources import Explorer, add_baseline
+from parallel_eplus.learning.model_based.dynamics import summary
+from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
 from parallel_eplus.runs.run_files import BEST_DIR
 from parallel_eplus.runs.run_status import RunStatus
-from parallel_eplus.training.callbacks import EpisodeMetrics, tensorboard_logger
+from parallel_eplus.training.callbacks import CallbackHost, EpisodeMetrics, tensorboard_logger
 from parallel_eplus.training.config import TrainConfig
 
 log = logging.getLogger(__name__)
-
-
-class _Model:
-    """What SB3's callbacks read of a model (EpisodeMetrics, RunStatus): the env, the logger, the step count."""
-
-    def __init__(self, env, logger):
-        self.env, self.logger, self.num_timesteps = env, logger, 0
-
-    def get_env(self):
-        return self.env
 
 
 def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool, make_vec_env, new_model,
@@ -90,7 +76,7 @@ class _Loop:
         self.steps, self.policy_obs, self.policy_act, self.replay = 0, [], [], {}
         self.student, self.student_fitted = None, False  # DAgger's phase: the distilled policy acts
         self.logger = tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name))
-        self.shim = _Model(venv, self.logger)
+        self.shim = CallbackHost(venv, self.logger)
         self.bar = tqdm(total=cfg.timesteps, unit="step", disable=not progress, desc=f"train {cfg.run_name}")
         self.callbacks = [EpisodeMetrics(cfg.run_dir / "episodes.csv", self.bar, 365 * self.building.steps_per_day),
                           status, *callbacks]  # fmt: skip
@@ -251,17 +237,8 @@ class _Loop:
 
     # -- the model, the comfort weight ----------------------------------------------------------
     def _record(self) -> None:
-        from parallel_eplus.learning.imitation import record_baseline
-
         days = self.s.record_days or self.cfg.run_days
-        demos = record_baseline(self.cfg.building, self.cfg.weathers, days, self.cfg.workers,
-                                self.cfg.run_dir / "baseline-record", progress=self.bar.disable is False)  # fmt: skip
-        comfort = self.building.comfort
-        self.replay = add_baseline(self.data, demos, self.mpc.forecasts, self.mpc.comfort_times,
-                                   lambda t, v: comfort.always or comfort.applies(t, v), 0)  # fmt: skip
-        import shutil
-
-        shutil.rmtree(self.cfg.run_dir / "baseline-record", ignore_errors=True)
+        self.replay = record_own_controls(self.cfg, days, self.data, self.mpc, progress=self.bar.disable is False)
         log.info("recorded the building's own controls: %d transitions", len(self.data))
 
     def _refit(self, epochs: int) -> None:
@@ -286,7 +263,7 @@ class _Loop:
         self.logger.dump(self.steps)
         io.write_text(self.cfg.run_dir / "model_error.json", __import__("json").dumps(errors, indent=2))
         log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,
-                 _summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
+                 summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
     def _update_comfort(self, out: float, zones: float) -> None:
         if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student_fitted:
@@ -312,16 +289,6 @@ class _Loop:
             self.policy_obs, self.policy_act = [policy[0]], [policy[1]]
         log.info("resuming %s from %s at step %d (%d transitions)", self.cfg.run_name, checkpoint, self.steps,
                  len(self.data))  # fmt: skip
-
-
-def _summary(errors: dict, names, horizon: int) -> str:
-    parts = []
-    for name in names:
-        for h in sorted({1, horizon}):
-            m, p = errors.get(f"{name}/{h}_step_model"), errors.get(f"{name}/{h}_step_persistence")
-            if m is not None:
-                parts.append(f"{name} {h}-step {m:.3g} (persistence {p:.3g})")
-    return "; ".join(parts) or "(no held-out rows yet)"
 
 
 __all__ = ["train_mpc", "newest_checkpoint"]

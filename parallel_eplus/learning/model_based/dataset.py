@@ -29,21 +29,22 @@ _FIELDS = ("s", "a_prev", "a", "x", "s_next", "applies", "episode", "step", "ori
 class Layout:
     """Where the state's elements sit in a building's observation, and the sizes the model needs."""
 
-    sensors: tuple[str, ...]  # the observation's sensor names, in order
+    sensors: tuple[str, ...]  # the observed sensors' names, in the observation's order
     temperatures: tuple[str, ...]
     energy: tuple[str, ...]
     n_actions: int
     n_exogenous: int
-    hvac: tuple[str, ...] = ()  # the energy's HVAC parts (sensors); the rest of `energy`'s sum is one more part
+    hvac: tuple[str, ...] = ()  # the energy's observed HVAC parts; the rest of `energy`'s sum is one more part
 
     @classmethod
     def of(cls, building: Building, n_exogenous: int) -> Layout:
         energy = tuple(e for e in building.comfort.energy if e not in building.temperatures)
         kpis = building.comfort.kpis
         hvac = tuple(c for _, c in kpis.hvac) if kpis is not None else ()
-        if not all(c in building.sensor_names and c not in energy for c in hvac):
-            hvac = ()  # a meter outside the observation, or HVAC already one of the energy terms: no parts
-        return cls(building.sensor_names, building.temperatures, energy, len(building.actions), n_exogenous, hvac)
+        observed = tuple(o.name for o in building.observed)
+        if not all(c in observed and c not in energy for c in hvac):
+            hvac = ()  # an HVAC meter the agent does not observe (the office's gas), or HVAC a term itself: no parts
+        return cls(observed, building.temperatures, energy, len(building.actions), n_exogenous, hvac)
 
     @property
     def state_names(self) -> tuple[str, ...]:

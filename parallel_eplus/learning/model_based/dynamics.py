@@ -121,3 +121,14 @@ class Ensemble(th.nn.Module):
         model.load_state_dict(state["weights"])
         model.fitted_rows = state.get("fitted_rows", 0)
         return model
+
+
+def summary(errors: dict, names, horizon: int) -> str:
+    """One log line: each state element's held-out error, 1 and `horizon` steps ahead, beside persistence."""
+    parts = []
+    for name in names:
+        for h in sorted({1, horizon}):
+            m, p = errors.get(f"{name}/{h}_step_model"), errors.get(f"{name}/{h}_step_persistence")
+            if m is not None:
+                parts.append(f"{name} {h}-step {m:.3g} (persistence {p:.3g})")
+    return "; ".join(parts) or "(no held-out rows yet)"

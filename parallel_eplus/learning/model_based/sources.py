@@ -50,6 +50,23 @@ def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: 
     return replay
 
 
+def record_own_controls(cfg, days: int, data: Transitions, mpc, progress: bool) -> dict[str, np.ndarray]:
+    """Record the building's own controls on the run's training weathers (`--init-from-baseline`'s recording)
+    into `data`; returns each weather's normalized actions, for `Explorer` to replay. `cfg`: the TrainConfig."""
+    import shutil
+
+    from parallel_eplus.buildings.building import load_building
+    from parallel_eplus.learning.imitation import record_baseline
+
+    folder = cfg.run_dir / "baseline-record"
+    demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, folder, progress=progress)
+    comfort = load_building(cfg.building).comfort
+    replay = add_baseline(data, demos, mpc.forecasts, mpc.comfort_times,
+                          lambda t, v: comfort.always or comfort.applies(t, v), 0)  # fmt: skip
+    shutil.rmtree(folder, ignore_errors=True)
+    return replay
+
+
 class Explorer:
     """The recorded actions of each worker's weather at its step, plus an offset walking toward held targets."""
 
