@@ -3,7 +3,7 @@
 The EnergyPlus-side long-lived processes run under cProfile (WarmProcess.start patched here only), each dumping
 its profile when its stdin closes. The env side runs under cProfile too.
 
-    python spike/profile_env.py --out /tmp/prof39
+    python scripts/spikes-issue39/profile_env.py --out /tmp/prof39
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ state per episode in a warm process, or forks of a parked, warmed-up one), again
 year: simulated steps per second of wall, rounds interleaved. No learner and no pipes: the EnergyPlus side's own
 ceiling for short episodes relative to a year.
 
-    python spike/fork_throughput.py --episodes 16 --rounds 2
+    python scripts/spikes-issue39/fork_throughput.py --episodes 16 --rounds 2
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Timestamps (CLOCK_MONOTONIC, shared by all processes) from the env side (reset, 
 last observation, finish) and the EnergyPlus side (request read, new_state, run start, observation 0 written,
 last step, run_energyplus returned, delete_state, done written). Patches only this script's processes.
 
-    python spike/timeline.py --episodes 10 --days 1
+    python scripts/spikes-issue39/timeline.py --episodes 10 --days 1
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ observations of every child are compared bit for bit with a fresh run's. Output 
 descriptor the parent holds open in its output directory to a copy in its own directory (the bytes on disk so far,
 then the same offset), and chdir()s so that files EnergyPlus opens by a relative path land in its own directory.
 
-    python spike/fork_episode.py --episodes 8 --days 1
+    python scripts/spikes-issue39/fork_episode.py --episodes 8 --days 1
 """
 
 from __future__ import annotations

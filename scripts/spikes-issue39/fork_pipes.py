@@ -12,7 +12,7 @@ bridge on the child's descriptors. The parent answers `pid N`, reaps the child a
 
 Driver (`bench`): our PipePair, the env's frames; rounds interleave alone / fork / env.
 
-    python spike/fork_pipes.py bench --episodes 10 --rounds 3
+    python scripts/spikes-issue39/fork_pipes.py bench --episodes 10 --rounds 3
 """
 
 from __future__ import annotations
