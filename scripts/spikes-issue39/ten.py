@@ -1,6 +1,7 @@
 """Ten consecutive 1-day episodes in one env (prepared), for farm-bench pairs between two trees' venvs.
 
-farm-bench -n 6 -- .venv/bin/python scripts/spikes-issue39/ten.py --vs '/work/main/.venv/bin/python scripts/spikes-issue39/ten.py'
+farm-bench -n 6 -- .venv/bin/python scripts/spikes-issue39/ten.py \
+    --vs '/other/tree/.venv/bin/python scripts/spikes-issue39/ten.py'
 """
 
 import sys
