@@ -8,7 +8,8 @@
 #   bash scripts/model_based.sh evaluate BUILDING PERIOD  # frozen, on the five weathers, against built-in and rule:
 #        PERIOD jan: January 1-14, the planner and the distilled policy; peak_cool: BOPTEST's two weeks around each
 #        weather's peak cooling day (after a week of warm-up), both; year: the distilled policy alone (a year of
-#        planning is ~17 min per weather on a quiet core)
+#        planning is ~17 min per weather on a quiet core). The planner is the run's best/planner/ where
+#        --eval-every kept one (the target met on the training weathers' January, then the least energy).
 #   bash scripts/model_based.sh save                   # small results (configs, episodes, planners, policies)
 #
 # `run` works in chunks: each trainer gets the time left of the chunk (default 110 min, under the sessions' 2 h)
@@ -94,7 +95,8 @@ evaluate)
     b=$2; period=${3:?evaluate BUILDING jan|peak_cool|year}; policies=()
     for run in "$WORK"/runs/"$b"-mpc-seed*/; do
         finished "$run" || continue
-        [ "$period" = year ] || policies+=(--policy "${run}planner=Planner")
+        planner=${run}planner; [ -d "${run}best/planner" ] && planner=${run}best/planner  # chosen on CA-CO-FL
+        [ "$period" = year ] || policies+=(--policy "$planner=Planner")
         policies+=(--policy "${run%/}=Distilled")
     done
     [ ${#policies[@]} -gt 0 ] || { echo "no finished run of $b"; exit 1; }
