@@ -266,12 +266,9 @@ void bridge_init(callback_fn slow_apply, callback_fn slow_observe, get_fn get_va
                          kind_of_sim, data_ready};
 }
 
-/* Sizing and warm-up in C (~2,700 Python callbacks an episode, ~5-10 ms, before: issue 39): from the first call
- * with the handles known until the run period's first control step, which goes back to Python with the state
- * (bridge_unhold). */
-int bridge_hold(int n_sensors, const int *sensors, int n_actuators, const int *actuators,
-                const int *actuator_action, int n_actions, const double *action, int pending,
-                const double *last_obs) {
+/* The handles and the action both entries take over from Python; -1 when a count or an index is out of range. */
+static int take_handles(int n_sensors, const int *sensors, int n_actuators, const int *actuators,
+                        const int *actuator_action, int n_actions, const double *action, int pending) {
     if (n_sensors > MAX_VALUES || n_actuators > MAX_VALUES || n_actions > MAX_VALUES)
         return -1;
     for (int i = 0; i < n_actuators; i++)
@@ -284,8 +281,19 @@ int bridge_hold(int n_sensors, const int *sensors, int n_actuators, const int *a
     memcpy(b.actuator_action, actuator_action, sizeof(int) * (size_t)n_actuators);
     b.n_actions = n_actions;
     memcpy(b.action, action, sizeof(double) * (size_t)n_actions);
-    memcpy(b.last_obs, last_obs, sizeof(double) * (size_t)n_sensors);
     b.pending = pending;
+    return 0;
+}
+
+/* Sizing and warm-up in C (~2,700 Python callbacks an episode, ~5-10 ms, before: issue 39): from the first call
+ * with the handles known until the run period's first control step, which goes back to Python with the state
+ * (bridge_unhold). */
+int bridge_hold(int n_sensors, const int *sensors, int n_actuators, const int *actuators,
+                const int *actuator_action, int n_actions, const double *action, int pending,
+                const double *last_obs) {
+    if (take_handles(n_sensors, sensors, n_actuators, actuators, actuator_action, n_actions, action, pending) < 0)
+        return -1;
+    memcpy(b.last_obs, last_obs, sizeof(double) * (size_t)n_sensors);
     b.holding = 1;
     return 0;
 }
@@ -302,11 +310,8 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
                const int *actuators, const int *actuator_action, int n_actions, const double *action,
                int pending, long step, long steps, int minutes, double spin_s, const double *replay,
                long replay_rows, long replayed) {
-    if (n_sensors > MAX_VALUES || n_actuators > MAX_VALUES || n_actions > MAX_VALUES)
+    if (take_handles(n_sensors, sensors, n_actuators, actuators, actuator_action, n_actions, action, pending) < 0)
         return -1;
-    for (int i = 0; i < n_actuators; i++)
-        if (actuator_action[i] < 0 || actuator_action[i] >= n_actions)
-            return -1;
     b.obs_fd = obs_fd;
     b.act_fd = act_fd;
     if (act_fd >= 0 && spin_s <= 0) { /* no spin: one blocking read per action, no failed read and poll first */
@@ -314,14 +319,6 @@ int bridge_arm(int obs_fd, int act_fd, int n_sensors, const int *sensors, int n_
         if (flags < 0 || fcntl(act_fd, F_SETFL, flags & ~O_NONBLOCK) < 0)
             return -1;
     }
-    b.n_sensors = n_sensors;
-    memcpy(b.sensors, sensors, sizeof(int) * (size_t)n_sensors);
-    b.n_actuators = n_actuators;
-    memcpy(b.actuators, actuators, sizeof(int) * (size_t)n_actuators);
-    memcpy(b.actuator_action, actuator_action, sizeof(int) * (size_t)n_actuators);
-    b.n_actions = n_actions;
-    memcpy(b.action, action, sizeof(double) * (size_t)n_actions);
-    b.pending = pending;
     b.step = step;
     b.steps = steps;
     b.minutes = minutes;
