@@ -118,7 +118,9 @@ save)
     for d in "$WORK"/runs/*/; do
         name=$(basename "$d"); b=${name%-mpc-seed*}; out="$SAVED/$b/runs/$name"
         mkdir -p "$out"
-        cp "$d"/{config.json,episodes.csv,status.json,model_error.json,distill.json} "$out/" 2>/dev/null || true
+        cp "$d"/{config.json,episodes.csv,status.json,model_error.json,distill.json,evaluations.csv,target.json} \
+            "$out/" 2>/dev/null || true
+        [ -d "$d/best/planner" ] && mkdir -p "$out/best/planner" && cp "$d"/best/planner/* "$out/best/planner/"
         [ -f "$d/model.zip" ] && cp "$d/model.zip" "$d/vecnormalize.npz" "$out/"
         [ -d "$d/planner" ] && mkdir -p "$out/planner" && cp "$d"/planner/* "$out/planner/"
         echo "saved $name"
