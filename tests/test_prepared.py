@@ -149,6 +149,8 @@ def test_the_learner_interrupted_or_killed_ends_running_and_prepared_processes(t
         while any(_state(p) not in ("", "Z") for p in pids):
             assert time.monotonic() < deadline, f"EnergyPlus-side processes outlived the learner: {pids}"
             time.sleep(0.05)
+        if sig == signal.SIGINT:  # an uncaught Ctrl-C closes the env at exit: the episode so far is kept
+            assert list(tmp_path.rglob("steps.parquet")), sorted(tmp_path.rglob("*"))
     finally:
         if learner.poll() is None:
             learner.kill()

@@ -8,9 +8,12 @@ drives several, writing every action before reading any observation.
 
 from __future__ import annotations
 
+import atexit
 import logging
 import shutil
+import sys
 import tempfile
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +90,7 @@ class Simulation:
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
         self._closed = False
+        _LIVE.add(self)
 
     # -- the process, as the vector env's `wait_any` and the tests see it -----------------------
     @property
@@ -342,8 +346,23 @@ class Simulation:
             shutil.rmtree(self._tmp, ignore_errors=True)
 
     def __del__(self):
-        if not getattr(self, "_closed", True):
+        if not getattr(self, "_closed", True) and not sys.is_finalizing():
             self.close()
+
+
+# Simulations still open when the interpreter exits (an uncaught Ctrl-C in a script that never called close()) are
+# closed while the modules they need are alive: from __del__ at shutdown, writing the episode's records failed
+# inside pandas ("'NoneType' object has no attribute 'filters'") and the step table was lost.
+_LIVE: weakref.WeakSet[Simulation] = weakref.WeakSet()
+
+
+@atexit.register
+def _close_live() -> None:
+    for sim in list(_LIVE):
+        try:
+            sim.close()
+        except Exception:  # noqa: BLE001 - one failing close must not keep the others' processes alive
+            logging.getLogger(__name__).exception("closing %s at exit", getattr(sim, "name", "a simulation"))
 
 
 __all__ = ["Simulation", "wait_any"]
