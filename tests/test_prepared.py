@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -135,16 +137,34 @@ time.sleep(60)
 """
 
 
+def _as_from_a_shell() -> None:
+    """The learner starts as a user's shell starts it: Ctrl-C delivered and handled by Python. A child inherits a
+    blocked or ignored SIGINT from the test process, which tests before this one may have left so."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _signal_state(pid: int) -> str:
+    with contextlib.suppress(OSError):
+        status = Path(f"/proc/{pid}/status").read_text().splitlines()
+        return "; ".join(line for line in status if line.startswith(("State", "SigBlk", "SigIgn", "SigCgt")))
+    return "gone"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
 def test_the_learner_interrupted_or_killed_ends_running_and_prepared_processes(tmp_path, sig):
     learner = subprocess.Popen([sys.executable, "-c", WORKLOAD, str(tmp_path)], cwd=SOURCE_ROOT,
-                               stdout=subprocess.PIPE, text=True)  # fmt: skip
+                               stdout=subprocess.PIPE, text=True, preexec_fn=_as_from_a_shell)  # fmt: skip
     try:
         pids = [int(p) for p in learner.stdout.readline().split()]
         assert len(pids) == 2
         learner.send_signal(sig)
-        learner.wait(timeout=30)
+        try:
+            learner.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            state = _signal_state(learner.pid)
+            raise AssertionError(f"the learner did not exit within 30 s of {sig!r}: {state}") from None
         deadline = time.monotonic() + 30
         while any(_state(p) not in ("", "Z") for p in pids):
             assert time.monotonic() < deadline, f"EnergyPlus-side processes outlived the learner: {pids}"
