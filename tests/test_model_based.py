@@ -6,6 +6,7 @@ then the planner) serves the first three tests; the fault test runs its own.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import signal
 from pathlib import Path
@@ -159,3 +160,16 @@ def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_
     mpc = MPC.load(final.parent / "planner" / "planner.pt")
     assert mpc.layout.state_names[-2:] == ("power_w", "gas_w")  # its gas meter is hidden: no HVAC parts
     assert len(Transitions.load(final.parent / "transitions.npz", mpc.layout)) > 192
+    # it plans against each zone's own thermostat bounds as they were at that time of the week (a first version
+    # planned against the spec's fixed band, and held 63 % of the occupied steps in the bounds it is scored on)
+    times = mpc.comfort_times
+    seen = np.flatnonzero(times.bound_seen)
+    assert len(seen) >= 96  # the recorded day and the run's own steps
+    monday = dt.datetime(2024, 1, 1)  # slot k of the week starts k steps after a Monday's midnight
+    at = [monday + dt.timedelta(minutes=float(times.step_minutes * k)) for k in seen]
+    bounds = times.bounds(at)  # [T, zones, 2]
+    night = np.array([t.hour == 3 for t in at])
+    np.testing.assert_allclose(bounds[night], np.broadcast_to([15.6, 26.7], bounds[night].shape), atol=0.05)
+    assert np.all(bounds[..., 0] < bounds[..., 1])
+    unseen = monday + dt.timedelta(minutes=float(times.step_minutes * np.flatnonzero(times.bound_seen == 0)[0]))
+    np.testing.assert_allclose(times.bounds([unseen])[0], times.fixed)  # nothing seen then: the spec's band
