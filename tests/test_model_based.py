@@ -21,7 +21,7 @@ from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.model_based.control import MPC, planner_controller
-from parallel_eplus.learning.model_based.dataset import Transitions
+from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ComfortConstraint, TrainConfig
@@ -173,3 +173,19 @@ def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_
     assert np.all(bounds[..., 0] < bounds[..., 1])
     unseen = monday + dt.timedelta(minutes=float(times.step_minutes * np.flatnonzero(times.bound_seen == 0)[0]))
     np.testing.assert_allclose(times.bounds([unseen])[0], times.fixed)  # nothing seen then: the spec's band
+
+
+@pytest.mark.slow
+def test_the_ray_backend_runs_the_planner_too(tmp_path, no_leaks):
+    """`train --algorithm mpc --backend ray`: the same loop over Ray's actors (the planner plans for every worker in
+    one call, whichever backend steps them)."""
+    pytest.importorskip("ray")
+    cfg = mpc_config(tmp_path, "ray", backend="ray", timesteps=576, checkpoint_every=288,
+                     mpc=MPCSettings(explore_steps=96, refit_every=192, epochs=5, candidates=32))  # fmt: skip
+    final = train(cfg, progress=False)
+    run = final.parent
+    assert final == run / "model.zip" and (run / "planner" / "planner.pt").is_file()
+    status = json.loads((run / "status.json").read_text())
+    assert status["state"] == "finished" and status["steps"] >= 576, status
+    data = Transitions.load(run / "transitions.npz", MPC.load(run / "planner" / "planner.pt").layout)
+    assert (data.array("origin") == ORIGINS.index("planner")).sum() >= 576 - 96  # both of Ray's workers, planned
