@@ -73,17 +73,41 @@ def period(scenario: str, day: int, year_start: dt.datetime) -> Period:
     return Period(scenario, day, start + 1, weekday)
 
 
-def loads(episode_dir: Path) -> tuple[pd.Series, pd.Series]:
-    """The zones' summed heating and cooling loads (W) of a year run with `LOADS` reported, on its step times."""
+def loads(episode_dir: Path, partial: bool = False) -> tuple[pd.Series, pd.Series]:
+    """The zones' summed heating and cooling loads (W) of a year run with `LOADS` reported, on its step times;
+    `partial`: a run that failed, up to its last step."""
     table = pd.read_csv(episode_dir / "eplusout.csv")
     steps = pd.read_parquet(episode_dir / "steps.parquet", columns=["time"])
-    if len(table) != len(steps):
+    if len(table) != len(steps) and not partial:
         raise ValueError(f"{episode_dir}: {len(table)} rows in eplusout.csv for {len(steps)} steps")
+    n = min(len(table), len(steps))  # a failed run: its steps up to the failure
+    table, steps = table.iloc[:n], steps.iloc[:n]
     index = pd.DatetimeIndex(steps["time"]) - pd.Timedelta(seconds=1)  # each step's load in its own day
     pick = lambda name: [c for c in table.columns if name.upper() in c.upper()]  # noqa: E731
     heat = table[pick(LOADS[0][1])].sum(axis=1).to_numpy(float)
     cool = table[pick(LOADS[1][1])].sum(axis=1).to_numpy(float)
     return pd.Series(heat, index=index), pd.Series(cool, index=index)
+
+
+def _loads_of(episode_dir: Path, weather: str, failed: bool, error: str | None) -> tuple[pd.Series, pd.Series]:
+    """A year's loads; where the built-in controls failed in it (the CRAC's on Golden's December cold snap), the
+    days up to a week before the failure (its run-up is no load of the building's: the CRAC's zone passed 200 °C,
+    which would be its peak cooling day), if that leaves four weeks."""
+    if not failed:
+        return loads(episode_dir)
+    try:
+        heat, cool = loads(episode_dir, partial=True)
+    except (OSError, ValueError, KeyError):
+        heat = cool = pd.Series(dtype=float)
+    if len(heat):
+        cut = heat.index[-1].normalize() - pd.Timedelta(days=7)
+        heat, cool = heat[heat.index < cut], cool[cool.index < cut]
+    if len(heat) == 0 or (heat.index[-1] - heat.index[0]).days < 28:
+        raise ValueError(f"{weather}: the built-in controls failed before BOPTEST's days could be found ({error}); "
+                         f"see {episode_dir}")  # fmt: skip
+    log.warning("%s: the built-in controls failed (%s); BOPTEST's days are found up to %s", weather, error,
+                heat.index[-1].date())  # fmt: skip
+    return heat, cool
 
 
 def find_periods(
@@ -102,10 +126,11 @@ def find_periods(
         log.info("finding BOPTEST's days: a year of the built-in controls on %s", ", ".join(todo))
         df = run_sweep(
             [Controller(BASELINE_LABEL, "baseline")], todo, 365, workers, out_dir / "scenario-loads", None, progress,
-            building, extra_outputs=LOADS,
+            building, extra_outputs=LOADS, keep_going=True,
         )  # fmt: skip
-        for _, row in df.iterrows():
-            heat, cool = loads(Path(row["episode_dir"]))
+        runs = [(row, False) for _, row in df.iterrows()] + [(f, True) for f in df.attrs["failures"]]
+        for row, failed in runs:
+            heat, cool = _loads_of(Path(row["episode_dir"]), row["weather"], failed, row.get("error"))
             year_start = heat.index[0].normalize().to_pydatetime()
             days = find_days(heat, cool)
             known[row["weather"]] = {
