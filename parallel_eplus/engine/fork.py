@@ -1,0 +1,199 @@
+"""Forked episodes, our side (issue 39): templates parked at the first control step, one episode forked per request.
+
+A template (fork_side.py) is one EnergyPlus-side process that has read its inputs, sized and warmed up for one model,
+weather file and run period, and waits at the run period's first control step. An episode of that weather is a
+fork of it: its input processing, sizing and warm-up are paid once per template, not per episode, and a child
+touches only what its episode writes (copy on write). The child equals a cold episode bit for bit
+(tests/test_fork.py): the same state, reached by the same code, the same files in its directory.
+
+`Templates` keeps one per weather file of a worker's rotation (the model and run period are the worker's), started
+on first use and replaced when it dies or hangs; episodes that cannot share one (weather noise: a new file each
+episode) start as before (prepared.py, warm_process.py). `ForkedEpisode` is a child as engine/process.py sees a
+process: its pid (watched by pidfd: any process's, not only our children's), `poll`, `wait`, `kill`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from parallel_eplus.engine.warm_process import engine_side_env
+
+log = logging.getLogger(__name__)
+ANSWER_S = 10.0  # for a parked template to answer a fork request (it takes milliseconds): longer means hung
+
+
+class ForkFailed(RuntimeError):
+    """The template died or hung: it is replaced, the episode starts as without one."""
+
+
+class Template:
+    """One parked EnergyPlus for one weather file, forked per episode."""
+
+    def __init__(self, epw: Path, model: bytes, model_name: str, args: list[str], pipe_dir: Path, timeout_s: float):
+        """`args`: the EnergyPlus side's arguments every episode shares (steps, initial action, the C bridge);
+        `pipe_dir`: a pipe directory of its worker (the template's own directory goes in it, and it names its owner
+        for `parallel-eplus clean`)."""
+        self.epw = epw
+        self.dir = Path(tempfile.mkdtemp(prefix="template-", dir=pipe_dir))
+        (self.dir / model_name).write_bytes(model)
+        cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--template", "--pipes", str(pipe_dir),
+               "--idf", model_name, "--epw", str(epw), "--output-dir", ".", *args]  # fmt: skip
+        with open(self.dir / "energyplus.log", "wb") as logf:
+            self.proc = subprocess.Popen(
+                cmd, cwd=self.dir, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=logf, start_new_session=True,
+                env={**engine_side_env(), "OPENBLAS_NUM_THREADS": "1"},  # no thread pool to lose in a fork
+            )  # fmt: skip
+        os.set_blocking(self.proc.stdout.fileno(), False)
+        self.deadline = time.monotonic() + timeout_s  # to park by: past it, it hung
+        self.is_parked = False
+        self.codes: dict[int, int] = {}  # children's exit codes, as it answered them
+        self._pids: list[int] = []
+        self._buf = b""
+        self._eof = False
+
+    def _read(self, timeout: float = 0.0) -> None:
+        """Take what the template has answered, waiting up to `timeout` for something."""
+        fd = self.proc.stdout.fileno()
+        if self._eof or not select.select([fd], [], [], timeout)[0]:
+            return
+        while True:
+            try:
+                chunk = os.read(fd, 65536)
+            except BlockingIOError:
+                break
+            if not chunk:
+                self._eof = True
+                break
+            self._buf += chunk
+        while b"\n" in self._buf:
+            line, self._buf = self._buf.split(b"\n", 1)
+            words = line.split()
+            if words == [b"parked"]:
+                self.is_parked = True
+            elif words[:1] == [b"pid"]:
+                self._pids.append(int(words[1]))
+            elif words[:1] == [b"done"]:
+                self.codes[int(words[1])] = int(words[2])
+
+    def alive(self) -> bool:
+        self._read()
+        return not self._eof and self.proc.poll() is None
+
+    def parked(self) -> bool:
+        return self.alive() and self.is_parked
+
+    def hung(self) -> bool:
+        return not self.is_parked and time.monotonic() > self.deadline
+
+    def wait_parked(self) -> bool:
+        """Wait for it to park, by its deadline: False if it died or hung first."""
+        while self.alive() and not self.is_parked and time.monotonic() < self.deadline:
+            self._read(min(0.5, max(0.0, self.deadline - time.monotonic())))
+        return self.parked()
+
+    def fork(self, request: dict) -> int:
+        """Fork an episode (`request`: its directory, log, pipes, spin); its pid, or ForkFailed."""
+        try:
+            self.proc.stdin.write(json.dumps(request).encode() + b"\n")
+            self.proc.stdin.flush()
+        except (BrokenPipeError, OSError) as e:
+            raise ForkFailed(f"the template for {self.epw.name} is gone ({e})") from e
+        deadline = time.monotonic() + ANSWER_S
+        while not self._pids:
+            if self._eof or time.monotonic() > deadline:
+                raise ForkFailed(f"the template for {self.epw.name} {'died' if self._eof else 'hung'}")
+            self._read(max(0.0, deadline - time.monotonic()))
+        return self._pids.pop(0)
+
+    def close(self) -> None:
+        """End it (its stdin closed and killed: it ends its children too) and remove its directory."""
+        with contextlib.suppress(OSError):
+            self.proc.stdin.close()
+        self.proc.kill()
+        self.proc.wait()
+        self.proc.stdout.close()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+class Templates:
+    """A worker's templates, one per weather file, started on first use and replaced when they die or hang."""
+
+    def __init__(self, model: Callable[[], bytes], model_name: str, args: list[str], timeout_s: float):
+        """`model`: the episode's model file's bytes (the same for every episode); `args`: as Template's."""
+        self.model, self.model_name, self.args, self.timeout_s = model, model_name, args, timeout_s
+        self.by_epw: dict[Path, Template] = {}
+
+    def get(self, epw: Path, pipe_dir: Path, wait: bool) -> Template | None:
+        """The parked template for `epw` (started now if there is none or it died or hung); with `wait`, waited
+        for; None where there is none parked (yet, or it failed: the episode then starts without it)."""
+        t = self.by_epw.get(epw)
+        if t is not None and (not t.alive() or t.hung()):
+            log.warning("the parked EnergyPlus for %s %s; starting another", epw.name, "hung" if t.alive() else "died")
+            self.drop(t)
+            t = None
+        if t is None:
+            t = self.by_epw[epw] = Template(epw, self.model(), self.model_name, self.args, pipe_dir, self.timeout_s)
+        if t.parked() or (wait and t.wait_parked()):
+            return t
+        if wait:  # it failed to park: the episode starts without it, and reports what failed as a cold one does
+            self.drop(t)
+        return None
+
+    def drop(self, t: Template) -> None:
+        if self.by_epw.get(t.epw) is t:
+            del self.by_epw[t.epw]
+        t.close()
+
+    def close(self) -> None:
+        for t in list(self.by_epw.values()):
+            self.drop(t)
+
+
+class ForkedEpisode:
+    """A forked child as engine/process.py uses a process: `pid`, `poll`, `wait`, `kill` (not ours to reap: its
+    template reaps it and answers its code; `poll` says -1 where the template has not answered yet)."""
+
+    exit_fd = None  # the pipes watch its pid by a pidfd of their own
+
+    def __init__(self, template: Template, pid: int):
+        self.template, self.pid = template, pid
+        self.returncode: int | None = None
+        try:
+            self._pidfd: int | None = os.pidfd_open(pid)
+        except ProcessLookupError:  # it ended (and was reaped) already
+            self._pidfd = None
+
+    def poll(self) -> int | None:
+        if self.returncode is None and (self._pidfd is None or select.select([self._pidfd], [], [], 0)[0]):
+            self._ended()
+        return self.returncode
+
+    def _ended(self) -> None:
+        with contextlib.suppress(ValueError, OSError):
+            self.template._read()
+        self.returncode = self.template.codes.pop(self.pid, -1)
+        if self._pidfd is not None:
+            os.close(self._pidfd)
+            self._pidfd = None
+
+    def wait(self, timeout: float | None = None) -> int:
+        if self.poll() is None and not select.select([self._pidfd], [], [], timeout)[0]:
+            raise subprocess.TimeoutExpired(f"pid {self.pid}", timeout or 0.0)
+        return self.poll()
+
+    def kill(self) -> None:
+        if self._pidfd is not None:
+            with contextlib.suppress(ProcessLookupError):
+                signal.pidfd_send_signal(self._pidfd, signal.SIGKILL)
