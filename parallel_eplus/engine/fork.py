@@ -61,12 +61,14 @@ class Template:
         self.codes: dict[int, int] = {}  # children's exit codes, as it answered them
         self._pids: list[int] = []
         self._buf = b""
-        self._eof = False
+        self._eof = False  # it answers no more: it died, or we closed it
 
     def _read(self, timeout: float = 0.0) -> None:
         """Take what the template has answered, waiting up to `timeout` for something."""
+        if self._eof:
+            return
         fd = self.proc.stdout.fileno()
-        if self._eof or not select.select([fd], [], [], timeout)[0]:
+        if not select.select([fd], [], [], timeout)[0]:
             return
         while True:
             try:
@@ -118,11 +120,15 @@ class Template:
         return self._pids.pop(0)
 
     def close(self) -> None:
-        """End it (its stdin closed and killed: it ends its children too) and remove its directory."""
-        with contextlib.suppress(OSError):
-            self.proc.stdin.close()
+        """End it and remove its directory. Killed first: its children are ours to end (a running episode outlives
+        a template that failed); only its owner's death, closing its stdin, makes it end them."""
+        if self.proc.stdout.closed:
+            return
+        self._eof = True
         self.proc.kill()
         self.proc.wait()
+        with contextlib.suppress(OSError):
+            self.proc.stdin.close()
         self.proc.stdout.close()
         shutil.rmtree(self.dir, ignore_errors=True)
 
