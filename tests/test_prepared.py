@@ -27,7 +27,7 @@ def _episode(env: EnergyPlusEnv, **reset) -> np.ndarray:
     obs, _ = env.reset(**reset)
     rows, terminated = [np.append(obs, 0.0)], False
     while not terminated:
-        obs, reward, terminated, truncated, _ = env.step(ZERO)
+        obs, reward, terminated, truncated, _ = env.step(np.zeros(env.action_space.shape, np.float32))
         assert not truncated
         rows.append(np.append(obs, reward))
     return np.array(rows)

@@ -96,7 +96,7 @@ class EnergyPlusProcess:
         """After the last step: let EnergyPlus write its files and exit, then make sure it has."""
         if self.proc is None:
             return
-        exited = self.pipes.wait_exit(grace_s)
+        exited = True if self.proc.poll() is not None else self.pipes.wait_exit(grace_s)  # (a poll took its answer)
         if exited is None:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 exited = self.proc.wait(timeout=grace_s) is not None

@@ -92,7 +92,7 @@ class Simulation:
         native_arg = ["--native", bridge] if bridge else []
         self._templates = Templates(self._starter.model, MODEL_FILE, [*s.process_args(), *native_arg],
                                     config.start_timeout_s) if forks else None  # fmt: skip
-        self._prepare_due = False  # the next episode is prepared at the first action (reset returns first)
+        self._prepare_due = False  # the next is prepared at the first action (reset returns first) the spare is free
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
@@ -224,8 +224,8 @@ class Simulation:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
         if self.proc is None or (self._ended is not None and self._ended[0] is self.process):  # over, not reset
             raise RuntimeError("no simulation running: call reset() first")
-        if self._prepare_due:
-            self._prepare_due = False
+        if self._prepare_due and (self._ended is None or not self._ended[0].running()):
+            self._prepare_due = False  # once the spare has finished the episode before: a step never waits for it
             self.prepare()
         if self.base is None:
             self._action = scale_action(action, self.low, self.high, self.action_names)
