@@ -175,26 +175,23 @@ def test_a_forked_episode_killed_mid_episode_raises_promptly_and_the_env_recover
 @pytest.mark.slow
 def test_a_hung_template_is_replaced_and_the_episode_starts_without_it(tmp_path, no_leaks, monkeypatch):
     monkeypatch.setattr(fork, "ANSWER_S", 1.0)
-    expected = _cold(tmp_path, "CA", 4)
+    expected = _cold(tmp_path, "CA", 3)
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "forked")
     try:
         obs, _ = env.reset()
-        rows = [np.append(obs, 0.0)]
+        rows, terminated = [np.append(obs, 0.0)], False
         hung = _template(env)
         os.kill(hung.proc.pid, signal.SIGSTOP)  # its running child is an episode of its own: it runs on
-        t0 = time.monotonic()
-        obs, reward, terminated, _, _ = env.step(ZERO)  # asks it for the next episode: no answer within 1 s
-        rows.append(np.append(obs, reward))
-        assert time.monotonic() - t0 < 4
-        assert not isinstance(env.sim.prepared.process.proc, ForkedEpisode)  # started in a long-lived process
-        while not terminated:
+        while not terminated:  # the next episode is asked of it here, without waiting: it never answers
             obs, reward, terminated, _, _ = env.step(ZERO)
             rows.append(np.append(obs, reward))
-        got = [np.array(rows), _episode(env)]
-        assert _template(env).proc.pid != hung.proc.pid  # replaced at the second's first step
-        assert _gone([hung.proc.pid]) and not hung.dir.exists()
-        got += [_episode(env), _episode(env)]
-        assert _forked(env) and env.sim._from_prepared  # the fourth forked from the new template
+        t0 = time.monotonic()
+        got = [np.array(rows), _episode(env)]  # no answer within 1 s: started from a new template
+        assert time.monotonic() - t0 < 60
+        assert _forked(env) and not env.sim._from_prepared
+        assert _template(env).proc.pid != hung.proc.pid and _gone([hung.proc.pid]) and not hung.dir.exists()
+        got.append(_episode(env))
+        assert _forked(env) and env.sim._from_prepared
     finally:
         env.close()
     for a, b in zip(expected, got, strict=True):

@@ -59,7 +59,8 @@ class Template:
         self.deadline = time.monotonic() + timeout_s  # to park by: past it, it hung
         self.is_parked = False
         self.codes: dict[int, int] = {}  # children's exit codes, as it answered them
-        self._pids: list[int] = []
+        self._pending: list[ForkedEpisode] = []  # forks asked for, their pids not answered yet (answers come in order)
+        self._failed = False  # a fork request went unanswered: it hung
         self._buf = b""
         self._eof = False  # it answers no more: it died, or we closed it
 
@@ -84,8 +85,8 @@ class Template:
             words = line.split()
             if words == [b"parked"]:
                 self.is_parked = True
-            elif words[:1] == [b"pid"]:
-                self._pids.append(int(words[1]))
+            elif words[:1] == [b"pid"] and self._pending:
+                self._pending.pop(0)._started(int(words[1]))
             elif words[:1] == [b"done"]:
                 self.codes[int(words[1])] = int(words[2])
 
@@ -97,7 +98,7 @@ class Template:
         return self.alive() and self.is_parked
 
     def hung(self) -> bool:
-        return not self.is_parked and time.monotonic() > self.deadline
+        return self._failed or (not self.is_parked and time.monotonic() > self.deadline)
 
     def wait_parked(self) -> bool:
         """Wait for it to park, by its deadline: False if it died or hung first."""
@@ -105,19 +106,27 @@ class Template:
             self._read(min(0.5, max(0.0, self.deadline - time.monotonic())))
         return self.parked()
 
-    def fork(self, request: dict) -> int:
-        """Fork an episode (`request`: its directory, log, pipes, spin); its pid, or ForkFailed."""
+    def fork(self, request: dict) -> ForkedEpisode:
+        """Ask for an episode (`request`: its directory, log, pipes, spin) without waiting: its pid comes with the
+        template's answer (`ForkedEpisode.started`; the fork itself, ~7 ms of page tables, runs beside us).
+        ForkFailed if the template is gone."""
         try:
             self.proc.stdin.write(json.dumps(request).encode() + b"\n")
             self.proc.stdin.flush()
-        except (BrokenPipeError, OSError) as e:
+        except (BrokenPipeError, OSError, ValueError) as e:
             raise ForkFailed(f"the template for {self.epw.name} is gone ({e})") from e
-        deadline = time.monotonic() + ANSWER_S
-        while not self._pids:
+        episode = ForkedEpisode(self)
+        self._pending.append(episode)
+        return episode
+
+    def answer(self, episode: ForkedEpisode, timeout: float) -> None:
+        """Wait for `episode`'s pid: ForkFailed if the template died or hung first."""
+        deadline = time.monotonic() + timeout
+        while episode._pid is None:
             if self._eof or time.monotonic() > deadline:
+                self._failed = True
                 raise ForkFailed(f"the template for {self.epw.name} {'died' if self._eof else 'hung'}")
             self._read(max(0.0, deadline - time.monotonic()))
-        return self._pids.pop(0)
 
     def close(self) -> None:
         """End it and remove its directory. Killed first: its children are ours to end (a running episode outlives
@@ -169,37 +178,66 @@ class Templates:
 
 class ForkedEpisode:
     """A forked child as engine/process.py uses a process: `pid`, `poll`, `wait`, `kill` (not ours to reap: its
-    template reaps it and answers its code; `poll` says -1 where the template has not answered yet)."""
+    template reaps it and answers its code; `poll` says -1 where the template has not answered yet). Its pid is
+    known once the template answered (`started`); until then it counts as starting up."""
 
     exit_fd = None  # the pipes watch its pid by a pidfd of their own
 
-    def __init__(self, template: Template, pid: int):
-        self.template, self.pid = template, pid
+    def __init__(self, template: Template):
+        self.template = template
+        self._pid: int | None = None  # known once the template answered
+        self._pidfd: int | None = None
         self.returncode: int | None = None
-        try:
-            self._pidfd: int | None = os.pidfd_open(pid)
-        except ProcessLookupError:  # it ended (and was reaped) already
-            self._pidfd = None
+
+    @property
+    def pid(self) -> int | None:
+        """Its pid, waited for if the template has not answered yet (None: it failed)."""
+        self.started()
+        return self._pid
+
+    def _started(self, pid: int) -> None:
+        self._pid = pid
+        with contextlib.suppress(ProcessLookupError):  # else it ended (and was reaped) already
+            self._pidfd = os.pidfd_open(pid)
+
+    def started(self, timeout: float | None = None) -> bool:
+        """Its pid, waited for up to `timeout` (default ANSWER_S): False if the template died or hung first (the
+        episode then counts as ended)."""
+        if self._pid is None and self.returncode is None:
+            try:
+                self.template.answer(self, ANSWER_S if timeout is None else timeout)
+            except ForkFailed as e:
+                log.warning("%s before it answered a fork", e)
+                self.returncode = -1
+        return self._pid is not None
 
     def poll(self) -> int | None:
-        if self.returncode is None and (self._pidfd is None or select.select([self._pidfd], [], [], 0)[0]):
+        if self.returncode is not None:
+            return self.returncode
+        if self._pid is None:
+            if not self.template.alive() and self._pid is None:  # (alive() takes its answers)
+                self.returncode = -1
+            return self.returncode
+        if self._pidfd is None or select.select([self._pidfd], [], [], 0)[0]:
             self._ended()
         return self.returncode
 
     def _ended(self) -> None:
         with contextlib.suppress(ValueError, OSError):
             self.template._read()
-        self.returncode = self.template.codes.pop(self.pid, -1)
+        self.returncode = self.template.codes.pop(self._pid, -1)
         if self._pidfd is not None:
             os.close(self._pidfd)
             self._pidfd = None
 
     def wait(self, timeout: float | None = None) -> int:
-        if self.poll() is None and not select.select([self._pidfd], [], [], timeout)[0]:
-            raise subprocess.TimeoutExpired(f"pid {self.pid}", timeout or 0.0)
+        running = self.poll() is None and self.started(timeout) and self.poll() is None
+        if running and not select.select([self._pidfd], [], [], timeout)[0]:
+            raise subprocess.TimeoutExpired(f"pid {self._pid}", timeout or 0.0)
         return self.poll()
 
     def kill(self) -> None:
+        self.started()  # to kill it, its pid: a fork asked for may still be under way
         if self._pidfd is not None:
             with contextlib.suppress(ProcessLookupError):
                 signal.pidfd_send_signal(self._pidfd, signal.SIGKILL)

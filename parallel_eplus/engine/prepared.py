@@ -79,11 +79,13 @@ class EpisodeStarter:
         number: int,
         weather: Callable[..., tuple[Path, Any]],
         template: Template | None = None,
+        wait: bool = True,
     ) -> tuple[Path, int, Any]:
         """Claim the episode's directory (numbered `number` or above), write its files, start its EnergyPlus in
         `process` without waiting: (the directory, its number, what `weather` made beside the weather file).
-        With a parked `template` of its weather (fork.py), the episode is forked from it; if the template failed,
-        it is closed and the episode starts as without one.
+        With a parked `template` of its weather (fork.py), the episode is forked from it (without `wait`, its pid
+        is taken when it is handed out: `EnergyPlusProcess.attach`); if the template failed, it is closed and the
+        episode starts as without one.
 
         `weather(plan, episode_dir, number)` writes the episode's weather file into its directory (a link, or a
         perturbed copy: the noise is drawn here, when the episode is prepared) and returns (its path, extras)."""
@@ -94,7 +96,7 @@ class EpisodeStarter:
             epw, extras = weather(plan, episode_dir, number)
             if template is not None:
                 try:
-                    process.fork(template, episode_dir, log_path, cfg.start_timeout_s)
+                    process.fork(template, episode_dir, log_path, cfg.start_timeout_s, wait)
                     return episode_dir, number, extras
                 except ForkFailed as e:
                     log.warning("%s; starting the episode without it", e)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.engine import pipe, spin
-from parallel_eplus.engine.fork import ForkedEpisode, Template
+from parallel_eplus.engine.fork import ANSWER_S, ForkedEpisode, Template
 from parallel_eplus.engine.warm_process import Episode, WarmProcess, engine_side_env
 
 log = logging.getLogger(__name__)
@@ -43,6 +43,7 @@ class EnergyPlusProcess:
         self.pipes: pipe.PipePair | None = None
         self.proc: subprocess.Popen | Episode | ForkedEpisode | None = None
         self.deadline = math.inf  # when the frame awaited next is overdue (monotonic s)
+        self._attached = True  # a forked episode's pid is watched (`attach`)
 
     def _fresh_pipes(self) -> pipe.PipePair:
         if self.pipes is None:
@@ -52,15 +53,27 @@ class EnergyPlusProcess:
             self.spin_s, self.child_spin_s = spin.auto_spins(self.siblings)
         return self.pipes
 
-    def fork(self, template: Template, episode_dir: Path, log_path: Path, first_frame_s: float) -> None:
-        """Fork the episode from a parked template (fork.py), not waiting: its first frame is due in `first_frame_s`.
-        Raises ForkFailed if the template died or hung."""
+    def fork(self, template: Template, episode_dir: Path, log_path: Path, first_frame_s: float, wait: bool) -> None:
+        """Fork the episode from a parked template (fork.py): its first frame is due in `first_frame_s`. With `wait`,
+        its pid is waited for and watched now (ForkFailed if the template died or hung); else by `attach`, when the
+        episode is handed out (a prepared one: the fork runs beside the episode before it)."""
         p = self._fresh_pipes()
         request = {"dir": str(episode_dir), "log": str(log_path), "obs": str(p.obs_path), "act": str(p.act_path),
                    "spin_us": self.child_spin_s * 1e6}  # fmt: skip
-        self.proc = ForkedEpisode(template, template.fork(request))
-        self.pipes.watch(self.proc.pid, lambda: self.proc is not None and self.proc.poll() is None)
+        self.proc = template.fork(request)
         self.deadline = time.monotonic() + first_frame_s
+        self._attached = False
+        if wait:
+            template.answer(self.proc, ANSWER_S)
+            self.attach()
+
+    def attach(self) -> None:
+        """Watch a forked episode's pid (waited for if the template has not answered yet), before stepping it."""
+        if isinstance(self.proc, ForkedEpisode) and not self._attached:
+            self._attached = True
+            self.proc.started()
+            proc = self.proc
+            self.pipes.watch(proc.pid or 0, lambda: proc.poll() is None)  # no pid: it failed, seen as exited
 
     def spawn(self, args: list[str], log_path: Path, first_frame_s: float) -> None:
         """Start EnergyPlus (`eplus_callback` with `args`), not waiting: its first frame is due in `first_frame_s`."""

@@ -160,6 +160,7 @@ class Simulation:
                 self.process.warm_up()
             started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather, template)
             self.episode_dir, self._number, (self.weather_params, self._forecaster) = started
+        self.process.attach()  # a forked one's pid watched
         if self.prepare_next and self._templates is None:
             self._spare.warm_up()  # the first episode's spare process starts up beside it
         self.plan = plan
@@ -184,7 +185,7 @@ class Simulation:
         self._spare.kill()
         template = self._template(plan, wait=False)  # not parked yet: this one starts in the spare process
         episode_dir, number, weather = self._starter.start(plan, self._spare, self._number + 1, self._episode_weather,
-                                                           template)  # fmt: skip
+                                                           template, wait=False)  # fmt: skip
         self._number = number  # numbers follow the order episodes began in
         self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number, weather)
 
