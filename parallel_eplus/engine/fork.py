@@ -34,6 +34,14 @@ log = logging.getLogger(__name__)
 ANSWER_S = 10.0  # for a parked template to answer a fork request (it takes milliseconds): longer means hung
 
 
+def template_env() -> dict[str, str]:
+    """A template's environment: no thread pool to lose in a fork (numpy's OpenBLAS), and malloc's heap in
+    transparent huge pages (glibc >= 2.35; older ones ignore it): a fork copies far fewer page-table entries
+    (its system time 7 -> 1 ms) and a child's page faults cost less (a 1-day episode's 32 -> 24 ms of system time)."""
+    tunables = ":".join(filter(None, [os.environ.get("GLIBC_TUNABLES"), "glibc.malloc.hugetlb=1"]))
+    return {**engine_side_env(), "OPENBLAS_NUM_THREADS": "1", "GLIBC_TUNABLES": tunables}
+
+
 class ForkFailed(RuntimeError):
     """The template died or hung: it is replaced, the episode starts as without one."""
 
@@ -53,7 +61,7 @@ class Template:
         with open(self.dir / "energyplus.log", "wb") as logf:
             self.proc = subprocess.Popen(
                 cmd, cwd=self.dir, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=logf, start_new_session=True,
-                env={**engine_side_env(), "OPENBLAS_NUM_THREADS": "1"},  # no thread pool to lose in a fork
+                env=template_env(),
             )  # fmt: skip
         os.set_blocking(self.proc.stdout.fileno(), False)
         self.deadline = time.monotonic() + timeout_s  # to park by: past it, it hung
