@@ -6,6 +6,7 @@ then the planner) serves the first three tests; the fault test runs its own.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import signal
 from pathlib import Path
@@ -20,7 +21,7 @@ from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.model_based.control import MPC, planner_controller
-from parallel_eplus.learning.model_based.dataset import Transitions
+from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ComfortConstraint, TrainConfig
@@ -159,3 +160,32 @@ def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_
     mpc = MPC.load(final.parent / "planner" / "planner.pt")
     assert mpc.layout.state_names[-2:] == ("power_w", "gas_w")  # its gas meter is hidden: no HVAC parts
     assert len(Transitions.load(final.parent / "transitions.npz", mpc.layout)) > 192
+    # it plans against each zone's own thermostat bounds as they were at that time of the week (a first version
+    # planned against the spec's fixed band, and held 63 % of the occupied steps in the bounds it is scored on)
+    times = mpc.comfort_times
+    seen = np.flatnonzero(times.bound_seen)
+    assert len(seen) >= 96  # the recorded day and the run's own steps
+    monday = dt.datetime(2024, 1, 1)  # slot k of the week starts k steps after a Monday's midnight
+    at = [monday + dt.timedelta(minutes=float(times.step_minutes * k)) for k in seen]
+    bounds = times.bounds(at)  # [T, zones, 2]
+    night = np.array([t.hour == 3 for t in at])
+    np.testing.assert_allclose(bounds[night], np.broadcast_to([15.6, 26.7], bounds[night].shape), atol=0.05)
+    assert np.all(bounds[..., 0] < bounds[..., 1])
+    unseen = monday + dt.timedelta(minutes=float(times.step_minutes * np.flatnonzero(times.bound_seen == 0)[0]))
+    np.testing.assert_allclose(times.bounds([unseen])[0], times.fixed)  # nothing seen then: the spec's band
+
+
+@pytest.mark.slow
+def test_the_ray_backend_runs_the_planner_too(tmp_path, no_leaks):
+    """`train --algorithm mpc --backend ray`: the same loop over Ray's actors (the planner plans for every worker in
+    one call, whichever backend steps them)."""
+    pytest.importorskip("ray")
+    cfg = mpc_config(tmp_path, "ray", backend="ray", timesteps=576, checkpoint_every=288,
+                     mpc=MPCSettings(explore_steps=96, refit_every=192, epochs=5, candidates=32))  # fmt: skip
+    final = train(cfg, progress=False)
+    run = final.parent
+    assert final == run / "model.zip" and (run / "planner" / "planner.pt").is_file()
+    status = json.loads((run / "status.json").read_text())
+    assert status["state"] == "finished" and status["steps"] >= 576, status
+    data = Transitions.load(run / "transitions.npz", MPC.load(run / "planner" / "planner.pt").layout)
+    assert (data.array("origin") == ORIGINS.index("planner")).sum() >= 576 - 96  # both of Ray's workers, planned

@@ -37,6 +37,20 @@ def write_spec(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:
     return path
 
 
+def interrupt_at_first_save(cmd: list[str], cwd: Path, checkpoints: Path, pattern: str, wait_s: float) -> str:
+    """Run a sweep until its first trial saves a file matching `pattern`, then Ctrl-C it; returns its output."""
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
+    deadline = time.monotonic() + wait_s
+    while not list(checkpoints.glob(pattern)) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.5)
+    assert proc.poll() is None, proc.communicate()[0]
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 130, out
+    return out
+
+
 @pytest.mark.parametrize(
     "text, message",
     [
@@ -159,16 +173,8 @@ def test_ctrl_c_stops_every_trial_with_a_checkpoint_and_the_same_command_resumes
     pipes_before = our_pipe_dirs()
     spec = write_spec(tmp_path, 'name = "cut"\nseeds = [0, 1]\n' + BASE.replace("384", "20000"))
     cmd = [sys.executable, "-m", "parallel_eplus.cli", "sweep", str(spec)]
-    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
     checkpoints = tmp_path / "runs" / "cut" / "seed-0" / "checkpoints"
-    deadline = time.monotonic() + 180
-    while not list(checkpoints.glob("model_*_steps.zip")) and time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.5)
-    assert proc.poll() is None, proc.communicate()[0]
-    proc.send_signal(signal.SIGINT)
-    out, _ = proc.communicate(timeout=120)
-    assert proc.returncode == 130, out
+    out = interrupt_at_first_save(cmd, tmp_path, checkpoints, "model_*_steps.zip", 180)
     assert our_processes() == [] and our_pipe_dirs() - pipes_before == set()
     cut_at = max(int(p.stem.split("_")[1]) for p in checkpoints.glob("model_*_steps.zip"))
     # saved on the stop, at the step the trial stopped: its status.json and the sweep's closing table say so (the
@@ -239,3 +245,22 @@ def test_a_signal_to_one_trial_stops_it_with_a_checkpoint_and_the_others_go_on(t
     status = json.loads((checkpoints.parent / "status.json").read_text())  # saved on the stop (as above)
     assert status["state"] == "stopped" and status["steps"] == cut_at, (status, out)
     assert our_processes() == [] and our_pipe_dirs() - pipes_before == set()
+
+
+@pytest.mark.slow
+def test_a_stopped_model_based_trial_resumes_from_its_own_checkpoint(tmp_path):
+    """`algorithm = "mpc"` trials save checkpoints/mpc_<steps>_steps.pt, not SB3 zips: the sweep run again continues
+    from them (it started the trial afresh before)."""
+    spec = write_spec(tmp_path, 'name = "mb"\nseeds = [0]\n' + BASE.replace("384", "20000") + 'algorithm = "mpc"\n'
+                      '[train.mpc]\nexplore_steps = 96\nrefit_every = 96\nepochs = 5\ncandidates = 32\n')  # fmt: skip
+    cmd = [sys.executable, "-m", "parallel_eplus.cli", "sweep", str(spec)]
+    checkpoints = tmp_path / "runs" / "mb" / "seed-0" / "checkpoints"
+    interrupt_at_first_save(cmd, tmp_path, checkpoints, "mpc_*_steps.npz", 240)
+    cut_at = max(int(p.stem.split("_")[1]) for p in checkpoints.glob("mpc_*_steps.pt"))
+
+    spec.write_text(spec.read_text().replace("20000", str(cut_at + 192)))
+    resumed = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    assert re.search(rf"resuming seed-0 from \S+mpc_{cut_at}_steps.pt at step {cut_at}", resumed.stderr), resumed.stderr
+    assert json.loads((checkpoints.parent / "status.json").read_text())["state"] == "finished"
+    assert (checkpoints.parent / "model.zip").is_file()

@@ -120,6 +120,19 @@ def _finished(cfg) -> dict | None:
             **trial_evaluation(cfg.run_dir)}  # fmt: skip
 
 
+def _has_save(cfg) -> bool:
+    """Whether the trial's folder holds a save to continue from: SB3's, or a model-based run's (its own files)."""
+    if cfg.algorithm == "mpc":
+        from parallel_eplus.learning.model_based.checkpoint import newest_checkpoint
+
+        try:
+            newest_checkpoint(cfg.run_dir)
+        except FileNotFoundError:
+            return False
+        return True
+    return bool(saves_newest_first(cfg.run_dir))
+
+
 def _wait_for_predecessor(run_dir: Path) -> None:
     """A trial Tune restarts (PBT's exploit, a restored sweep) may start before its previous process has saved
     its stop's checkpoint: wait for that process to end, so the newest save is the one meant."""
@@ -212,7 +225,7 @@ class TrialRun(tune.Trainable):
             _wait_for_predecessor(cfg.run_dir)
             if self._donor is not None:
                 exploit(self._donor, cfg, self._donor_steps)
-            resume = cfg.run_dir if saves_newest_first(cfg.run_dir) else None
+            resume = cfg.run_dir if _has_save(cfg) else None
             report.episodes = sum(episodes_per_weather(cfg.run_dir / "episodes.csv").values()) if resume else 0
             # a folder without a checkpoint (a trial killed early) is moved aside, not trained into
             train(cfg, resume=resume, progress=False, overwrite=resume is None, callbacks=[report])

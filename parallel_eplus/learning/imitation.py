@@ -55,6 +55,7 @@ class Demonstrations:
     weathers: list[str] = field(default_factory=list)
     builtin: list[dict] = field(default_factory=list)  # each weather's episode summary under the built-in controls
     times: list = field(default_factory=list)  # each row's time (the end of the step it observed)
+    bounds: np.ndarray | None = None  # each row's zone bounds [N, K, 2] where they follow the thermostat's schedules
 
     def to_physical(self, actions: np.ndarray) -> np.ndarray:
         return self.low + (np.clip(actions, -1, 1) + 1) / 2 * (self.high - self.low)
@@ -109,6 +110,8 @@ def record_baseline(
     spec = load_building(building)
     recorded: dict[str, list[np.ndarray]] = {}
     times: dict[str, list] = {}
+    bounds: dict[str, list] = {}  # the thermostat's bounds (buildings/comfort.py), where they move
+    comfort = spec.comfort
     empty = np.zeros(0, dtype=np.float32)
 
     class Recorder(Controller):
@@ -116,6 +119,8 @@ def record_baseline(
             def act(obs: np.ndarray, info: dict) -> np.ndarray:
                 recorded.setdefault(weather_label(info["weather"]), []).append(np.array(obs, np.float32))
                 times.setdefault(weather_label(info["weather"]), []).append(info["time"])
+                if comfort.per_step:
+                    bounds.setdefault(weather_label(info["weather"]), []).append(comfort.bounds(info))
                 return empty
 
             return act
@@ -137,7 +142,7 @@ def record_baseline(
         log.warning("the built-in controls did not finish %s (%s): cloning without it", f["weather"], f["error"])
     if not rows:
         raise ValueError("the built-in controls finished no weather: nothing to imitate")
-    observations, physical, labels, when = [], [], [], []
+    observations, physical, labels, when, zone_bounds = [], [], [], [], []
     for row in rows:
         weather = row["weather"]
         obs = np.stack(recorded[weather])
@@ -148,12 +153,15 @@ def record_baseline(
         physical.append(chosen)
         labels += [weather] * len(obs)
         when += times[weather]
+        zone_bounds += bounds.get(weather, [])
     physical_all = np.concatenate(physical)
     low = np.array([a.low for a in spec.actions])
     high = np.array([a.high for a in spec.actions])
     actions = np.clip(2 * (physical_all - low) / (high - low) - 1, -1, 1).astype(np.float32)
     names = tuple(a.name for a in spec.actions)
-    return Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, rows, when)
+    demos = Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, rows, when)
+    demos.bounds = np.array(zone_bounds, float) if zone_bounds else None
+    return demos
 
 
 def _actor_mean(policy, obs: th.Tensor) -> th.Tensor:

@@ -171,7 +171,8 @@ class _Loop:
                     self._add(obs[i], nxt, a_last[i], actions[i], after, episode_of[i], step_of[i], planning)
                     temps = [after[t] for t in self.building.temperatures]
                     if after.get("comfort_applies", True):
-                        out += self.building.comfort.out_of_band(tuple(temps))[0]
+                        bounds = self.building.comfort.bounds(after)  # the thermostat's, where they move
+                        out += self.building.comfort.out_of_band(tuple(temps), bounds)[0]
                         zones += len(temps)
                 if dones[i]:
                     a_last[i], step_of[i], episode_of[i] = self.mpc.initial, 0, episode_of[i] + n
@@ -229,7 +230,8 @@ class _Loop:
         layout = self.mpc.layout
         x = self.mpc.forecasts(after["weather"]).at([after["time"]])
         applies = float(after.get("comfort_applies", True))
-        self.mpc.comfort_times.learn([after["time"]], [applies])
+        times = self.mpc.comfort_times
+        times.learn([after["time"]], [applies], times.bounds_of(after))
         sensors = len(layout.sensors)
         self.data.add(s=layout.state(obs[None, :sensors]), a_prev=a_prev[None], a=a[None], x=x,
                       s_next=layout.state(np.asarray(nxt)[None, :sensors]), applies=[applies], episode=[episode],

@@ -42,25 +42,27 @@ class MPC:
         self.model = model or Ensemble(self.layout, settings, seed)
         self.comfort_times = ComfortTimes(building, self.step_minutes)
         self.margin_c, self.power_weight = margin_c, power_weight
-        self.planner = Planner(self.model, settings, b.band, margin_c, power_weight, workers, seed)
+        self.planner = Planner(self.model, settings, margin_c, power_weight, workers, seed)
         self.comfort_weight = 10.0
         self.initial = np.array([2 * (a.initial - a.low) / (a.high - a.low) - 1 for a in b.actions], np.float32)
 
-    def future(self, infos: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-        """(exogenous inputs [W, H, X], whether the band applies [W, H]) over each worker's horizon."""
-        exo, applies = [], []
+    def future(self, infos: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(exogenous inputs [W, H, X], whether the band applies [W, H], each zone's bounds [W, H, K, 2]) over each
+        worker's horizon."""
+        exo, applies, bounds = [], [], []
         for info in infos:
             t = info["time"]
             times = [t + dt.timedelta(minutes=self.step_minutes * (h + 1)) for h in range(self.settings.horizon)]
             exo.append(self.forecasts(info["weather"]).at(times))
             applies.append(self.comfort_times(times))
-        return np.stack(exo), np.stack(applies)
+            bounds.append(self.comfort_times.bounds(times))
+        return np.stack(exo), np.stack(applies), np.stack(bounds)
 
     def act(self, obs: np.ndarray, infos: list[dict], a_last: np.ndarray) -> np.ndarray:
         """Every worker's next normalized action from its observation (sensors first) and info (time, weather)."""
-        exo, applies = self.future(infos)
+        exo, applies, bounds = self.future(infos)
         s = self.layout.state(np.asarray(obs)[:, : len(self.layout.sensors)])
-        return self.planner.plan(s, a_last, exo, applies, self.comfort_weight)
+        return self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight)
 
     # -- saving: a planner checkpoint -----------------------------------------------------------
     def state(self) -> dict:
@@ -68,8 +70,7 @@ class MPC:
             "building": self.building, "ensemble": self.model.state(), "settings": asdict(self.settings),
             "margin_c": self.margin_c, "power_weight": self.power_weight, "comfort_weight": self.comfort_weight,
             "support_low": self.planner.support[0], "support_high": self.planner.support[1],
-            "comfort_seen": th.as_tensor(self.comfort_times.seen),
-            "comfort_applied": th.as_tensor(self.comfort_times.applied),
+            **{k: th.as_tensor(v) for k, v in self.comfort_times.state().items()},
         }  # fmt: skip
 
     def save(self, path: Path) -> Path:
@@ -85,8 +86,7 @@ class MPC:
         mpc = cls(state["building"], settings, state["margin_c"], state["power_weight"], workers, seed, model)
         mpc.comfort_weight = state["comfort_weight"]
         mpc.planner.support = (state["support_low"], state["support_high"])
-        mpc.comfort_times.seen = np.asarray(state["comfort_seen"], float)
-        mpc.comfort_times.applied = np.asarray(state["comfort_applied"], float)
+        mpc.comfort_times.load(state)
         return mpc
 
     @classmethod

@@ -148,8 +148,13 @@ def next_state(layout: Layout, s, out):
 
 
 class ComfortTimes:
-    """When the band applies at a future time: always (data centers), by the clock (`hours`), or (a schedule or an
-    observation) as it applied at that weekday and time of day in the data so far, counted by majority."""
+    """When the band applies at a future time, and each zone's bounds then.
+
+    When: always (data centers), by the clock (`hours`), or (a schedule or an observation) as it applied at that
+    weekday and time of day in the data so far, counted by majority. With each zone's own thermostat bounds
+    (`band = "thermostat"`, the office) at every step: BOPTEST's discomfort counts every step against the occupied
+    and the setback bounds. The bounds: the spec's band per zone, or the thermostat's schedules as they were at
+    that weekday and time of day in the data (the mean of what was seen; the spec's band where nothing was)."""
 
     def __init__(self, building: str | None, step_minutes: float):
         self.comfort = load_building(building).comfort
@@ -157,20 +162,55 @@ class ComfortTimes:
         self.step_minutes = step_minutes
         self.seen = np.zeros(self.slots)
         self.applied = np.zeros(self.slots)
+        self.fixed = np.array(self.comfort.zone_bands, np.float32)  # [K, 2]
+        self.bound_sum = np.zeros((self.slots, *self.fixed.shape))
+        self.bound_seen = np.zeros(self.slots)
 
     def _slot(self, t: dt.datetime) -> int:
         return int((t.weekday() * 24 * 60 + t.hour * 60 + t.minute) // self.step_minutes) % self.slots
 
-    def learn(self, times: list[dt.datetime], applies: np.ndarray) -> None:
-        for t, a in zip(times, applies, strict=True):
-            self.seen[self._slot(t)] += 1
-            self.applied[self._slot(t)] += bool(a)
+    def learn(self, times: list[dt.datetime], applies: np.ndarray, bounds: np.ndarray | None = None) -> None:
+        """`bounds` [T, K, 2]: each zone's bounds at those times (per-step thermostat bounds), else None."""
+        for i, (t, a) in enumerate(zip(times, applies, strict=True)):
+            k = self._slot(t)
+            self.seen[k] += 1
+            self.applied[k] += bool(a)
+            if bounds is not None and self.comfort.per_step:
+                self.bound_sum[k] += bounds[i]
+                self.bound_seen[k] += 1
 
     def __call__(self, times: list[dt.datetime]) -> np.ndarray:
         c = self.comfort
-        if c.always:
+        if c.always or c.per_step:
             return np.ones(len(times), np.float32)
         if c.occupied.observation is None:
             return np.array([c.applies(t, {}) for t in times], np.float32)
         slots = [self._slot(t) for t in times]
         return np.array([self.applied[k] * 2 > self.seen[k] for k in slots], np.float32)
+
+    def bounds(self, times: list[dt.datetime]) -> np.ndarray:
+        """Each zone's (lower, upper) bounds at `times`: [T, K, 2]."""
+        if not self.comfort.per_step:
+            return np.broadcast_to(self.fixed, (len(times), *self.fixed.shape))
+        slots = [self._slot(t) for t in times]
+        seen = self.bound_seen[slots][:, None, None]
+        mean = self.bound_sum[slots] / np.maximum(seen, 1)
+        return np.where(seen > 0, mean, self.fixed).astype(np.float32)
+
+    def state(self) -> dict[str, np.ndarray]:
+        return {"comfort_seen": self.seen, "comfort_applied": self.applied, "bound_sum": self.bound_sum,
+                "bound_seen": self.bound_seen}  # fmt: skip
+
+    def load(self, state: dict) -> None:
+        """From `state()`'s arrays (a planner saved before the bounds were learned has none: the spec's band)."""
+        self.seen = np.asarray(state["comfort_seen"], float)
+        self.applied = np.asarray(state["comfort_applied"], float)
+        if "bound_sum" in state:
+            self.bound_sum = np.asarray(state["bound_sum"], float)
+            self.bound_seen = np.asarray(state["bound_seen"], float)
+
+    def bounds_of(self, values: dict) -> np.ndarray | None:
+        """[1, K, 2]: a step's per-zone thermostat bounds from its sensor values (info), or None."""
+        if not self.comfort.per_step:
+            return None
+        return np.array([self.comfort.bounds(values)], float)

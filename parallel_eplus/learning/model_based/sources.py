@@ -42,7 +42,7 @@ def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: 
         s = layout.state(obs[:, : len(layout.sensors)])
         sensed = [dict(zip(layout.sensors, o[: len(layout.sensors)].tolist(), strict=True)) for o in obs]
         applies = np.array([applies_of(t, v) for t, v in zip(times, sensed, strict=True)], np.float32)
-        comfort_times.learn(times[1:], applies[1:])
+        comfort_times.learn(times[1:], applies[1:], None if demos.bounds is None else demos.bounds[rows][1:])
         a_prev = np.concatenate([actions[:1], actions[:-2]])
         data.add(s=s[:-1], a_prev=a_prev, a=actions[:-1], x=forecasts(weather).at(times[1:]), s_next=s[1:],
                  applies=applies[1:], episode=first_episode + j, step=np.arange(len(rows) - 1),
