@@ -92,7 +92,7 @@ class Simulation:
         native_arg = ["--native", bridge] if bridge else []
         self._templates = Templates(self._starter.model, MODEL_FILE, [*s.process_args(), *native_arg],
                                     config.start_timeout_s) if forks else None  # fmt: skip
-        self._prepare_due = False  # the next is prepared at the first action (reset returns first) the spare is free
+        self._prepare_due = False  # the next is prepared at the first action after the spare is free (reset first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
