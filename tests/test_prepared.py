@@ -27,7 +27,7 @@ def _episode(env: EnergyPlusEnv, **reset) -> np.ndarray:
     obs, _ = env.reset(**reset)
     rows, terminated = [np.append(obs, 0.0)], False
     while not terminated:
-        obs, reward, terminated, truncated, _ = env.step(ZERO)
+        obs, reward, terminated, truncated, _ = env.step(np.zeros(env.action_space.shape, np.float32))
         assert not truncated
         rows.append(np.append(obs, reward))
     return np.array(rows)
@@ -43,10 +43,11 @@ def _parked(env: EnergyPlusEnv, timeout_s: float = 120.0):
 
 
 @pytest.mark.slow
-def test_a_prepared_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks):
+@pytest.mark.parametrize("fork", [False, True], ids=["long-lived", "forked"])
+def test_a_prepared_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks, fork):
     weathers = ["CA", "FL"]
     cold = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "cold", prepare_next=False)
-    warm = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "warm")
+    warm = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "warm", fork_episodes=fork)
     try:
         expected = [_episode(cold) for _ in range(3)]
         got, prepared = [], []
@@ -66,7 +67,7 @@ def test_a_prepared_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks):
 
 @pytest.mark.slow
 def test_a_reset_with_other_options_or_a_seed_discards_the_prepared_episode(tmp_path, no_leaks):
-    env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path)
+    env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path, fork_episodes=False)
     try:
         env.reset()
         env.step(ZERO)  # the first action starts preparing the next episode (FL)
@@ -99,7 +100,7 @@ def _state(pid: int) -> str:
 @pytest.mark.slow
 @pytest.mark.parametrize("fault", ["killed", "hung"])
 def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path, no_leaks, fault):
-    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path, fork_episodes=False)  # forks: test_fork.py
     try:
         obs, _ = env.reset()
         rows = [np.append(obs, 0.0)]
@@ -128,11 +129,12 @@ def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path
 WORKLOAD = """
 import sys, time, numpy as np
 from parallel_eplus import EnergyPlusEnv
-env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=sys.argv[1])
+env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=sys.argv[1], fork_episodes=sys.argv[2] == "fork")
 env.reset(); env.step(np.zeros(4, np.float32))
 while env.sim.prepared is None or not env.sim.prepared.parked():
     time.sleep(0.02)
-print(env.sim.process.proc.pid, env.sim.prepared.process.proc.pid, flush=True)
+templates = [t.proc.pid for t in (env.sim._templates.by_epw.values() if env.sim._templates else ())]
+print(env.sim.process.proc.pid, env.sim.prepared.process.proc.pid, *templates, flush=True)
 time.sleep(60)
 """
 
@@ -153,12 +155,14 @@ def _signal_state(pid: int) -> str:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
-def test_the_learner_interrupted_or_killed_ends_running_and_prepared_processes(tmp_path, sig):
-    learner = subprocess.Popen([sys.executable, "-c", WORKLOAD, str(tmp_path)], cwd=SOURCE_ROOT,
+@pytest.mark.parametrize("mode", ["fork", "long-lived"])
+def test_the_learner_interrupted_or_killed_ends_running_and_prepared_processes(tmp_path, sig, mode):
+    """The running and the prepared episode's processes end, and with forks their template (its children's parent)."""
+    learner = subprocess.Popen([sys.executable, "-c", WORKLOAD, str(tmp_path), mode], cwd=SOURCE_ROOT,
                                stdout=subprocess.PIPE, text=True, preexec_fn=_as_from_a_shell)  # fmt: skip
     try:
         pids = [int(p) for p in learner.stdout.readline().split()]
-        assert len(pids) == 2
+        assert len(pids) == (3 if mode == "fork" else 2)
         learner.send_signal(sig)
         try:
             learner.wait(timeout=30)
@@ -211,7 +215,7 @@ def test_a_vector_env_worker_whose_prepared_process_died_starts_its_next_episode
 def test_a_reset_mid_episode_stops_energyplus_and_keeps_its_process_and_the_partial_record(tmp_path, no_leaks):
     import json
 
-    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path)
+    env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path, fork_episodes=False)
     try:
         env.reset()
         for _ in range(5):
@@ -236,7 +240,7 @@ def test_a_prepared_episode_with_weather_noise_equals_a_cold_one(tmp_path, no_le
     try:
         expected = [_episode(cold) for _ in range(2)]
         got = [_episode(warm) for _ in range(2)]
-        assert warm.sim._from_prepared
+        assert warm.sim._from_prepared and warm.sim._templates is None  # a new weather file each: no fork
     finally:
         cold.close()
         warm.close()
@@ -248,7 +252,7 @@ def test_a_prepared_episode_with_weather_noise_equals_a_cold_one(tmp_path, no_le
 @pytest.mark.slow
 def test_a_prepared_episode_swapped_in_still_warming_up_starts_the_next_at_once(tmp_path, no_leaks):
     """Back to back: the spare process starts the episode after next at the reset, not at the first action."""
-    env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path)
+    env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path, fork_episodes=False)
     try:
         env.reset()
         obs, reward, terminated, _, _ = env.step(ZERO)  # the next episode (FL) starts preparing here

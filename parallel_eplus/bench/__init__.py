@@ -130,7 +130,7 @@ def short_episodes(cfg: BenchConfig, workdir: Path) -> dict:
     """Issue 39's figures: consecutive short episodes against EnergyPlus alone, resets, TRPO by episode length."""
     from parallel_eplus.bench.short import consecutive, parked_resets, training
 
-    out = {f"{d}d": consecutive(d, 10, cfg.repeats, cfg.weather) for d in (1, 7)}
+    out = {f"{d}d": consecutive(d, 10, cfg.repeats, cfg.weather, ("prepared", "cold")) for d in (1, 7)}
     out |= parked_resets(1, 30, cfg.weather, workdir / "parked")
     out |= training([1, 7, 14, 365], cfg.train_steps, 1)
     return out

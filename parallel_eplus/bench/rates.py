@@ -149,7 +149,12 @@ def independent_rate(cfg: BenchConfig, workdir: Path) -> float:
 
 
 def training_rate(
-    cfg: BenchConfig, workdir: Path, backend: str = "local", run_days: int = 365, prepare_next: bool = True
+    cfg: BenchConfig,
+    workdir: Path,
+    backend: str = "local",
+    run_days: int = 365,
+    prepare_next: bool = True,
+    fork_episodes: bool = True,
 ) -> dict[str, float]:
     """Env steps/s inside TRPO learn (paper settings, 16k batch), first observations excluded; `run_days` per episode,
     each worker preparing its next episode while one runs unless `prepare_next` is off.
@@ -162,7 +167,7 @@ def training_rate(
 
     tc = TrainConfig(
         workers=cfg.workers, weathers=[cfg.weather], building=cfg.building, timesteps=cfg.train_steps,
-        run_days=run_days, prepare_next=prepare_next,
+        run_days=run_days, prepare_next=prepare_next, fork_episodes=fork_episodes,
         batch_size=-(-cfg.batch_size // cfg.workers) * cfg.workers,  # split evenly across the workers
         run_name="bench", runs_dir=str(workdir / "runs"), tensorboard_dir=str(workdir / "tb"),
         checkpoint_every=10**9, keep_episodes=0, backend=backend, workers_per_actor=1,

@@ -44,6 +44,10 @@ class SimulationConfig:
     # Envs and vector envs: fork each episode's process from a warm interpreter and start the next episode while
     # one runs, so a reset finds it parked at its first step (engine/prepared.py). A lone Simulation never does.
     prepare_next: bool = True
+    # With prepare_next: episodes forked from an EnergyPlus parked at the run period's first control step, one per
+    # weather file, so input processing, sizing and warm-up are paid once, not per episode (engine/fork.py). Not
+    # with weather noise (a new weather file each episode): those start as without it.
+    fork_episodes: bool = True
     native_bridge: bool = True  # EnergyPlus's side of each step in C (native.py) where a C compiler works
     # Set: comfort is a constraint (learning/lagrangian.py): the reward pays for energy only and each step reports
     # a comfort cost rising over this many kelvin inside the band's edges, and its zones out of band.

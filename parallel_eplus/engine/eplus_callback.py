@@ -6,7 +6,8 @@
 Without pipes it runs EnergyPlus alone for benchmarks (bench/raw.py): `--replay A.npy` applies one action
 row per step where the env's actions would land, stops after `--steps`, and prints the stepping time.
 With `--native LIB` (native.py) every step after the first runs in C (eplus_callback.c). With `--serve` it runs
-episode after episode, each request a `main` (warm_process.py).
+episode after episode, each request a `main` (warm_process.py); with `--template` it parks at the run period's
+first control step and forks an episode per request (fork_side.py).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import contextlib
 import os
 import sys
 import traceback
+from collections.abc import Callable
 
 import numpy as np
 
@@ -68,10 +70,7 @@ def _run(args: argparse.Namespace, opened: list[int]) -> int:
         opened.append(act_fd)
 
     def fail(status: float) -> int:
-        if obs_fd is not None:
-            with contextlib.suppress(OSError):  # if the env is gone, there is nobody to tell
-                os.write(obs_fd, pipe.encode([status], pipe.ERROR))
-        return 1
+        return tell_failure(obs_fd, status)
 
     try:
         from pyenergyplus.api import EnergyPlusAPI
@@ -94,13 +93,26 @@ def _run(args: argparse.Namespace, opened: list[int]) -> int:
     except BaseException:  # noqa: BLE001
         traceback.print_exc()
         return fail(-1.0)
+    return outcome(bridge, status, fail)
+
+
+def tell_failure(obs_fd: int | None, status: float) -> int:
+    """An ERROR frame to the env (if there is one to tell), and the episode's exit code."""
+    if obs_fd is not None:
+        with contextlib.suppress(OSError):  # if the env is gone, there is nobody to tell
+            os.write(obs_fd, pipe.encode([status], pipe.ERROR))
+    return 1
+
+
+def outcome(bridge: Bridge, status: int, fail: Callable[[float], int]) -> int:
+    """An episode's exit code once EnergyPlus has returned (`fail` tells the env why it failed)."""
     if bridge.error is not None:
         return fail(-2.0)
     if status != 0:
         print(f"EnergyPlus exited with status {status}", file=sys.stderr)
         return fail(float(status))
     if not bridge.done:
-        print(f"simulation ended after {bridge.step} of {args.steps} steps", file=sys.stderr)
+        print(f"simulation ended after {bridge.step} of {bridge.steps} steps", file=sys.stderr)
         return fail(-3.0)
     if bridge.raw:  # for benchmarks: the time its steps took, start-up excluded, as the vector env is timed
         print(f"stepping_s {bridge.done_at - bridge.started_at:.6f}")
@@ -115,4 +127,8 @@ if __name__ == "__main__":
         from parallel_eplus.engine.warm_process import serve
 
         sys.exit(serve(main))
+    if sys.argv[1:2] == ["--template"]:  # parked at the first control step, forked per episode (fork_side.py)
+        from parallel_eplus.engine.fork_side import serve_template
+
+        sys.exit(serve_template(sys.argv[2:], sys.modules[__name__]))
     sys.exit(main())

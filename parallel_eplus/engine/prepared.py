@@ -1,8 +1,9 @@
 """The next episode, decided and started before `reset()` asks for it (issue 39).
 
 While an episode runs, its worker prepares the next: the episode's directory and model are written and its
-EnergyPlus process (forked warm, forkserver.py) reads its inputs, sizes, warms up and parks at its first control
-step, its observation 0 written and its first action awaited. `reset()` swaps it in if it was prepared for what
+EnergyPlus process reads its inputs, sizes, warms up and parks at its first control step (in a long-lived process,
+warm_process.py; or forked from a template parked there, fork.py), its observation 0 written and its first action
+awaited. `reset()` swaps it in if it was prepared for what
 the reset asks (the same `EpisodePlan`); otherwise, or if it died or hung meanwhile, it is discarded (killed, its
 directory removed) and the episode starts cold. Nothing in EnergyPlus sees the difference: the same files, the
 same arguments, the same process code, so a prepared episode equals a cold one bit for bit
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import shutil
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,6 +25,7 @@ from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import MODEL_FILE, claim_episode_dir
+from parallel_eplus.engine.fork import ForkFailed, Template
 from parallel_eplus.engine.process import EnergyPlusProcess
 
 log = logging.getLogger(__name__)
@@ -56,26 +59,50 @@ class EpisodeStarter:
         self.output_dir, self.idf, self.config, self.args = output_dir, idf, config, args
         self._model: bytes | None = None  # the episode's model (idf_prep.py), the same for every episode
 
+    def model(self, path: Path | None = None) -> bytes:
+        """The episode's model (tokenized once, ~20 ms; the same for every episode), written to `path` if given."""
+        if self._model is None:
+            cfg = self.config
+            with tempfile.TemporaryDirectory(prefix="parallel-eplus-model-") as tmp:
+                made = Path(tmp) / MODEL_FILE
+                prepare_idf(self.idf, made, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs, cfg.start_day,
+                            cfg.start_weekday)  # fmt: skip
+                self._model = made.read_bytes()
+        if path is not None:
+            path.write_bytes(self._model)
+        return self._model
+
     def start(
-        self, plan: EpisodePlan, process: EnergyPlusProcess, number: int, weather: Callable[..., tuple[Path, Any]]
+        self,
+        plan: EpisodePlan,
+        process: EnergyPlusProcess,
+        number: int,
+        weather: Callable[..., tuple[Path, Any]],
+        template: Template | None = None,
+        wait: bool = True,
     ) -> tuple[Path, int, Any]:
         """Claim the episode's directory (numbered `number` or above), write its files, start its EnergyPlus in
         `process` without waiting: (the directory, its number, what `weather` made beside the weather file).
+        With a parked `template` of its weather (fork.py), the episode is forked from it (without `wait`, its pid
+        is taken when it is handed out: `EnergyPlusProcess.attach`); if the template failed, it is closed and the
+        episode starts as without one.
 
         `weather(plan, episode_dir, number)` writes the episode's weather file into its directory (a link, or a
         perturbed copy: the noise is drawn here, when the episode is prepared) and returns (its path, extras)."""
         episode_dir, number = claim_episode_dir(self.output_dir, weather_label(plan.weather), number)
-        cfg, model = self.config, episode_dir / MODEL_FILE
+        cfg, model, log_path = self.config, episode_dir / MODEL_FILE, episode_dir / "energyplus.log"
         try:
-            if self._model is None:  # tokenized once (~20 ms), written each time
-                prepare_idf(self.idf, model, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs, cfg.start_day,
-                            cfg.start_weekday)  # fmt: skip
-                self._model = model.read_bytes()
-            else:
-                model.write_bytes(self._model)
+            self.model(model)
             epw, extras = weather(plan, episode_dir, number)
+            if template is not None:
+                try:
+                    process.fork(template, episode_dir, log_path, cfg.start_timeout_s, wait)
+                    return episode_dir, number, extras
+                except ForkFailed as e:
+                    log.warning("%s; starting the episode without it", e)
+                    template.close()
             args = ["--idf", str(model), "--epw", str(epw), "--output-dir", str(episode_dir)]
-            process.spawn([*args, *self.args], episode_dir / "energyplus.log", cfg.start_timeout_s)
+            process.spawn([*args, *self.args], log_path, cfg.start_timeout_s)
         except BaseException:
             shutil.rmtree(episode_dir, ignore_errors=True)
             raise

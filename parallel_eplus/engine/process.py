@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.engine import pipe, spin
+from parallel_eplus.engine.fork import ANSWER_S, ForkedEpisode, Template
 from parallel_eplus.engine.warm_process import Episode, WarmProcess, engine_side_env
 
 log = logging.getLogger(__name__)
@@ -40,16 +41,43 @@ class EnergyPlusProcess:
         self.child_spin_s = self.spin_s  # the same for EnergyPlus's side
         self.native_bridge = native_bridge
         self.pipes: pipe.PipePair | None = None
-        self.proc: subprocess.Popen | Episode | None = None
+        self.proc: subprocess.Popen | Episode | ForkedEpisode | None = None
         self.deadline = math.inf  # when the frame awaited next is overdue (monotonic s)
+        self._attached = True  # a forked episode's pid is watched (`attach`)
 
-    def spawn(self, args: list[str], log_path: Path, first_frame_s: float) -> None:
-        """Start EnergyPlus (`eplus_callback` with `args`), not waiting: its first frame is due in `first_frame_s`."""
+    def _fresh_pipes(self) -> pipe.PipePair:
         if self.pipes is None:
             self.pipes = pipe.PipePair()
         self.pipes.drain()
         if self.auto_spin:
             self.spin_s, self.child_spin_s = spin.auto_spins(self.siblings)
+        return self.pipes
+
+    def fork(self, template: Template, episode_dir: Path, log_path: Path, first_frame_s: float, wait: bool) -> None:
+        """Fork the episode from a parked template (fork.py): its first frame is due in `first_frame_s`. With `wait`,
+        its pid is waited for and watched now (ForkFailed if the template died or hung); else by `attach`, when the
+        episode is handed out (a prepared one: the fork runs beside the episode before it)."""
+        p = self._fresh_pipes()
+        request = {"dir": str(episode_dir), "log": str(log_path), "obs": str(p.obs_path), "act": str(p.act_path),
+                   "spin_us": self.child_spin_s * 1e6}  # fmt: skip
+        self.proc = template.fork(request)
+        self.deadline = time.monotonic() + first_frame_s
+        self._attached = False
+        if wait:
+            template.answer(self.proc, ANSWER_S)
+            self.attach()
+
+    def attach(self) -> None:
+        """Watch a forked episode's pid (waited for if the template has not answered yet), before stepping it."""
+        if isinstance(self.proc, ForkedEpisode) and not self._attached:
+            self._attached = True
+            self.proc.started()
+            proc = self.proc
+            self.pipes.watch(proc.pid or 0, lambda: proc.poll() is None)  # no pid: it failed, seen as exited
+
+    def spawn(self, args: list[str], log_path: Path, first_frame_s: float) -> None:
+        """Start EnergyPlus (`eplus_callback` with `args`), not waiting: its first frame is due in `first_frame_s`."""
+        self._fresh_pipes()
         argv = [
             "--act-pipe", str(self.pipes.act_path), "--obs-pipe", str(self.pipes.obs_path), *args,
             "--spin-us", str(self.child_spin_s * 1e6),
@@ -81,13 +109,19 @@ class EnergyPlusProcess:
         """After the last step: let EnergyPlus write its files and exit, then make sure it has."""
         if self.proc is None:
             return
-        exited = self.pipes.wait_exit(grace_s)
+        exited = True if self.proc.poll() is not None else self.pipes.wait_exit(grace_s)  # (a poll took its answer)
         if exited is None:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 exited = self.proc.wait(timeout=grace_s) is not None
         if not exited:
             log.warning("EnergyPlus did not exit within %.0f s of the last step; killing it", grace_s)
         self.kill()
+
+    def pipe_dir(self) -> Path:
+        """Its pipe directory (made now if it has none): a template's directory goes in it (fork.py)."""
+        if self.pipes is None:
+            self.pipes = pipe.PipePair()
+        return self.pipes.dir
 
     def warm_up(self) -> None:
         """Start the long-lived process now, with no episode yet: its start-up and imports then run beside the
@@ -101,7 +135,7 @@ class EnergyPlusProcess:
         """End a running episode early. A long-lived process gets a control frame where EnergyPlus awaits its next
         action (the bridge stops EnergyPlus) and stays for the next episode; one that does not stop in
         `grace_s`, or a process of its own, is killed."""
-        if self.warm is not None and self.running():
+        if isinstance(self.proc, Episode) and self.running():  # a fork (or a process of its own) is just killed
             with contextlib.suppress(OSError):
                 self.pipes.send(pipe.encode([], pipe.END))  # not an action: the bridge stops EnergyPlus
             with contextlib.suppress(subprocess.TimeoutExpired):

@@ -25,7 +25,8 @@ from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.engine.episode import StepRecorder, err_tail, prune_episodes, write_records
+from parallel_eplus.engine.episode import MODEL_FILE, StepRecorder, err_tail, prune_episodes, write_records
+from parallel_eplus.engine.fork import Template, Templates
 from parallel_eplus.engine.observation import Observer
 from parallel_eplus.engine.prepared import EpisodePlan, EpisodeStarter, PreparedEpisode
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
@@ -85,7 +86,13 @@ class Simulation:
         self.weather_index = 0
         self.plan: EpisodePlan | None = None
         self._starter = EpisodeStarter(self.output_dir, self.idf, config, s.process_args())
-        self._prepare_due = False  # the next episode is prepared at the first action (reset returns first)
+        # Episodes forked from a template parked at their first control step (fork.py): not with weather noise (a
+        # new weather file each episode), nor for one episode (an evaluation's)
+        forks = prepare and config.fork_episodes and s.noise is None
+        native_arg = ["--native", bridge] if bridge else []
+        self._templates = Templates(self._starter.model, MODEL_FILE, [*s.process_args(), *native_arg],
+                                    config.start_timeout_s) if forks else None  # fmt: skip
+        self._prepare_due = False  # the next is prepared at the first action after the spare is free (reset first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
         self._action = self.initial_action.tolist()
@@ -148,11 +155,13 @@ class Simulation:
             self.weather_params, self._forecaster = ready.weather
         else:
             self._settle()  # the process may still finish the last episode's files
-            if self.prepare_next:  # its Python start-up runs while the model is written (the first: ~25 ms)
+            template = self._template(plan, wait=True)
+            if self.prepare_next and template is None:  # its Python start-up runs while the model is written
                 self.process.warm_up()
-            started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather)
+            started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather, template)
             self.episode_dir, self._number, (self.weather_params, self._forecaster) = started
-        if self.prepare_next:
+        self.process.attach()  # a forked one's pid watched
+        if self.prepare_next and self._templates is None:
             self._spare.warm_up()  # the first episode's spare process starts up beside it
         self.plan = plan
         self.weather_index, self.weather = plan.weather_index, plan.weather
@@ -174,9 +183,18 @@ class Simulation:
         plan = plan or self.next_plan()
         self._settle()  # the spare may still finish the episode before (a few ms, long over in training)
         self._spare.kill()
-        episode_dir, number, weather = self._starter.start(plan, self._spare, self._number + 1, self._episode_weather)
+        template = self._template(plan, wait=False)  # not parked yet: this one starts in the spare process
+        episode_dir, number, weather = self._starter.start(plan, self._spare, self._number + 1, self._episode_weather,
+                                                           template, wait=False)  # fmt: skip
         self._number = number  # numbers follow the order episodes began in
         self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number, weather)
+
+    def _template(self, plan: EpisodePlan, wait: bool) -> Template | None:
+        """The parked template to fork `plan`'s episode from (fork.py), or None: none for this worker, or none
+        parked (without `wait`) or able to park."""
+        if self._templates is None:
+            return None
+        return self._templates.get(plan.epw, self.process.pipe_dir(), wait)
 
     def discard_prepared(self) -> None:
         if self.prepared is not None:
@@ -207,8 +225,8 @@ class Simulation:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
         if self.proc is None or (self._ended is not None and self._ended[0] is self.process):  # over, not reset
             raise RuntimeError("no simulation running: call reset() first")
-        if self._prepare_due:
-            self._prepare_due = False
+        if self._prepare_due and (self._ended is None or not self._ended[0].running()):
+            self._prepare_due = False  # once the spare has finished the episode before: a step never waits for it
             self.prepare()
         if self.base is None:
             self._action = scale_action(action, self.low, self.high, self.action_names)
@@ -277,6 +295,8 @@ class Simulation:
         self._settle()
         self._kill()
         self.discard_prepared()
+        if self._templates is not None:
+            self._templates.close()
         self._spare.close()
         if self.records is not None and not self.records.n:
             self.records = None  # keep the failed episode's directory for the user to inspect
@@ -340,6 +360,8 @@ class Simulation:
         self._spare.kill()
         self.discard_prepared()
         self.stop()
+        if self._templates is not None:
+            self._templates.close()
         self.process.close()
         self._spare.close()
         if self._tmp is not None:

@@ -84,9 +84,11 @@ class EnergyPlusEnv(gym.Env):
     `run_days`; `output_dir` and `keep_episodes` for episode records (envs sharing one `output_dir`, in one process
     or several, each get their own `episode-NNNNNN-<weather>` directories); `energyplus_csv=False` drops
     EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `prepare_next=False`
-    starts every episode cold instead of preparing the next while one runs (engine/prepared.py); `reward`; `idf` to
-    override the model file; `start_timeout_s`, `step_timeout_s`; `time_features`, `schedule_features` (None: the
-    spec's); `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec file or a built-in spec's name
+    starts every episode cold instead of preparing the next while one runs (engine/prepared.py); `fork_episodes=False`
+    prepares each in a long-lived process instead of forking it from one parked at its first step (engine/fork.py);
+    `reward`; `idf` to override the model file; `start_timeout_s`, `step_timeout_s`; `time_features`,
+    `schedule_features` (None: the spec's); `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec
+    file or a built-in spec's name
     (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
     not apply; its reward parameters are the default `reward`; it is checked against its model first);
     `name`: the `worker` its episodes' summaries name (`rllib_env` names RLlib's env runners).
@@ -118,6 +120,7 @@ class EnergyPlusEnv(gym.Env):
         energyplus_csv: bool = True,
         name: str = "0",
         prepare_next: bool = True,
+        fork_episodes: bool = True,
         weather_noise: str | None = None,
         forecast_hours: int = 0,
         forecast_error: str | None = None,
@@ -149,6 +152,7 @@ class EnergyPlusEnv(gym.Env):
             building=None if building is None else str(building),
             energyplus_csv=energyplus_csv,
             prepare_next=prepare_next,
+            fork_episodes=fork_episodes,
             weather_noise=weather_noise,
             forecast_hours=forecast_hours,
             forecast_error=forecast_error,

@@ -37,6 +37,7 @@ class TrainConfig:
     timesteps: int = 1_000_000
     run_days: int = 365
     prepare_next: bool = True  # each worker prepares its next episode while one runs (engine/prepared.py)
+    fork_episodes: bool = True  # ...forked from an EnergyPlus parked at its first step (engine/fork.py)
     batch_size: int = 16384  # the paper's timesteps_per_batch, split evenly across workers
     seed: int = 0
     run_name: str | None = None

@@ -57,6 +57,7 @@ def sim_config(cfg: TrainConfig) -> SimulationConfig:
         building=cfg.building,
         run_days=cfg.run_days,
         prepare_next=cfg.prepare_next,
+        fork_episodes=cfg.fork_episodes,
         output_dir=str(cfg.run_dir / "episodes"),
         keep_episodes=cfg.keep_episodes,
         energyplus_csv=False,  # the kept episodes' records are steps.parquet

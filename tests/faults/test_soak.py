@@ -47,10 +47,12 @@ def test_soak_100_episodes_leave_descriptors_processes_pipes_and_memory_flat(tmp
     samples = json.loads(run.stdout.strip().splitlines()[-1])
     vector, single = samples["vector"], samples["single"]
     _report("2-worker vector env (-1: after close)", vector)
-    _assert_flat(vector[:-1], envs=2, max_processes=4, max_pipes=4)  # a running and a prepared episode per worker
+    # per worker: the template its episodes are forked from, a running and a prepared episode (engine/fork.py)
+    _assert_flat(vector[:-1], envs=2, max_processes=6, max_pipes=4)
     _report(f"{SINGLE_ENVS} single envs in one process (-1: after close)", single)
     prepared = len(range(0, SINGLE_ENVS, PREPARED_EVERY))  # these prepare their next episode; the rest start cold
-    _assert_flat(single[:-1], envs=SINGLE_ENVS, max_processes=SINGLE_ENVS + prepared, max_pipes=SINGLE_ENVS + prepared)
+    processes = SINGLE_ENVS + 2 * prepared  # and fork their episodes from a template of their own
+    _assert_flat(single[:-1], envs=SINGLE_ENVS, max_processes=processes, max_pipes=SINGLE_ENVS + prepared)
     start, end = vector[0], single[-1]
     assert end["fds"] <= start["fds"] + 2 and end["processes"] == 0 and end["pipes"] == 0
     print(f"\n100 episodes in {time.monotonic() - t0:.0f} s; fds {start['fds']} -> {end['fds']}, "
