@@ -111,6 +111,11 @@ def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path
         if fault == "killed":  # died while parked at its first step
             _parked(env)
             os.kill(pid, signal.SIGKILL)
+            # dead, not dying: a kill is asynchronous, and a process tearing down ~250 MB under load is alive for
+            # tens of ms with its observation 0 still in the pipe (handed out then, it fails at its first step)
+            deadline = time.monotonic() + 10
+            while _state(pid) not in ("", "Z") and time.monotonic() < deadline:
+                time.sleep(0.005)
         else:  # stopped in its start-up, and now past its deadline
             os.kill(pid, signal.SIGSTOP)
             ready.process.deadline = time.monotonic() - 1
