@@ -71,7 +71,8 @@ class Simulation:
         self._tmp = None
         if config.output_dir is None:
             self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
-        self.output_dir = Path(config.output_dir or self._tmp)
+        # absolute: forked episodes run in their template's working directory (a relative one named nothing there)
+        self.output_dir = Path(config.output_dir or self._tmp).absolute()
         self.output_dir.mkdir(parents=True, exist_ok=True)
         self.action_names = tuple(e.name for e in self.elements)
         self.base: RuleBasedController | None = None  # the controller a residual action corrects
