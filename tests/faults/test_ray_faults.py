@@ -72,8 +72,10 @@ def test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run_
 ):
     # Struck as the learner orders the second batch: every actor is idle and every EnergyPlus worker waits
     # for its next action at step 160 of a 192-step episode, so the strike lands mid-episode, never by timing.
+    # Long-lived processes: a forked episode shares its command line with its template, which the strike would hit
+    # instead (a template's death costs no episode: tests/test_fork.py; so does a killed forked child's recovery).
     cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=2, timesteps=1600, batch_size=320,
-                       checkpoint_every=320, backend="ray", workers_per_actor=1)  # fmt: skip
+                       checkpoint_every=320, backend="ray", workers_per_actor=1, fork_episodes=False)  # fmt: skip
     hit: list[int] = []
     _before_batch(monkeypatch, 2, lambda: _kill_first(pipe_sweep.CALLBACK_MODULE, hit))
     final = train(cfg, progress=False)
