@@ -97,6 +97,11 @@ def _state(pid: int) -> str:
         return ""
 
 
+def _waitable(pid: int) -> bool:
+    """Our child has exited, all its threads with it (not reaped: its owner reaps it)."""
+    return os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("fault", ["killed", "hung"])
 def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path, no_leaks, fault):
@@ -112,9 +117,11 @@ def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path
             _parked(env)
             os.kill(pid, signal.SIGKILL)
             # dead, not dying: a kill is asynchronous, and a process tearing down ~250 MB under load is alive for
-            # tens of ms with its observation 0 still in the pipe (handed out then, it fails at its first step)
+            # tens of ms with its observation 0 still in the pipe (handed out then, it fails at its first step).
+            # Its main thread shows "Z" while its other threads still exit: waitable is what says it is gone.
             deadline = time.monotonic() + 10
-            while _state(pid) not in ("", "Z") and time.monotonic() < deadline:
+            while not _waitable(pid):
+                assert time.monotonic() < deadline, f"the killed process {pid} did not exit: {_state(pid)}"
                 time.sleep(0.005)
         else:  # stopped in its start-up, and now past its deadline
             os.kill(pid, signal.SIGSTOP)
