@@ -15,6 +15,9 @@
 #   bash scripts/weather_study.sh evaluate BUILDING  # paper weathers, noisy years, unseen climates -> $OUT/BUILDING/
 #   bash scripts/weather_study.sh climates BUILDING  # issue 29's learned controller on all 16 climates vs built-in
 #   bash scripts/weather_study.sh table              # $OUT/README.md's tables and figures from the evaluations
+#   bash scripts/weather_study.sh save               # each run's small files to $OUT/runs (commit them): a finished
+#                                                   # run's policy, an unfinished one's newest save to resume from
+#   bash scripts/weather_study.sh restore            # those back into $WORK/runs, on a new machine, before `run`
 #
 # Settings (environment): BUILDINGS, SEEDS, VARIANTS, TIMESTEPS (default: the recipe's), NOISE (default:
 # Sinergym's dry bulb 1 K, 24 h), FORECAST (hours, 24), FORECAST_ERROR (BOPTEST's low/medium/high; default exact),
@@ -127,5 +130,32 @@ climates)
 table)
     "$PY" "$REPO/scripts/weather_table.py" "$OUT"
     ;;
-*) echo "usage: $0 run [CHUNK]|status|evaluate BUILDING|climates BUILDING|table" >&2; exit 2 ;;
+save)
+    for d in "$WORK"/runs/*/; do
+        name=$(basename "$d"); out="$OUT/runs/$name"
+        newest=$("$PY" -c "import sys; from pathlib import Path; from parallel_eplus.runs.run_files import \
+saves_newest_first as s; n = s(Path(sys.argv[1])); print(n[0] if n else '')" "$d")
+        [ -n "$newest" ] || continue
+        rm -rf "$out" && mkdir -p "$out"
+        cp "$d"/{config.json,status.json,episodes.csv,builtin.csv,imitation.json} "$out/" 2>/dev/null || true
+        steps=$(steps_done "$d")
+        if [ "$(basename "$newest")" = model.zip ]; then
+            cp "$d/model.zip" "$d/vecnormalize.npz" "$out/"
+        else  # unfinished: its newest checkpoint only (git keeps no modification times to order saves by)
+            mkdir -p "$out/checkpoints"
+            cp "$newest" "$out/checkpoints/model_${steps}_steps.zip"
+            cp "$d/checkpoints/model_vecnormalize_${steps}_steps.npz" "$out/checkpoints/" 2>/dev/null || true
+        fi
+        echo "saved $name ($steps steps)"
+    done
+    ;;
+restore)
+    mkdir -p "$WORK/runs"
+    for d in "$OUT"/runs/*/; do
+        name=$(basename "$d")
+        if [ -e "$WORK/runs/$name" ]; then echo "$name: already in $WORK/runs"; continue; fi
+        cp -r "$d" "$WORK/runs/$name" && echo "restored $name ($(steps_done "$WORK/runs/$name") steps)"
+    done
+    ;;
+*) echo "usage: $0 run [CHUNK]|status|evaluate BUILDING|climates BUILDING|table|save|restore" >&2; exit 2 ;;
 esac

@@ -80,8 +80,16 @@ def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cyc
     assert episodes_per_weather(csv) == {"CA": 2, "CO": 2, "FL": 2}
     tags = scalars(tmp_path / "tb" / "fair")
     assert [e.value for e in tags["episodes/CO"]][-1] == 2
-    train(small_config(tmp_path, "fair", run_days=1, timesteps=1152, batch_size=576), resume=tmp_path / "runs" / "fair")
+    # Moved (as to another machine, or restored from a commit): the run continues where it is now, logs too.
+    home = tmp_path / "moved"
+    home.mkdir()
+    for folder in ("runs", "tb"):
+        (tmp_path / folder).rename(home / folder)
+    csv = home / "runs" / "fair" / "episodes.csv"
+    train(small_config(tmp_path, "fair", run_days=1, timesteps=1152, batch_size=576), resume=home / "runs" / "fair")
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "tb").exists()
     assert episodes_per_weather(csv) == {"CA": 4, "CO": 4, "FL": 4}
+    assert [e.value for e in scalars(home / "tb" / "fair")["episodes/CO"]][-1] == 4
     order = pd.read_csv(csv).groupby("worker")["weather"].apply(list).to_dict()
     assert order == {0: ["CA", "CO", "FL"] * 2, 1: ["CO", "FL", "CA"] * 2}
 

@@ -159,6 +159,18 @@ class TrainConfig:
         """Where this run's model, checkpoints, config and episode records go."""
         return Path(self.runs_dir) / str(self.run_name)
 
+    def continue_in(self, run_dir: Path) -> None:
+        """Continue the run in `run_dir`, where its files are now: a run folder copied or moved (another machine, a
+        committed result restored) resumes there, not in the folder it was made in. Its TensorBoard logs move with
+        it when they sat beside its runs folder (the default layout)."""
+        run_dir = Path(run_dir).absolute()
+        if run_dir == self.run_dir.absolute():
+            return
+        home, logs = Path(self.runs_dir).absolute().parent, Path(self.tensorboard_dir).absolute()
+        if logs.is_relative_to(home):
+            self.tensorboard_dir = str(run_dir.parent.parent / logs.relative_to(home))
+        self.runs_dir, self.run_name = str(run_dir.parent), run_dir.name
+
     @property
     def constrained(self) -> bool:
         """Comfort as a constraint (`--comfort-target`) rather than the reward's fixed weights."""

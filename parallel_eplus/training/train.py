@@ -130,6 +130,7 @@ def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tu
     if resume is not None:
         checkpoint = _resume_point(Path(resume))
         saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
+        saved.continue_in(run_dir_of(checkpoint))
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
         saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
