@@ -24,17 +24,14 @@ from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError, Interrupts
 from parallel_eplus.learning.lagrangian import ConstrainedRolloutBuffer, CostReplayBuffer, Lagrangian, SACComfort
 from parallel_eplus.learning.sb3_adapter import SB3VecEnv
-from parallel_eplus.runs.checkpoints import AtomicCheckpoint, resume_point, save_checkpoint
+from parallel_eplus.runs.checkpoints import AtomicCheckpoint, save_checkpoint
 from parallel_eplus.runs.norm_stats import read_stats
 from parallel_eplus.runs.policy_files import (
     MODEL_FILE,
-    _check_init_from,
     _warm_start,
     normalization_file,
     replay_buffer_file,
-    run_dir_of,
 )
-from parallel_eplus.runs.run_names import claim_run_name
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import (
     BUILTIN_FILE,
@@ -45,6 +42,7 @@ from parallel_eplus.training.callbacks import (
 )
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.resume_settings import load_kwargs
+from parallel_eplus.training.run_setup import episodes_done, prepare_run
 
 log = logging.getLogger(__name__)
 
@@ -80,7 +78,7 @@ def sim_config(cfg: TrainConfig) -> SimulationConfig:
 def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
     """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
     sim = sim_config(cfg)
-    shares = weather_shares(cfg.weathers, cfg.workers, _episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
+    shares = weather_shares(cfg.weathers, cfg.workers, episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
         from parallel_eplus.learning.ray_vector_env import RayVectorEnv
 
@@ -89,14 +87,6 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
     else:
         venv = EnergyPlusVectorEnv(sim, shares, max_restarts=cfg.max_restarts)
     return SB3VecEnv(venv)
-
-
-def _episodes_done(episodes_csv: Path, workers: int) -> list[int]:
-    """Finished episodes per worker so far (a resumed run continues each worker's weather cycle)."""
-    if not episodes_csv.is_file():
-        return [0] * workers
-    counts = pd.read_csv(episodes_csv, usecols=["worker"])["worker"].value_counts()
-    return [int(counts.get(i, 0)) for i in range(workers)]
 
 
 def train(
@@ -113,51 +103,13 @@ def train(
     `callbacks` run after ours (a sweep's trial reports each batch to Ray Tune with one: experiments/tune_trial.py).
     runs/<name>/status.json says how far it got and how it ended (run_status.py; `parallel-eplus runs`).
     """
-    cfg, checkpoint = _prepare(cfg, resume, overwrite)
+    cfg, checkpoint = prepare_run(cfg, resume, overwrite)
     if cfg.algorithm == "mpc":  # the model-based learner drives the same workers itself
         from parallel_eplus.training.mpc import train_mpc
 
         return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model, callbacks, _evaluator(cfg))
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
         return _learn(cfg, checkpoint, progress, timer, status, callbacks)
-
-
-def _prepare(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tuple[TrainConfig, Path | None]:
-    """The run's settings (a resumed run's own) and checkpoint; a new run claims its name. Writes config.json."""
-    checkpoint = None
-    if resume is not None and cfg.init_from is not None:
-        raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
-    if resume is not None:
-        checkpoint = _resume_point(Path(resume))
-        saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
-        saved.continue_in(run_dir_of(checkpoint))
-        # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
-        saved.timesteps = cfg.timesteps or saved.timesteps
-        saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
-        saved.overlap = cfg.overlap
-        if cfg.evaluation.every:  # evaluation may be added to (or changed for) a resumed run
-            saved.evaluation = cfg.evaluation
-        cfg = saved
-    cfg = cfg.resolved()
-    if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
-        _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
-    if checkpoint is None:
-        cfg.check_new_run()
-        claim_run_name(cfg.run_dir, Path(cfg.tensorboard_dir) / str(cfg.run_name), overwrite)
-    run_dir = cfg.run_dir
-    run_dir.mkdir(parents=True, exist_ok=True)
-    io.write_text(run_dir / "config.json", cfg.to_json())
-    return cfg, checkpoint
-
-
-def _resume_point(path: Path) -> Path:
-    """The checkpoint `--resume` names: an SB3 save, or a model-based run's (learning/model_based/checkpoint.py)."""
-    config = (path if path.is_dir() else run_dir_of(path)) / "config.json"
-    if config.is_file() and TrainConfig.from_json(config.read_text()).algorithm == "mpc":
-        from parallel_eplus.learning.model_based.checkpoint import newest_checkpoint
-
-        return newest_checkpoint(path)
-    return resume_point(path)
 
 
 def _learn(
