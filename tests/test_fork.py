@@ -23,7 +23,7 @@ def _forked(env: EnergyPlusEnv) -> bool:
 
 def _template(env: EnergyPlusEnv, weather: int = 0) -> fork.Template:
     """The env's template for its `weather`-th weather file, once parked."""
-    t = env.sim._templates.by_epw[env.sim.weather_paths[weather]]
+    t = env.sim.supply.templates.by_epw[env.sim.weather_paths[weather]]
     assert t.wait_parked()
     return t
 
@@ -79,7 +79,7 @@ def test_every_episode_after_the_first_is_forked_and_prepared(tmp_path, no_leaks
             env.step(ZERO)  # the next is forked here, and parks at once
             assert isinstance(_parked(env).process.proc, ForkedEpisode)
         assert kinds == [(True, False), (True, True), (True, True)]
-        assert env.sim.process.warm.proc is None and env.sim._spare.warm.proc is None  # no long-lived process
+        assert env.sim.process.warm.proc is None and env.sim.supply.spare.warm.proc is None  # no long-lived process
     finally:
         env.close()
 
@@ -109,7 +109,7 @@ def test_a_reset_for_another_weather_discards_what_was_prepared_and_forks_from_t
         got = _episode(env, seed=5)  # a seed it was not planned for: forked afresh
         assert _forked(env) and not env.sim._from_prepared
         np.testing.assert_array_equal(got, ca)
-        assert len(env.sim._templates.by_epw) == 2  # one parked per weather file of the rotation
+        assert len(env.sim.supply.templates.by_epw) == 2  # one parked per weather file of the rotation
     finally:
         env.close()
 
@@ -231,7 +231,7 @@ def test_close_ends_the_templates_and_their_children_and_removes_their_directori
         env.reset()
         while env.sim.prepared is None:  # CA's successor (FL) is forked once the process before has finished
             env.step(ZERO)
-        templates = list(env.sim._templates.by_epw.values())
+        templates = list(env.sim.supply.templates.by_epw.values())
         pids = [env.sim.proc.pid, _parked(env).process.proc.pid, *(t.proc.pid for t in templates)]
     finally:
         env.close()

@@ -145,7 +145,7 @@ env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=sys.argv[1], fork_episo
 env.reset(); env.step(np.zeros(4, np.float32))
 while env.sim.prepared is None or not env.sim.prepared.parked():
     time.sleep(0.02)
-templates = [t.proc.pid for t in (env.sim._templates.by_epw.values() if env.sim._templates else ())]
+templates = [t.proc.pid for t in (env.sim.supply.templates.by_epw.values() if env.sim.supply.templates else ())]
 print(env.sim.process.proc.pid, env.sim.prepared.process.proc.pid, *templates, flush=True)
 time.sleep(60)
 """
@@ -252,7 +252,7 @@ def test_a_prepared_episode_with_weather_noise_equals_a_cold_one(tmp_path, no_le
     try:
         expected = [_episode(cold) for _ in range(2)]
         got = [_episode(warm) for _ in range(2)]
-        assert warm.sim._from_prepared and warm.sim._templates is None  # a new weather file each: no fork
+        assert warm.sim._from_prepared and warm.sim.supply.templates is None  # a new weather file each: no fork
     finally:
         cold.close()
         warm.close()

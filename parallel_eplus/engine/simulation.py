@@ -1,8 +1,9 @@
 """One episode after another on one worker: the unit the env and the vector env step.
 
 `Simulation` owns everything per step that must not be written twice: action checks and scaling, the
-reward, observation clipping, the step record and the error messages. The EnergyPlus process itself (spawn,
-deadlines, exit) is `process.EnergyPlusProcess`. `EnergyPlusEnv` drives one Simulation; the vector env
+reward, observation clipping, the step record and the error messages. Where an episode comes from (a prepared
+one or a cold start) is `supply.EpisodeSupply`; the EnergyPlus process itself (spawn, deadlines, exit) is
+`process.EnergyPlusProcess`. `EnergyPlusEnv` drives one Simulation; the vector env
 drives several, writing every action before reading any observation.
 """
 
@@ -25,12 +26,12 @@ from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine import native, pipe
 from parallel_eplus.engine.actions import check_action, scale_action
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.engine.episode import MODEL_FILE, StepRecorder, err_tail, prune_episodes, write_records
-from parallel_eplus.engine.fork import Template, Templates
+from parallel_eplus.engine.episode import StepRecorder, err_tail, write_records
 from parallel_eplus.engine.observation import Observer
-from parallel_eplus.engine.prepared import EpisodePlan, EpisodeStarter, PreparedEpisode
+from parallel_eplus.engine.prepared import EpisodePlan, PreparedEpisode
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
 from parallel_eplus.engine.setup import WorkerSetup
+from parallel_eplus.engine.supply import EpisodeSupply
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
 log = logging.getLogger(__name__)
@@ -51,11 +52,6 @@ class Simulation:
         after episode (an env's): two long-lived EnergyPlus-side processes take turns, one running an episode
         while the other prepares the next (prepared.py, warm_process.py); off for one episode (an evaluation's)."""
         self.config = config
-        self.prepare_next = prepare
-        bridge = native.bridge_library() if config.native_bridge else None
-        self.process = EnergyPlusProcess(config.spin_s, bridge, siblings=siblings, warm=prepare)
-        self._spare = EnergyPlusProcess(config.spin_s, bridge, siblings=siblings, warm=prepare)
-        self.prepared: PreparedEpisode | None = None
         self._from_prepared = False  # the running episode was prepared ahead (a failed start-up is retried cold)
         self.name = name
         s = self.setup = WorkerSetup.resolve(config, weathers)  # every check before anything is spawned
@@ -80,19 +76,12 @@ class Simulation:
         self._sensed: list[float] = []  # the last observation's sensor values, for its step record
         self.episode = 0
         self.episode_dir: Path | None = None
-        self._number = 0  # the last episode directory's number (its folder may be shared)
-        self._whole: list[Path] = []  # this Simulation's own episode directories still whole, oldest first
-        self._ended: tuple[EnergyPlusProcess, Path | None] | None = None  # an episode past its last step (`_settle`)
         self.weather = self.weathers[0]
         self.weather_index = 0
         self.plan: EpisodePlan | None = None
-        self._starter = EpisodeStarter(self.output_dir, self.idf, config, s.process_args())
-        # Episodes forked from a template parked at their first control step (fork.py): not with weather noise (a
-        # new weather file each episode), nor for one episode (an evaluation's)
-        forks = prepare and config.fork_episodes and s.noise is None
-        native_arg = ["--native", bridge] if bridge else []
-        self._templates = Templates(self._starter.model, MODEL_FILE, [*s.process_args(), *native_arg],
-                                    config.start_timeout_s) if forks else None  # fmt: skip
+        bridge = native.bridge_library() if config.native_bridge else None
+        weather = lambda plan, folder, number: s.episode_weather(plan, folder, number, name)  # noqa: E731
+        self.supply = EpisodeSupply(config, s, self.output_dir, weather, prepare, bridge, siblings)
         self._prepare_due = False  # the next is prepared at the first action after the spare is free (reset first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
@@ -101,6 +90,16 @@ class Simulation:
         _LIVE.add(self)
 
     # -- the process, as the vector env's `wait_any` and the tests see it -----------------------
+    @property
+    def process(self) -> EnergyPlusProcess:
+        """The running episode's EnergyPlus process."""
+        return self.supply.process
+
+    @property
+    def prepared(self) -> PreparedEpisode | None:
+        """The next episode, started before the reset that asks for it (None: none yet)."""
+        return self.supply.prepared
+
     @property
     def pipes(self) -> pipe.PipePair | None:
         return self.process.pipes
@@ -142,28 +141,17 @@ class Simulation:
         """Start the next episode without waiting for its first observation (the vector env starts many at once):
         the prepared one if it was prepared for `plan` and is alive, else a new process. The one after it starts
         preparing here if this one was prepared but is not parked yet, else at its first action (`send`)."""
-        if self._ended is None or self._ended[0] is not self.process:  # else it is over, its files being finished
+        if not self.supply.over():  # else it is over, its files being finished
             self.stop()
         plan = plan or self.next_plan(weather_index)
-        ready, self.prepared = self.prepared, None
-        if ready is not None and (ready.plan != plan or not ready.usable(self.config.start_timeout_s)):
-            ready.discard()
-            ready = None
+        ready = self.supply.take(plan)
         self._from_prepared = ready is not None
-        if ready is not None:  # swap it in; the finished episode's process (and pipes) prepare the one after
-            self.process, self._spare = ready.process, self.process
-            self.episode_dir, self._number = ready.episode_dir, ready.number
-            self.weather_params, self._forecaster = ready.weather
+        if ready is not None:
+            self.episode_dir, (self.weather_params, self._forecaster) = ready.episode_dir, ready.weather
         else:
-            self._settle()  # the process may still finish the last episode's files
-            template = self._template(plan, wait=True)
-            if self.prepare_next and template is None:  # its Python start-up runs while the model is written
-                self.process.warm_up()
-            started = self._starter.start(plan, self.process, self._number + 1, self._episode_weather, template)
-            self.episode_dir, self._number, (self.weather_params, self._forecaster) = started
+            self.episode_dir, (self.weather_params, self._forecaster) = self.supply.start(plan)
         self.process.attach()  # a forked one's pid watched
-        if self.prepare_next and self._templates is None:
-            self._spare.warm_up()  # the first episode's spare process starts up beside it
+        self.supply.warm_spare()
         self.plan = plan
         self.weather_index, self.weather = plan.weather_index, plan.weather
         self.episode += 1
@@ -179,28 +167,8 @@ class Simulation:
     def prepare(self, plan: EpisodePlan | None = None) -> None:
         """Start the next episode (`plan`, default: the rotation's next) in the spare process, to be swapped in
         by the `launch` that asks for the same plan."""
-        if self.prepared is not None or self._closed:
-            return
-        plan = plan or self.next_plan()
-        self._settle()  # the spare may still finish the episode before (a few ms, long over in training)
-        self._spare.kill()
-        template = self._template(plan, wait=False)  # not parked yet: this one starts in the spare process
-        episode_dir, number, weather = self._starter.start(plan, self._spare, self._number + 1, self._episode_weather,
-                                                           template, wait=False)  # fmt: skip
-        self._number = number  # numbers follow the order episodes began in
-        self.prepared = PreparedEpisode(plan, self._spare, episode_dir, number, weather)
-
-    def _template(self, plan: EpisodePlan, wait: bool) -> Template | None:
-        """The parked template to fork `plan`'s episode from (fork.py), or None: none for this worker, or none
-        parked (without `wait`) or able to park."""
-        if self._templates is None:
-            return None
-        return self._templates.get(plan.epw, self.process.pipe_dir(), wait)
-
-    def discard_prepared(self) -> None:
-        if self.prepared is not None:
-            self.prepared.discard()
-            self.prepared = None
+        if self.supply.prepared is None and not self._closed:
+            self.supply.prepare(plan or self.next_plan())
 
     def first_observation(self) -> tuple[np.ndarray, dict]:
         """Wait through sizing and warmup for observation 0 of the launched episode.
@@ -219,14 +187,14 @@ class Simulation:
         if code != pipe.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
         obs, info = self._observation(values)
-        self._prepare_due = self.prepare_next and self.prepared is None
+        self._prepare_due = self.supply.prepare_next and self.prepared is None
         return obs, info
 
     def send(self, action) -> None:
         """Check, clip, scale and send one action; its observation is read by `receive`."""
-        if self.proc is None or (self._ended is not None and self._ended[0] is self.process):  # over, not reset
+        if self.proc is None or self.supply.over():  # over, not reset
             raise RuntimeError("no simulation running: call reset() first")
-        if self._prepare_due and (self._ended is None or not self._ended[0].running()):
+        if self._prepare_due and not self.supply.spare_busy():
             self._prepare_due = False  # once the spare has finished the episode before: a step never waits for it
             self.prepare()
         if self.base is None:
@@ -267,9 +235,6 @@ class Simulation:
         return obs, r, terminated, info
 
     # -- internals ----------------------------------------------------------------------------
-    def _episode_weather(self, plan: EpisodePlan, episode_dir: Path, number: int) -> tuple[Path, tuple]:
-        return self.setup.episode_weather(plan, episode_dir, number, self.name)
-
     def _observation(self, values: np.ndarray) -> tuple[np.ndarray, dict]:
         if len(values) != self.observer.width:
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
@@ -293,36 +258,21 @@ class Simulation:
     def _error(self, message: str, kind: type[EnergyPlusError] = EnergyPlusError) -> EnergyPlusError:
         """Stop the process first, so the error file is complete and nothing is left running (a prepared episode
         and an idle warm process neither: whoever handles the error starts afresh)."""
-        self._settle()
-        self._kill()
-        self.discard_prepared()
-        if self._templates is not None:
-            self._templates.close()
-        self._spare.close()
+        self.supply.abort()
         if self.records is not None and not self.records.n:
             self.records = None  # keep the failed episode's directory for the user to inspect
         return kind(f"[{weather_label(self.weather)}] {message}", self.episode_dir, err_tail(self.episode_dir))
 
     def _finish(self) -> None:
         """The run period is over: write the records while EnergyPlus finishes its own files. A long-lived process
-        is waited for when it is needed again (`_settle`), not here: the env's loop goes on meanwhile (~10-20 ms an
-        episode of EnergyPlus's end-of-run files and `delete_state`)."""
+        is waited for when it is needed again (`EpisodeSupply.settle`), not here: the env's loop goes on meanwhile
+        (~10-20 ms an episode of EnergyPlus's end-of-run files and `delete_state`)."""
         try:
             self._write_records(complete=True, prune=False)
         finally:
-            self._ended = (self.process, self.episode_dir)
-            if not self.prepare_next:  # a process per episode: wait for it now, as an evaluation expects
-                self._settle()
-
-    def _settle(self) -> None:
-        """Wait for the episode past its last step to finish (EnergyPlus's files written, its state freed), then
-        prune: older episodes are pruned after, so nothing is removed under a writing EnergyPlus."""
-        if self._ended is None:
-            return
-        (process, episode_dir), self._ended = self._ended, None
-        process.finish()
-        if episode_dir is not None:
-            self._whole = prune_episodes([*self._whole, episode_dir], self.config.keep_episodes)
+            self.supply.end(self.episode_dir)
+            if not self.supply.prepare_next:  # a process per episode: wait for it now, as an evaluation expects
+                self.supply.settle()
 
     def _write_records(self, complete: bool, prune: bool = True) -> None:
         if self.records is None or self.episode_dir is None:
@@ -335,10 +285,7 @@ class Simulation:
         self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored, table)
         self.records = None
         if prune:
-            self._whole = prune_episodes([*self._whole, self.episode_dir], self.config.keep_episodes)
-
-    def _kill(self) -> None:
-        self.process.kill()
+            self.supply.prune(self.episode_dir)
 
     def stop(self) -> None:
         """End a running episode early (EnergyPlus stopped, its long-lived process kept) and keep the partial
@@ -356,15 +303,9 @@ class Simulation:
         if self._closed:
             return
         self._closed = True
-        self._settle()  # the last episode's files whole
-        self._kill()  # no need to stop EnergyPlus gracefully: its process goes too
-        self._spare.kill()
-        self.discard_prepared()
-        self.stop()
-        if self._templates is not None:
-            self._templates.close()
-        self.process.close()
-        self._spare.close()
+        self.supply.stop_all()  # the last episode's files whole, then every process killed
+        self.stop()  # the running episode's partial record
+        self.supply.close()
         if self._tmp is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
 

@@ -31,10 +31,10 @@ def proc_times(pid: int) -> np.ndarray:
 
 def energyplus_side(env: EnergyPlusEnv) -> np.ndarray:
     sim = env.sim
-    if sim._templates is not None:
-        pids = [t.proc.pid for t in sim._templates.by_epw.values()]
+    if sim.supply.templates is not None:
+        pids = [t.proc.pid for t in sim.supply.templates.by_epw.values()]
     else:
-        pids = [p.warm.proc.pid for p in (sim.process, sim._spare) if p.warm.proc is not None]
+        pids = [p.warm.proc.pid for p in (sim.process, sim.supply.spare) if p.warm.proc is not None]
     return sum(proc_times(p) for p in pids)
 
 
@@ -51,7 +51,7 @@ def run(days: int, episodes: int, fork: bool) -> dict:
                 terminated = False
                 while not terminated:
                     _, _, terminated, _, _ = env.step(a)
-            env.sim._settle()
+            env.sim.supply.settle()
             side1, me1, t1 = energyplus_side(env), resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
         finally:
             env.close()
