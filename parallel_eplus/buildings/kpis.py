@@ -132,7 +132,9 @@ class Kpis:
     def summarize(self, steps: pd.DataFrame, step_minutes: float) -> dict[str, float]:
         """HVAC energy, cost, emissions and peak per fuel over the step table."""
         hours = step_minutes / 60
-        starts = _index(steps["time"].dt.round("min") - np.timedelta64(int(round(step_minutes)), "m"))
+        starts = None  # each step's start, for prices that vary in time (~1 ms an episode: only then)
+        if any(self.tariffs[fuel].constant is None for fuel, _ in self.hvac):
+            starts = _index(steps["time"].dt.round("min") - np.timedelta64(int(round(step_minutes)), "m"))
         out: dict[str, float] = {}
         total = cost = emissions = 0.0
         for fuel, col in self.hvac:
@@ -142,7 +144,8 @@ class Kpis:
             out[f"hvac_{key}_kwh"] = float(kwh.sum())
             out[f"hvac_{key}_peak_kw"] = float(w.max() / 1000) if len(w) else 0.0
             total += float(kwh.sum())
-            cost += float(np.sum(kwh * self.tariffs[fuel].series(starts)))
+            tariff = self.tariffs[fuel]
+            cost += float(np.sum(kwh * (tariff.constant if starts is None else tariff.series(starts))))
             emissions += float(np.sum(kwh) * self.factors.get(fuel, 0.0))
         out.update(hvac_energy_kwh=total, cost=cost, emissions_kg=emissions)
         return out

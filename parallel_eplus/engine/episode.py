@@ -118,16 +118,17 @@ def write_records(
     comfort: Comfort | None = None,
     scored: pd.DataFrame | None = None,
     table: bool = True,
+    area_m2: float | None = None,
 ) -> dict:
     """Write the step table and summary.json; returns the summary. Per-m² figures divide by the spec's floor area,
-    else the model's own (its eplusout.eio, written before the first step). `scored`: the steps the figures count
-    (a test period without its warm-up); None: all. `table=False`: the summary only (an episode about to be pruned
-    to its summary)."""
+    else `area_m2` (the model's, from an earlier episode), else the model's own (its eplusout.eio, written before the
+    first step). `scored`: the steps the figures count (a test period without its warm-up); None: all.
+    `table=False`: the summary only (an episode about to be pruned to its summary)."""
     if table:
         steps.to_parquet(episode_dir / STEPS_FILE, index=False)
     summary = {**extra, **summarize(steps if scored is None else scored, comfort)}
     if comfort is not None and comfort.kpis is not None:
-        area = comfort.kpis.floor_area_m2 or floor_area(episode_dir / "eplusout.eio")
+        area = comfort.kpis.floor_area_m2 or area_m2 or floor_area(episode_dir / "eplusout.eio")
         summary |= per_area(summary, area)
     (episode_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str))
     return summary

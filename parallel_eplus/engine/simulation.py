@@ -85,6 +85,7 @@ class Simulation:
         self._prepare_due = False  # the next is prepared at the first action after the spare is free (reset first)
         self.records: StepRecorder | None = None
         self.last_summary: dict | None = None
+        self._area: float | None = None  # the model's floor area (m²), for the per-m² figures
         self._action = self.initial_action.tolist()
         self._closed = False
         _LIVE.add(self)
@@ -282,7 +283,8 @@ class Simulation:
         steps = self.records.frame()
         scored = self.setup.scored_steps(steps, extra)
         table = not (complete and self.config.keep_episodes == 0)  # pruned at once: ~8 ms an episode saved
-        self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored, table)
+        self.last_summary = write_records(self.episode_dir, steps, extra, self.comfort, scored, table, self._area)
+        self._area = self.last_summary.get("floor_area_m2")  # the same model every episode: its eio read once
         self.records = None
         if prune:
             self.supply.prune(self.episode_dir)

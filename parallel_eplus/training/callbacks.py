@@ -141,8 +141,7 @@ class EpisodeMetrics(BaseCallback):
         if episode_return is not None:
             self.logger.record_mean(f"episode/{weather}/return", episode_return)
         row = {"timesteps": self.num_timesteps, **summary}
-        line = pd.DataFrame([row]).to_csv(header=not self.episodes_csv.exists(), index=False)
-        io.append_text(self.episodes_csv, line)  # a crash mid-write keeps the earlier rows whole
+        io.append_text(self.episodes_csv, io.csv_rows(row, header=not self.episodes_csv.is_file()))
         if self.progress is not None:
             self.progress.set_postfix(episodes=self.episodes, last=f"{weather} {summary.get('power_kw', 0):.0f} kW")
 

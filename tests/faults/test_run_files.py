@@ -131,6 +131,26 @@ def test_an_atomic_write_that_fails_leaves_the_previous_file_and_no_temporary(tm
     assert target.read_text() == "a\n1\n2\n"
 
 
+def test_an_append_cut_short_is_cut_off_by_the_next_and_rows_read_as_pandas_wrote_them(tmp_path):
+    import pandas as pd
+
+    target = tmp_path / "episodes.csv"
+    rows = [{"timesteps": 96, "weather": "CA, x", "power_kw": 1 / 3, "noise_sigma": None, "ratio": float("nan"),
+             "complete": True, "steps": np.int64(96), "in_band_pct": np.float32(99.5)}, {"timesteps": 192}]  # fmt: skip
+    first = io.csv_rows(rows[0], header=True)
+    assert first == pd.DataFrame([rows[0]]).to_csv(index=False)  # what episodes.csv held before
+    io.append_text(target, first)
+    with target.open("ab") as f:  # a writer killed mid-row (or a full disk)
+        f.write(b"192,CA,0.5")
+    io.append_text(target, io.csv_rows(rows[0] | rows[1]))
+    back = pd.read_csv(target)
+    assert back["timesteps"].tolist() == [96, 192] and back["weather"].tolist() == ["CA, x"] * 2
+    assert back["power_kw"][0] == 1 / 3 and back["noise_sigma"].isna().all() and back["complete"].all()
+    (tmp_path / "torn.csv").write_bytes(b"no newline at all")
+    io.append_text(tmp_path / "torn.csv", "a\n")
+    assert (tmp_path / "torn.csv").read_text() == "a\n"
+
+
 @pytest.mark.parametrize(
     "name, algorithm", [("paper-ca", "trpo"), ("ppo-ca-co-fl-time", "ppo"), ("residual-demand", "trpo")]
 )
