@@ -50,8 +50,9 @@ class Building:
     def band(self) -> tuple[float, float]:
         return self.spec.reward.band
 
-    @property
+    @functools.cached_property
     def steps_per_day(self) -> int:
+        """Control steps a day: the spec's, else the model's own Timestep (its IDF read once, not every episode)."""
         return 24 * (self.spec.timesteps_per_hour or timesteps_per_hour(self.spec.idf))
 
     @functools.cached_property
