@@ -10,6 +10,11 @@
 #   bash scripts/learned_controllers.sh evaluate BUILDING      # the seeds against the built-in controls, 5 weathers
 #   bash scripts/learned_controllers.sh recipe BUILDING        # print the building's recipe (train options)
 #
+# RECIPE=sac (issue 38's comparison): SAC with the comfort constraint instead, from scratch (no clone: its first
+# SAC_STEPS/100 steps are random actions anyway), SAC_STEPS (200000) steps, runs named BUILDING-sac-seedN in
+# ../learned-sac, saved beside the model-based runs (results/model-based/BUILDING/runs/), evaluated on full years into
+# results/model-based/BUILDING/sac-year/.
+#
 # A run resumes from its newest checkpoint (every 100k steps; a new machine from the checkpoint `save` put in
 # results/learned/), so `start` is safe to repeat after a session ends. Runs use a copy of the package at a fixed
 # commit ($COMMIT, git archive), so later edits to the working tree cannot disturb them.
@@ -17,17 +22,22 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 REPO=$PWD
 COMMIT=${COMMIT:-$(git rev-parse --short HEAD)}
-WORK=${WORK:-$REPO/../learned}
+RECIPE=${RECIPE:-clone}
 SEEDS=${SEEDS:-"0 1 2"}
 NICE=${NICE:-0}
 PY=$REPO/.venv/bin/python
-SAVED=$REPO/results/learned
+if [ "$RECIPE" = sac ]; then
+    TAG=-sac INIT="" WORK=${WORK:-$REPO/../learned-sac} SAVED=$REPO/results/model-based EVAL_OUT=sac-year
+else
+    TAG="" INIT=--init-from-baseline WORK=${WORK:-$REPO/../learned} SAVED=$REPO/results/learned EVAL_OUT=""
+fi
 
 # The recipe per building (chosen from pilots: results/learned/README.md). Every one imitates the building's own
 # controls, then learns with comfort as a constraint; a short horizon (the actions act within hours) and a small
 # exploration spread around the clone.
 COMMON="--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2.5"
 recipe() {
+    [ "$RECIPE" = sac ] && { sac_recipe "$1"; return; }
     case $1 in
     datacenter-2zone) echo "--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2 --algorithm ppo --timesteps 1000000 --comfort-target 99.6 --time-features --schedule-features" ;;
     # The CRAC's model fails in Golden's cold snap of December 18-19 (roof surfaces past 200 C, its own controls
@@ -37,12 +47,22 @@ recipe() {
     *) echo "unknown building $1" >&2; exit 2 ;;
     esac
 }
+sac_recipe() {  # the same comfort targets, observations and periods as the clone recipe
+    local features
+    case $1 in
+    datacenter-2zone) features="--comfort-target 99.6 --time-features --schedule-features" ;;
+    datacenter-crac) features="--comfort-target 99.9 --time-features --run-days 351" ;;
+    office-small) features="--comfort-target 97.5" ;;
+    *) echo "unknown building $1" >&2; exit 2 ;;
+    esac
+    echo "--algorithm sac --timesteps ${SAC_STEPS:-200000} $features"
+}
 BUILDINGS=${BUILDINGS:-"datacenter-2zone datacenter-crac office-small"}
 
 latest() { ls "$1"/checkpoints/model_*_steps.zip 2>/dev/null | sort -t_ -k2 -n | tail -1; }
 
 run_one() {  # building seed: resume or start it, to the end
-    local b=$1 s=$2 name="$1-seed$2" code="$WORK/code-$COMMIT"
+    local b=$1 s=$2 name="$1$TAG-seed$2" code="$WORK/code-$COMMIT"
     local dir="$WORK/runs/$name" args=(--building "$b" --weathers CA,CO,FL --workers 2 --seed "$s" --quiet)
     local target
     target=$(recipe "$b" | grep -o -- "--timesteps [0-9]*" | cut -d" " -f2)
@@ -60,7 +80,7 @@ run_one() {  # building seed: resume or start it, to the end
         cmd+=(--resume "$dir" --quiet --timesteps "$target")  # a budget raised since continues the run
     else
         # shellcheck disable=SC2046
-        cmd+=("${args[@]}" --run-name "$name" --init-from-baseline $(recipe "$b"))
+        cmd+=("${args[@]}" --run-name "$name" $INIT $(recipe "$b"))
         [ -d "$dir" ] && cmd+=(--overwrite)  # stopped before its first checkpoint: start it again
     fi
     echo "$(date -Is) $name: ${cmd[*]:2}"
@@ -75,8 +95,8 @@ start)
     mkdir -p "$WORK"
     code="$WORK/code-$COMMIT"
     [ -d "$code" ] || { mkdir -p "$code" && git archive "$COMMIT" parallel_eplus idf | tar -x -C "$code"; }
-    export -f run_one recipe latest
-    export WORK COMMIT PY SAVED REPO NICE COMMON
+    export -f run_one recipe sac_recipe latest
+    export WORK COMMIT PY SAVED REPO NICE COMMON RECIPE TAG INIT SAC_STEPS
     # seeds outer: every building's first seed before any second one
     nohup bash -c "for s in $SEEDS; do for b in $BUILDINGS; do run_one \$b \$s; done; done" >>"$WORK/learned.log" 2>&1 &
     echo $! >"$WORK/learned.pid"
@@ -85,18 +105,20 @@ start)
 status)
     for d in "$WORK"/runs/*/; do
         [ -d "$d" ] || continue
-        steps=$(tail -1 "$d/episodes.csv" 2>/dev/null | cut -d, -f1)
+        steps=$(tail -1 "$d/episodes.csv" 2>/dev/null | cut -d, -f1 || true)
         echo "$(basename "$d"): $( [ -f "$d/model.zip" ] && echo finished || echo "checkpoint $(basename "$(latest "$d")")"), last episode at step ${steps:-?}"
     done
     tail -c 3000 "$WORK/learned.log" 2>/dev/null | tr '\r' '\n' | grep -av '^$' | tail -3 || true
     ;;
 stop)
-    pkill -INT -f "parallel_eplus.cli train.*-seed[0-9]" && echo "asked the trainer to checkpoint and stop"
+    # this study's runs only (other studies' run names end in -seedN too)
+    pkill -INT -f "parallel_eplus.cli train.*(--run-name |/runs/)(${BUILDINGS// /|})$TAG-seed[0-9]" &&
+        echo "asked the trainer to checkpoint and stop"
     kill "$(cat "$WORK/learned.pid")" 2>/dev/null || true
     ;;
 save)
     for d in "$WORK"/runs/*/; do
-        name=$(basename "$d"); b=${name%-seed*}; out="$SAVED/$b/runs/$name"
+        name=$(basename "$d"); b=${name%"$TAG"-seed*}; out="$SAVED/$b/runs/$name"
         mkdir -p "$out"
         cp "$d/config.json" "$d/episodes.csv" "$out/" 2>/dev/null || true
         cp "$d/imitation.json" "$out/" 2>/dev/null || true
@@ -113,15 +135,15 @@ save)
     ;;
 evaluate)
     b=$2; policies=()
-    for run in "$SAVED/$b"/runs/*/; do
+    for run in "$SAVED/$b"/runs/"$b$TAG"-seed*/; do
         [ -f "$run/model.zip" ] && policies+=(--policy "$run/model.zip=Learned")
     done
     clone="$SAVED/$b/runs/$b-seed0/cloned/model.zip"  # how close imitation alone gets (one seed: it is a fit)
-    [ -f "$clone" ] && policies+=(--policy "$clone=Cloned (before RL)")
+    [ -f "$clone" ] && [ -z "$TAG" ] && policies+=(--policy "$clone=Cloned (before RL)")
     days=$(recipe "$b" | grep -o -- "--run-days [0-9]*" || true)  # the period trained on (default: the year)
     # shellcheck disable=SC2086
     "$REPO/.venv/bin/parallel-eplus" evaluate --building "$b" --baseline "${policies[@]}" --weathers CA,CO,FL,IL,VA \
-        --workers 2 --out "$SAVED/$b" --quiet $days
+        --workers 2 --out "$SAVED/$b/$EVAL_OUT" --quiet $days
     ;;
 recipe)  # the recipe's options, for other studies of it (scripts/weather_study.sh)
     recipe "$2"
