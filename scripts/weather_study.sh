@@ -13,7 +13,9 @@
 #                                                   # to the end); stop any time (Ctrl-C checkpoints), run again
 #   bash scripts/weather_study.sh status             # each run's steps
 #   bash scripts/weather_study.sh evaluate BUILDING  # paper weathers, noisy years, unseen climates -> $OUT/BUILDING/
-#   bash scripts/weather_study.sh climates BUILDING  # issue 29's learned controller on all 16 climates vs built-in
+#   bash scripts/weather_study.sh climates BUILDING [RUNS LABEL]  # issue 29's learned controllers (or the policies
+#                                                   # of RUNS/*/model.zip, into $OUT/climates-LABEL) on all 16
+#                                                   # climates against the built-in controls
 #   bash scripts/weather_study.sh table              # $OUT/README.md's tables and figures from the evaluations
 #   bash scripts/weather_study.sh save               # each run's small files to $OUT/runs (commit them): a finished
 #                                                   # run's policy, an unfinished one's newest save to resume from
@@ -119,13 +121,14 @@ evaluate)
     "${CLI[@]}" "${common[@]}" --weathers "$UNSEEN" --out "$OUT/$b/climates" || true
     ;;
 climates)
-    b=$2; learned=()
-    for run in "$REPO/results/learned/$b"/runs/*/; do
+    b=$2 runs=${3:-$REPO/results/learned/$2/runs} label=${4:-}; learned=()
+    for run in "$runs"/*/; do
         [ -f "$run/model.zip" ] && learned+=(--policy "$run/model.zip=Learned")
     done
+    [ ${#learned[@]} -gt 0 ] || { echo "no policy (*/model.zip) in $runs" >&2; exit 1; }
     # shellcheck disable=SC2046
     "${CLI[@]}" evaluate --building "$b" --baseline "${learned[@]}" --weathers all --workers 2 --quiet \
-        $(eval_days "$b") --out "$OUT/climates/$b" || true
+        $(eval_days "$b") --out "$OUT/climates${label:+-$label}/$b" || true
     ;;
 table)
     "$PY" "$REPO/scripts/weather_table.py" "$OUT"

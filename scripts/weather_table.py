@@ -54,9 +54,10 @@ def variants_table(out: Path, building: str) -> list[str]:
     return lines + [""]
 
 
-def climates_table(out: Path, building: str) -> list[str]:
-    """Issue 29's learned controller on every climate: savings, comfort, the goal's count; writes a bar figure."""
-    df = with_changes(pd.read_csv(out / "climates" / building / "results.csv"), BASELINE_LABEL)
+def climates_table(out: Path, building: str, folder: str = "climates") -> list[str]:
+    """A building's learned controllers (`folder`: climates/ for issue 29's) on every climate: savings, comfort,
+    the goal's count; writes a bar figure."""
+    df = with_changes(pd.read_csv(out / folder / building / "results.csv"), BASELINE_LABEL)
     base = df[df.controller == BASELINE_LABEL].set_index("weather")
     learned = df[df.controller != BASELINE_LABEL]
     lines = [f"### {building}", "", "| climate | energy vs built-in | comfort: built-in → learned | goal |",
@@ -79,25 +80,30 @@ def climates_table(out: Path, building: str) -> list[str]:
     ax.set_title(f"{building}: learned controller by climate (blue: paper weathers, orange: unseen)")
     ax.tick_params(axis="x", rotation=60)
     fig.tight_layout()
-    fig.savefig(out / "climates" / f"{building}-savings.png", dpi=120)
+    fig.savefig(out / folder / f"{building}-savings.png", dpi=120)
     plt.close(fig)
-    return lines + [f"![{building}: savings by climate](climates/{building}-savings.png)", ""]
+    return lines + [f"![{building}: savings by climate]({folder}/{building}-savings.png)", ""]
+
+
+# `weather_study.sh climates BUILDING RUNS LABEL` writes climates-LABEL/: whose controllers they are
+CLIMATE_SETS = {"climates": "issue 29's learned controllers (clone, then RL)",
+                "climates-model-based": "the model-based planner distilled into a policy (issue 38)"}  # fmt: skip
 
 
 def main(out: Path) -> None:
-    buildings = sorted(p.name for p in out.iterdir() if p.is_dir() and p.name != "climates")
+    buildings = sorted(p.name for p in out.iterdir() if p.is_dir() and not p.name.startswith(("climates", "runs")))
     lines = ["# Weather noise, forecasts and every climate (issue 40)", "",
              "Written by `scripts/weather_table.py` from `scripts/weather_study.sh`'s evaluations; docs/weather.md "
              "explains the options. Mean over seeds (and noisy years) with a 95 % bootstrap interval.", "",
              "## Training variants", ""]  # fmt: skip
     for b in buildings:
         lines += variants_table(out, b)
-    climates = sorted(p.name for p in (out / "climates").iterdir()) if (out / "climates").is_dir() else []
-    climates = [c for c in climates if (out / "climates" / c / "results.csv").is_file()]
-    if climates:
-        lines += ["## Every climate the EnergyPlus wheel ships: issue 29's learned controllers", ""]
-        for b in climates:
-            lines += climates_table(out, b)
+    for folder in sorted(p.name for p in out.iterdir() if p.is_dir() and p.name.startswith("climates")):
+        done = sorted(b.name for b in (out / folder).iterdir() if (b / "results.csv").is_file())
+        if done:
+            lines += [f"## Every climate the EnergyPlus wheel ships: {CLIMATE_SETS.get(folder, folder)}", ""]
+            for b in done:
+                lines += climates_table(out, b, folder)
     (out / "README.md").write_text("\n".join(lines))
     print(f"written: {out / 'README.md'}")
 
