@@ -24,12 +24,15 @@
 # Settings (environment): BUILDINGS, SEEDS, VARIANTS, TIMESTEPS (default: the recipe's), NOISE (default:
 # Sinergym's dry bulb 1 K, 24 h), FORECAST (hours, 24), FORECAST_ERROR (BOPTEST's low/medium/high; default exact),
 # NOISY_YEARS (3), EXTRA (more train options, e.g. a tiny trial: EXTRA="--run-days 2 --batch-size 512"),
-# EVAL_DAYS (evaluation period; default the recipe's), WORK (runs; default ../weather-study), OUT (results/weather).
+# EVAL_DAYS (evaluation period; default the recipe's), WORK (runs; default ../weather-study), OUT (results/weather),
+# COMMIT (the code training runs with: a copy of the package at that commit, $WORK/code-COMMIT, so edits to the
+# working tree cannot change a study under way; default HEAD).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 REPO=$PWD
 PY=$REPO/.venv/bin/python
 CLI=("$PY" -m parallel_eplus.cli)
+COMMIT=${COMMIT:-$(git rev-parse --short HEAD)}
 WORK=${WORK:-$REPO/../weather-study}
 OUT=${OUT:-$REPO/results/weather}
 BUILDINGS=${BUILDINGS:-"datacenter-2zone datacenter-crac office-small"}
@@ -84,7 +87,9 @@ run_one() {  # building seed variant chunk: the run's next chunk (or all of it)
         [ -d "$dir" ] && cmd+=(--overwrite)  # stopped before its first save: start it again
     fi
     echo "$(date -Is) $name: $done -> $next steps"
-    (cd "$WORK" && "${cmd[@]}")
+    local code="$WORK/code-$COMMIT"
+    [ -d "$code" ] || { mkdir -p "$code" && git -C "$REPO" archive "$COMMIT" parallel_eplus idf weather | tar -x -C "$code"; }
+    (cd "$WORK" && PYTHONPATH=$code "${cmd[@]}")
 }
 
 policies() {  # building: --policy PATH=LABEL for every finished run of every variant
