@@ -97,9 +97,24 @@ def _state(pid: int) -> str:
         return ""
 
 
-def _waitable(pid: int) -> bool:
-    """Our child has exited, all its threads with it (not reaped: its owner reaps it)."""
-    return os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None
+def test_a_process_whose_main_thread_is_gone_is_not_handed_out():
+    """Killed while its other threads still exit: not reapable yet (`poll()` says running), but never to step."""
+    from parallel_eplus.engine.prepared import _exiting
+
+    code = "import ctypes, threading, time; threading.Thread(target=time.sleep, args=(30,)).start(); " \
+           "ctypes.CDLL(None).pthread_exit(None)"  # fmt: skip
+    proc = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        assert not _exiting(None)
+        deadline = time.monotonic() + 10
+        while not _exiting(proc.pid):
+            assert time.monotonic() < deadline, _state(proc.pid)
+            time.sleep(0.01)
+        assert proc.poll() is None and _state(proc.pid) == "Z"
+    finally:
+        proc.kill()
+        proc.wait()
+    assert not _exiting(proc.pid)  # reaped: gone
 
 
 @pytest.mark.slow
@@ -116,11 +131,10 @@ def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path
         if fault == "killed":  # died while parked at its first step
             _parked(env)
             os.kill(pid, signal.SIGKILL)
-            # dead, not dying: a kill is asynchronous, and a process tearing down ~250 MB under load is alive for
-            # tens of ms with its observation 0 still in the pipe (handed out then, it fails at its first step).
-            # Its main thread shows "Z" while its other threads still exit: waitable is what says it is gone.
+            # A kill is asynchronous: once its main thread is gone ("Z"), it must not be handed out, though its other
+            # threads may still be exiting (not reapable yet) with its observation 0 still in the pipe.
             deadline = time.monotonic() + 10
-            while not _waitable(pid):
+            while _state(pid) not in ("", "Z"):
                 assert time.monotonic() < deadline, f"the killed process {pid} did not exit: {_state(pid)}"
                 time.sleep(0.005)
         else:  # stopped in its start-up, and now past its deadline

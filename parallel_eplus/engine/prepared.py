@@ -126,7 +126,7 @@ class PreparedEpisode:
 
     def usable(self, start_timeout_s: float) -> bool:
         """Alive, and either parked or still within its start-up deadline: a dead or hung one is replaced."""
-        if not self.process.running():
+        if not self.process.running() or _exiting(getattr(self.process.proc, "pid", None)):
             log.warning("the prepared episode's EnergyPlus (%s) died; starting the episode afresh", self.episode_dir)
             return False
         if self.parked():
@@ -144,3 +144,15 @@ class PreparedEpisode:
             self.process.end_episode(STOP_GRACE_S)
         self.process.kill()  # what was still starting up
         shutil.rmtree(self.episode_dir, ignore_errors=True)
+
+
+def _exiting(pid: int | None) -> bool:
+    """Killed and still tearing down: its main thread a zombie while its other threads exit. It cannot be reaped
+    yet (so it still counts as running) and its observation 0 is still in the pipe, but it will never step."""
+    if pid is None:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            return f.read().rsplit(b")", 1)[1].split()[0] in (b"Z", b"X")
+    except (OSError, IndexError):
+        return False
