@@ -86,6 +86,9 @@ def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cyc
     for folder in ("runs", "tb"):
         (tmp_path / folder).rename(home / folder)
     csv = home / "runs" / "fair" / "episodes.csv"
+    last = csv.read_text().splitlines()[-1].split(",", 1)[1]
+    with csv.open("a") as f:  # an episode after the last save, as a run killed then leaves it: collected again
+        f.write(f"999999,{last}\n")
     train(small_config(tmp_path, "fair", run_days=1, timesteps=1152, batch_size=576), resume=home / "runs" / "fair")
     assert not (tmp_path / "runs").exists() and not (tmp_path / "tb").exists()
     assert episodes_per_weather(csv) == {"CA": 4, "CO": 4, "FL": 4}

@@ -22,6 +22,7 @@ from parallel_eplus.evaluation.controllers import BASELINE_LABEL, RBC_LABEL, pol
 from parallel_eplus.evaluation.plots import controller_colors  # noqa: E402
 from parallel_eplus.evaluation.seeds import interval  # noqa: E402
 from parallel_eplus.evaluation.sweep import run_sweep  # noqa: E402
+from parallel_eplus.runs.run_files import saved_steps  # noqa: E402
 from parallel_eplus.training.config import TrainConfig  # noqa: E402
 from parallel_eplus.training.train import train  # noqa: E402
 
@@ -66,7 +67,7 @@ def _compare_one(out, algorithm, seed, named_by_seed, timesteps, eval_every, bas
                                  "checkpoint_every": eval_every})  # fmt: skip
             final = train(cfg, progress=True)
         wall += time.monotonic() - t0
-        steps = _steps_of(final)
+        steps = saved_steps(final)
         controller = policy_controller(str(final))
         df = run_sweep([controller], ALL_WEATHERS, eval_days, base.workers, out / "eval" / f"{name}-{steps}")
         row = {"algorithm": algorithm, "seed": seed, "target": target, "steps": steps, "wall_s": wall,
@@ -78,13 +79,6 @@ def _compare_one(out, algorithm, seed, named_by_seed, timesteps, eval_every, bas
         log.info("%s at %d steps (%.1f h): %.1f %% in band, %.1f kW", name, steps, wall / 3600,
                  row["in_band_pct"], row["power_kw"])  # fmt: skip
     return done
-
-
-def _steps_of(model_zip: Path) -> int:
-    from stable_baselines3.common.save_util import load_from_zip_file
-
-    data, _, _ = load_from_zip_file(model_zip, device="cpu", load_data=True)
-    return int(data["num_timesteps"])
 
 
 def references(results_csv: Path) -> dict[str, tuple[float, float, float]]:

@@ -28,7 +28,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from parallel_eplus.experiments.sweep_rank import trial_evaluation
 from parallel_eplus.experiments.sweep_spec import trial_config
 from parallel_eplus.runs.policy_files import MODEL_FILE, saves_newest_first
-from parallel_eplus.runs.run_files import latest_evaluation
+from parallel_eplus.runs.run_files import latest_evaluation, saved_steps
 from parallel_eplus.runs.run_status import TRIAL_VARIABLE
 from parallel_eplus.training.callbacks import episodes_per_weather
 
@@ -146,11 +146,6 @@ def _wait_for_predecessor(run_dir: Path) -> None:
         time.sleep(0.5)
 
 
-def _steps_of(save: Path) -> int:
-    with zipfile.ZipFile(save) as z:
-        return int(json.loads(z.read("data"))["num_timesteps"])
-
-
 def exploit(donor: Path, cfg, at_steps: int) -> None:
     """PBT: this trial continues from `donor`'s newest save with its own (perturbed) settings: the save and its
     statistics are copied into this run's checkpoints/ and its config.json rewritten, so `train --resume` takes
@@ -158,11 +153,11 @@ def exploit(donor: Path, cfg, at_steps: int) -> None:
     from parallel_eplus import io
     from parallel_eplus.runs.policy_files import normalization_file, stats_target
 
-    saves = [p for p in saves_newest_first(donor) if _steps_of(p) <= at_steps] or saves_newest_first(donor)
+    saves = [p for p in saves_newest_first(donor) if saved_steps(p) <= at_steps] or saves_newest_first(donor)
     if not saves:
         log.warning("trial %s: PBT's donor %s has no save yet; continuing from its own", cfg.run_name, donor)
         return
-    steps = _steps_of(saves[0])
+    steps = saved_steps(saves[0])
     target = cfg.run_dir / "checkpoints" / f"model_{steps}_steps.zip"
     target.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(normalization_file(saves[0]), stats_target(target))

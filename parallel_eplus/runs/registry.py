@@ -15,7 +15,6 @@ import os
 import signal
 import socket
 import time
-import zipfile
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -29,6 +28,7 @@ from parallel_eplus.runs.run_files import (
     latest_evaluation,
     read_json,
     read_status,
+    saved_steps,
     saves_newest_first,
 )
 
@@ -127,15 +127,6 @@ def _state(run_dir: Path, status: dict | None) -> tuple[str, str, str]:
     return "running", process, "on another host: its process is not checked from here"
 
 
-def _saved_steps(save: Path) -> int:
-    """Steps of a checkpoint (from its name) or of model.zip (SB3's `num_timesteps` in its data file)."""
-    if save.name != MODEL_FILE:
-        return int(save.stem.split("_")[1])
-    with contextlib.suppress(OSError, ValueError, KeyError, zipfile.BadZipFile), zipfile.ZipFile(save) as z:
-        return int(json.loads(z.read("data"))["num_timesteps"])
-    return 0
-
-
 def _episodes(run_dir: Path) -> tuple[int, int, dict[str, dict]]:
     """(episodes finished, steps at the last one, weather -> its latest episode's row)."""
     try:
@@ -157,7 +148,7 @@ def read_run(run_dir: Path, folder: Path | None = None) -> RunInfo:
     state, process, note = _state(run_dir, status)
     saves = saves_newest_first(run_dir)
     episodes, episode_steps, latest = _episodes(run_dir)
-    steps = max(int((status or {}).get("steps", 0)), episode_steps, _saved_steps(saves[0]) if saves else 0)
+    steps = max(int((status or {}).get("steps", 0)), episode_steps, saved_steps(saves[0]) if saves else 0)
     try:
         planned = int(json.loads((run_dir / CONFIG_FILE).read_text())["timesteps"])
     except (OSError, ValueError, KeyError):

@@ -6,7 +6,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import zipfile
 from pathlib import Path
 
 MODEL_FILE = "model.zip"
@@ -45,6 +47,33 @@ def saves_newest_first(run_dir: Path) -> list[Path]:
         newer = [c for c in checkpoints if c.stat().st_mtime_ns > final.stat().st_mtime_ns]
         checkpoints.insert(len(checkpoints) - len(newer), final)
     return checkpoints[::-1]
+
+
+def saved_steps(save: Path) -> int:
+    """Steps of a checkpoint (from its name: model_N_steps.zip, mpc_N_steps.pt) or of model.zip (SB3's
+    `num_timesteps` in its data file); 0 if unreadable."""
+    if save.name != MODEL_FILE:
+        return int(save.stem.split("_")[1])
+    with contextlib.suppress(OSError, ValueError, KeyError, zipfile.BadZipFile), zipfile.ZipFile(save) as z:
+        return int(json.loads(z.read("data"))["num_timesteps"])
+    return 0
+
+
+def trim_episodes(episodes_csv: Path, steps: int) -> int:
+    """Drop the rows of episodes that ended after step `steps` (a run killed after its last checkpoint: resumed
+    from it, it runs those episodes again): the rows dropped."""
+    import pandas as pd
+
+    from parallel_eplus import io
+
+    try:
+        df = pd.read_csv(episodes_csv)
+    except (OSError, ValueError):
+        return 0
+    if "timesteps" not in df or not (late := df["timesteps"] > steps).any():
+        return 0
+    io.write_text(episodes_csv, df[~late].to_csv(index=False))
+    return int(late.sum())
 
 
 def read_status(run_dir: Path) -> dict | None:

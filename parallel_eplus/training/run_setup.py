@@ -6,6 +6,7 @@ changed, and continues in the folder it is in now. Both write config.json before
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import pandas as pd
@@ -13,8 +14,11 @@ import pandas as pd
 from parallel_eplus import io
 from parallel_eplus.runs.checkpoints import resume_point
 from parallel_eplus.runs.policy_files import _check_init_from, run_dir_of
+from parallel_eplus.runs.run_files import saved_steps, trim_episodes
 from parallel_eplus.runs.run_names import claim_run_name
 from parallel_eplus.training.config import TrainConfig
+
+log = logging.getLogger(__name__)
 
 
 def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tuple[TrainConfig, Path | None]:
@@ -26,6 +30,9 @@ def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) ->
         checkpoint = _resume_point(Path(resume))
         saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
         saved.continue_in(run_dir_of(checkpoint))
+        steps = saved_steps(checkpoint)
+        if dropped := trim_episodes(run_dir_of(checkpoint) / "episodes.csv", steps):  # killed after its last save
+            log.info("episodes.csv: %d episode(s) after step %d dropped: the run collects them again", dropped, steps)
         # The run keeps its settings (the rollout buffer is sized by them); only where it runs may change.
         saved.timesteps = cfg.timesteps or saved.timesteps
         saved.backend, saved.ray_address, saved.lockstep = cfg.backend, cfg.ray_address, cfg.lockstep
