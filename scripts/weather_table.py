@@ -87,7 +87,8 @@ def climates_table(out: Path, building: str, folder: str = "climates") -> list[s
 
 # `weather_study.sh climates BUILDING RUNS LABEL` writes climates-LABEL/: whose controllers they are
 CLIMATE_SETS = {"climates": "issue 29's learned controllers (clone, then RL)",
-                "climates-model-based": "the model-based planner distilled into a policy (issue 38)"}  # fmt: skip
+                "climates-model-based": "the model-based planner distilled into a policy (issue 38)",
+                "climates-planner-january": "the model-based planner itself, January 1-14 (issue 38)"}  # fmt: skip
 
 
 def main(out: Path) -> None:
