@@ -2,7 +2,8 @@
 
 For each building: every training variant (base, noise, forecast, both) on the five paper weathers, on noisy years
 of them and on the 11 unseen climates: energy against the built-in controls and the comfort share, mean over seeds
-(and noisy years) with a 95 % bootstrap interval (evaluation/seeds.py). For the learned controllers of issue 29 on
+(and noisy years) with a 95 % bootstrap interval (evaluation/seeds.py); how many of the 16 climates each variant
+meets the issue's goal on; a figure of energy against comfort per variant. For the learned controllers of issue 29 on
 all 16 climates: each climate's savings and comfort, how many keep the built-in's comfort at less energy, and a
 bar figure of the savings by climate.
 
@@ -36,22 +37,83 @@ def _share(values: list) -> str:
     return f"{point:.2f} %" if low != low else f"{point:.2f} % [{low:.2f}, {high:.2f}]"
 
 
+def _results(out: Path, building: str, name: str) -> pd.DataFrame | None:
+    path = out / building / name / "results.csv"
+    return with_changes(pd.read_csv(path), BASELINE_LABEL) if path.is_file() else None
+
+
 def variants_table(out: Path, building: str) -> list[str]:
-    """One row per (variant, weather set): energy vs built-in and comfort, stratified over weathers."""
+    """One row per (variant, weather set): energy vs built-in and comfort, stratified over weathers; then each
+    variant's count of climates (paper weathers and unseen ones) where it keeps the built-in's comfort at less
+    energy, the issue's goal; and the frontier figure."""
     lines = [f"### {building}", "", "| variant | weathers | energy vs built-in | comfort: built-in → learned |",
              "| --- | --- | --- | --- |"]  # fmt: skip
     for name, what in SETS.items():
-        path = out / building / name / "results.csv"
-        if not path.is_file():
+        df = _results(out, building, name)
+        if df is None:
             continue
-        df = with_changes(pd.read_csv(path), BASELINE_LABEL)
         base = df[df.controller == BASELINE_LABEL]
         base_comfort = _share([g.to_numpy() for _, g in base.groupby("weather")["in_band_pct"]])
         for variant, rows in df[df.controller != BASELINE_LABEL].groupby("controller", sort=False):
             energy = [g.to_numpy() for _, g in rows.groupby("weather")["energy_change_pct"]]
             comfort = [g.to_numpy() for _, g in rows.groupby("weather")["in_band_pct"]]
             lines.append(f"| {variant} | {what} | {_cell(energy)} | {base_comfort} → {_share(comfort)} |")
+    lines += [""] + goal_counts(out, building) + frontier_figure(out, building)
+    return lines
+
+
+def goal_counts(out: Path, building: str) -> list[str]:
+    """Per variant: on how many of the 16 climates (the five paper weathers and the 11 unseen, the same
+    unperturbed years the climate tables use) its mean over seeds keeps at least the built-in's comfort at less
+    energy."""
+    frames = [df for name in ("paper", "climates") if (df := _results(out, building, name)) is not None]
+    if not frames:
+        return []
+    df = pd.concat(frames)
+    base = df[df.controller == BASELINE_LABEL].groupby("weather")["in_band_pct"].mean()
+    lines = [
+        "| variant | climates where it keeps the built-in's comfort at less energy | misses |",
+        "| --- | --- | --- |",
+    ]
+    for variant, rows in df[df.controller != BASELINE_LABEL].groupby("controller", sort=False):
+        mean = rows.groupby("weather", sort=False)[["energy_change_pct", "in_band_pct"]].mean()
+        ok = (mean["energy_change_pct"] < 0) & (mean["in_band_pct"] >= mean.index.map(base))
+        miss = mean[~ok]
+        if len(miss) > 6:  # a range, not a list
+            e, c = miss.energy_change_pct, miss.in_band_pct
+            misses = f"{len(miss)}: {e.min():+.1f} to {e.max():+.1f} %, {c.min():.2f}-{c.max():.2f} % in band"
+        else:
+            misses = ", ".join(f"{w} ({m.energy_change_pct:+.1f} %, {m.in_band_pct:.2f} %)" for w, m in miss.iterrows())
+        lines.append(f"| {variant} | {int(ok.sum())} of {len(ok)} | {misses or '–'} |")
     return lines + [""]
+
+
+def frontier_figure(out: Path, building: str) -> list[str]:
+    """Energy against comfort per weather set: each seed's mean over weathers (and noisy years) as a dot, the
+    variant's mean over them as a larger mark, the built-in controls as a star."""
+    sets = [(name, what, df) for name, what in SETS.items() if (df := _results(out, building, name)) is not None]
+    if not sets:
+        return []
+    fig, axes = plt.subplots(1, len(sets), figsize=(4.2 * len(sets), 3.8), squeeze=False)
+    for ax, (_, what, df) in zip(axes[0], sets, strict=True):
+        base = df[df.controller == BASELINE_LABEL]
+        ax.plot(0, base["in_band_pct"].mean(), "k*", markersize=12, label="built-in")
+        for i, (variant, rows) in enumerate(df[df.controller != BASELINE_LABEL].groupby("controller", sort=False)):
+            seed = rows["run"].fillna("").str.replace(r" year \d+$", "", regex=True)
+            per_seed = rows.groupby(seed)[["energy_change_pct", "in_band_pct"]].mean()
+            ax.plot(per_seed["energy_change_pct"], per_seed["in_band_pct"], "o", color=f"C{i}", alpha=0.45, ms=5)
+            ax.plot(per_seed["energy_change_pct"].mean(), per_seed["in_band_pct"].mean(), "D", color=f"C{i}",
+                    ms=8, markeredgecolor="k", label=variant)  # fmt: skip
+        ax.set_title(what)
+        ax.set_xlabel("energy vs built-in (%)")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("comfort: samples in band (%)")
+    axes[0][-1].legend(fontsize=8, loc="best")
+    fig.suptitle(f"{building}: training variants (dots: seeds; diamonds: their mean)")
+    fig.tight_layout()
+    fig.savefig(out / building / "variants.png", dpi=120)
+    plt.close(fig)
+    return [f"![{building}: energy against comfort per training variant]({building}/variants.png)", ""]
 
 
 def climates_table(out: Path, building: str, folder: str = "climates") -> list[str]:

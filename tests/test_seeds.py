@@ -39,6 +39,21 @@ def test_means_intervals_and_iqm_over_seeds():
     assert one[0] == 3.0 and np.isnan(one[1])  # one run: no interval
 
 
+def test_noisy_years_are_compared_with_the_baselines_same_year():
+    # two noisy years of one weather: the baseline uses 1000 then 1200 kWh; a controller 10 % less each year
+    rows = [
+        dict(controller=c, run=f"year {k}", weather="CA", weather_seed=k, energy_kwh=e, cost=e / 10)
+        for c, scale in (("Baseline", 1.0), ("TRPO", 0.9))
+        for k, e in ((0, 1000.0 * scale), (1, 1200.0 * scale))
+    ]
+    df = seeds.with_changes(pd.DataFrame(rows), "Baseline")
+    trpo = df[df.controller == "TRPO"]
+    assert trpo["energy_change_pct"].to_numpy() == pytest.approx([-10.0, -10.0])  # unpaired: -18.2 and -1.8
+    assert trpo["cost_change_pct"].to_numpy() == pytest.approx([-10.0, -10.0])
+    missing = seeds.with_changes(pd.DataFrame(rows + [{**rows[-1], "weather_seed": 7}]), "Baseline")
+    assert missing["energy_change_pct"].iloc[-1] == pytest.approx(100 * (1080 / 1100 - 1))  # the weather's mean
+
+
 def test_runs_are_averaged_in_the_tables_and_reported_across_seeds(tmp_path):
     df = runs_table()
     collapsed = seeds.collapse(df)

@@ -51,18 +51,32 @@ def interval(groups: list[np.ndarray], statistic=np.mean, seed: int = 0) -> tupl
 
 
 def with_changes(df: pd.DataFrame, baseline: str) -> pd.DataFrame:
-    """Each row's energy against the baseline's on the same weather (`energy_change_pct`), where both exist."""
-    energy = "energy_kwh" if "energy_kwh" in df.columns else "power_kw"
-    base = df[df.controller == baseline].groupby("weather")[energy].mean()
+    """Each row's energy against the baseline's on the same weather (`energy_change_pct`), where both exist.
+
+    On noisy years (a `weather_seed` per row, sweep.py) each year is compared with the baseline's same year: the
+    years differ more than the controllers do, so pairing them keeps the year's weather out of the change."""
     df = df.copy()
-    df["energy_change_pct"] = 100 * (df[energy] / df["weather"].map(base) - 1)
-    for key in ("hvac_energy_kwh", "cost", "emissions_kg"):  # and BOPTEST's, where the rows have them
-        if key in df.columns:
-            ref = df[df.controller == baseline].groupby("weather")[key].mean()
-            df[f"{key.removesuffix('_kwh').removesuffix('_kg')}_change_pct"] = 100 * (
-                df[key] / df["weather"].map(ref) - 1
-            )
+    keys = ["weather"]
+    if "weather_seed" in df.columns and df["weather_seed"].notna().all():
+        keys.append("weather_seed")
+    for key in ("energy_kwh" if "energy_kwh" in df.columns else "power_kw", "hvac_energy_kwh", "cost", "emissions_kg"):
+        if key not in df.columns:  # BOPTEST's figures (buildings/kpis.py), where the rows have them
+            continue
+        name = "energy" if key in ("energy_kwh", "power_kw") else key.removesuffix("_kwh").removesuffix("_kg")
+        df[f"{name}_change_pct"] = 100 * (df[key] / _paired(df, baseline, key, keys) - 1)
     return df
+
+
+def _paired(df: pd.DataFrame, baseline: str, key: str, keys: list[str]) -> pd.Series:
+    """The baseline's mean `key` for each row's weather (and year, where `keys` has it); by weather alone for a
+    row whose year the baseline did not run."""
+    base = df[df.controller == baseline]
+    by_weather = df["weather"].map(base.groupby("weather")[key].mean())
+    if len(keys) == 1:
+        return by_weather
+    by_year = base.groupby(keys)[key].mean()
+    paired = pd.Series(pd.MultiIndex.from_frame(df[keys]).map(by_year), index=df.index, dtype=float)
+    return paired.fillna(by_weather)
 
 
 def seed_table(df: pd.DataFrame, baseline: str) -> pd.DataFrame:
