@@ -25,8 +25,8 @@
 # Sinergym's dry bulb 1 K, 24 h), FORECAST (hours, 24), FORECAST_ERROR (BOPTEST's low/medium/high; default exact),
 # NOISY_YEARS (3), EXTRA (more train options, e.g. a tiny trial: EXTRA="--run-days 2 --batch-size 512"),
 # EVAL_DAYS (evaluation period; default the recipe's), WORK (runs; default ../weather-study), OUT (results/weather),
-# COMMIT (the code training runs with: a copy of the package at that commit, $WORK/code-COMMIT, so edits to the
-# working tree cannot change a study under way; default HEAD).
+# COMMIT (the code training and `evaluate` run with: a copy of the package at that commit, $WORK/code-COMMIT, so edits
+# to the working tree cannot change a study under way; default HEAD).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 REPO=$PWD
@@ -87,9 +87,13 @@ run_one() {  # building seed variant chunk: the run's next chunk (or all of it)
         [ -d "$dir" ] && cmd+=(--overwrite)  # stopped before its first save: start it again
     fi
     echo "$(date -Is) $name: $done -> $next steps"
+    snapshot
+    (cd "$WORK" && PYTHONPATH=$WORK/code-$COMMIT "${cmd[@]}")
+}
+
+snapshot() {  # the package at $COMMIT, for training and evaluating
     local code="$WORK/code-$COMMIT"
     [ -d "$code" ] || { mkdir -p "$code" && git -C "$REPO" archive "$COMMIT" parallel_eplus idf weather | tar -x -C "$code"; }
-    (cd "$WORK" && PYTHONPATH=$code "${cmd[@]}")
 }
 
 policies() {  # building: --policy PATH=LABEL for every finished run of every variant
@@ -120,6 +124,8 @@ evaluate)
     set -- $(policies "$b")
     [ $# -gt 0 ] || { echo "no finished run of $b under $WORK/runs" >&2; exit 1; }
     common=(evaluate --building "$b" --baseline "$@" --workers 2 --quiet $(eval_days "$b"))
+    snapshot  # the policies run with the code they were trained with
+    export PYTHONPATH=$WORK/code-$COMMIT
     "${CLI[@]}" "${common[@]}" --weathers "$PAPER" --out "$OUT/$b/paper" || true
     "${CLI[@]}" "${common[@]}" --weathers "$PAPER" --weather-noise "$NOISE" --noisy-years "$NOISY_YEARS" \
         --out "$OUT/$b/noisy" || true
