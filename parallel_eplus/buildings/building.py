@@ -17,6 +17,10 @@ from parallel_eplus.buildings.comfort import Comfort
 from parallel_eplus.buildings.model import ActionElement, ControlModel, Sensor, action_elements
 from parallel_eplus.buildings.spec import BuildingSpec, load_spec
 
+# The actuators the zone predictor reads, component types (EnergyPlus's EMS calling point for them:
+# BeginTimestepBeforePredictor).
+PREDICTOR_ACTUATORS = frozenset({"zone temperature control"})
+
 
 @dataclass(frozen=True)
 class Building:
@@ -28,6 +32,9 @@ class Building:
     hidden: int = 0  # the last `hidden` sensors are not observed: thermostat schedules, HVAC meters
     zone_bounds: tuple[tuple[str, str], ...] | None = None  # per zone: the sensors of its lower and upper bound
     hvac: tuple[tuple[str, str], ...] = ()  # (fuel, sensor in W): HVAC energy, BOPTEST's `ener_tot`
+    # Per action, per actuator: the hidden sensor reading the schedule the building's own controls set that
+    # actuator to (a thermostat's setpoint schedule), None where there is none; for `--residual-space builtin`.
+    own: tuple[tuple[str | None, ...], ...] = ()
 
     @property
     def observed(self) -> tuple[Sensor, ...]:
@@ -54,6 +61,15 @@ class Building:
     def steps_per_day(self) -> int:
         """Control steps a day: the spec's, else the model's own Timestep (its IDF read once, not every episode)."""
         return 24 * (self.spec.timesteps_per_hour or timesteps_per_hour(self.spec.idf))
+
+    @functools.cached_property
+    def before_predictor(self) -> bool:
+        """Whether every actuator is one the zone predictor reads (a thermostat's setpoints): the EnergyPlus side
+        then sets the action at BeginTimestepBeforePredictor, where EnergyPlus's EMS guide sets them; set after
+        the predictor, as node setpoints and fan flows are (after the HVAC managers, whose setpoint managers
+        would overwrite them), a thermostat setpoint acts a zone timestep late (bridge.py)."""
+        kinds = {a.component_type.lower() for e in self.actions for a in e.actuators}
+        return bool(kinds) and kinds <= PREDICTOR_ACTUATORS
 
     @functools.cached_property
     def comfort(self) -> Comfort:
@@ -100,7 +116,9 @@ def _load(path: Path) -> Building:
     hidden: list[Sensor] = []
     bounds = _thermostat_bounds(spec, hidden) if spec.reward.thermostat else None
     hvac = _hvac_signals(spec, hidden)
-    return Building(spec, sensors + tuple(hidden), action_elements(spec), len(hidden), bounds, hvac)
+    actions = action_elements(spec)
+    own = _own_schedules(spec, actions, hidden)
+    return Building(spec, sensors + tuple(hidden), actions, len(hidden), bounds, hvac, own)
 
 
 HVAC_ELECTRICITY = "Facility Total HVAC Electricity Demand Rate"  # W: every HVAC electric end use, no lights/plugs
@@ -110,6 +128,31 @@ def _hidden(hidden: list[Sensor], name: str, variable: str, key: str, meter: boo
     if all(h.name != name for h in hidden):
         hidden.append(Sensor(name, variable, key, -1e12, 1e12, meter))
     return name
+
+
+# The thermostat actuators whose built-in value is a setpoint schedule of the zone's thermostat (thermostat.py)
+_OWN_SIDE = {("zone temperature control", "heating setpoint"): "heating",
+             ("zone temperature control", "cooling setpoint"): "cooling"}  # fmt: skip
+
+
+def _own_schedules(spec: BuildingSpec, actions, hidden: list[Sensor]) -> tuple[tuple[str | None, ...], ...]:
+    """Per action, per actuator: the hidden sensor of the schedule the model's own thermostat follows there (the
+    value the built-in controls would set; read each step, as the thermostat bounds are), None elsewhere."""
+    from parallel_eplus.buildings.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
+
+    kinds = [[_OWN_SIDE.get((a.component_type.lower(), a.control_type.lower())) for a in e.actuators] for e in actions]
+    if not any(k for ks in kinds for k in ks):
+        return tuple((None,) * len(e.actuators) for e in actions)
+    setpoints = zone_setpoints(spec.idf)
+    out = []
+    for e, ks in zip(actions, kinds, strict=True):
+        names = []
+        for a, side in zip(e.actuators, ks, strict=True):
+            sp = setpoints.get(a.key.upper()) if side else None
+            schedule = getattr(sp, side) if sp else None
+            names.append(_hidden(hidden, sensor_name(schedule), SCHEDULE_VARIABLE, schedule) if schedule else None)
+        out.append(tuple(names))
+    return tuple(out)
 
 
 def _thermostat_bounds(spec: BuildingSpec, hidden: list[Sensor]) -> tuple[tuple[str, str], ...]:

@@ -97,6 +97,20 @@ def _unknown_readbacks(spec: BuildingSpec) -> list[str]:
     ]
 
 
+def _late_thermostats(spec: BuildingSpec) -> list[str]:
+    """A note where thermostat setpoints share the action with other actuators (building.py `before_predictor`)."""
+    from parallel_eplus.buildings.building import PREDICTOR_ACTUATORS
+
+    kinds = {x.component.lower() for a in spec.actions for x in a.actuators}
+    if not (kinds & PREDICTOR_ACTUATORS) or kinds <= PREDICTOR_ACTUATORS:
+        return []
+    return [
+        "actions: thermostat setpoints beside other actuators are all set after the HVAC managers (where node "
+        "setpoints and fan flows must be), after the zone predictor has read the thermostats: their setpoints act a "
+        "zone timestep late. A spec whose actions are all thermostat setpoints sets them before the predictor."
+    ]
+
+
 def check_spec(
     spec: BuildingSpec | str | Path, weather: str | Path | None = None, use_cache: bool = True
 ) -> CheckResult:
@@ -126,7 +140,7 @@ def check_spec(
     tph = int(data["timesteps_per_hour"])
     if spec.timesteps_per_hour is not None and tph and spec.timesteps_per_hour != tph:
         problems.append(f"timesteps_per_hour: {spec.timesteps_per_hour}, but the model's Timestep gives {tph}")
-    notes = tuple(data.get("notes", [])) + tuple(_unknown_readbacks(spec))
+    notes = tuple(data.get("notes", [])) + tuple(_unknown_readbacks(spec)) + tuple(_late_thermostats(spec))
     result = CheckResult(tuple(problems), tph, time.monotonic() - t0, notes=notes)
     if result.ok and use_cache:
         cached.parent.mkdir(parents=True, exist_ok=True)

@@ -63,11 +63,14 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--mpc", metavar="NAME=VALUE,...", help="with --algorithm mpc: its settings (docs/model-based.md)")
     tr.add_argument(
         "--residual", type=float, default=0.0, metavar="SCALE",
-        help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting alone",
+        help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting "
+        "alone; with --residual-space builtin, the building's own setpoint schedules",
     )  # fmt: skip
     tr.add_argument(
-        "--residual-space", default="action", choices=["action", "demand"],
-        help="with --residual: correct each normalized action (default) or each zone's flow demand (SCALE in kg/s)",
+        "--residual-space", default="action", choices=["action", "demand", "builtin"],
+        help="with --residual: correct each normalized action (default) or each zone's flow demand (SCALE in kg/s) "
+        "of the rule-based controller, or (builtin) the building's own thermostat schedules by up to SCALE of half "
+        "each action's range: a zero correction runs the building's own controls exactly",
     )  # fmt: skip
     tr.add_argument("--rbc-target", type=float, help="with --residual: the rule-based controller's zone target, C")
     tr.add_argument(

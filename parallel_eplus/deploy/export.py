@@ -61,6 +61,12 @@ def spec_name(saved: dict) -> str | None:
 
 
 def _refuse_unexportable(model_zip: Path, saved: dict) -> None:
+    if float(saved.get("residual_scale", 0.0)) and saved.get("residual_space") == "builtin":
+        raise ValueError(
+            f"{model_zip}: this policy corrects the building's own setpoint schedules (train --residual "
+            f"{saved['residual_scale']} --residual-space builtin): its output is a correction to add to them at each "
+            "step, which the deployment contract does not carry yet; run it with `evaluate --policy`"
+        )
     if float(saved.get("residual_scale", 0.0)):
         raise ValueError(
             f"{model_zip}: this policy corrects the rule-based controller (train --residual "

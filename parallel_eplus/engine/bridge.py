@@ -2,16 +2,19 @@
 
 Timing (one control step = one zone timestep, no shift between an observation and its action):
 - warmup and sizing hold the initial action and never produce a step;
-- at the run period's first AfterPredictorAfterHVACManagers, observation 0 (the state at the end of
-  warmup) goes out and action 1 comes back and is applied to timestep 1;
+- at the run period's first apply point, observation 0 (the state at the end of warmup) goes out and
+  action 1 comes back and is applied to timestep 1;
 - at the end of every zone timestep (after zone reporting) observation k goes out; action k+1 is read
-  where it is applied, at timestep k+1's first AfterPredictorAfterHVACManagers: what EnergyPlus does in
-  between (the next timestep's weather, surfaces, the predictor) does not depend on it, so the env's
-  turnaround and the pipe crossings overlap that work (with the same actuator values at the same points,
-  the trajectories are those of reading it at once);
+  where it is applied, at timestep k+1's first apply point: what EnergyPlus does in between (the next
+  timestep's weather, surfaces) does not depend on it, so the env's turnaround and the pipe crossings
+  overlap that work (with the same actuator values at the same points, the trajectories are those of
+  reading it at once);
 - after timestep N the observation goes out as an END frame and no action is awaited.
-AfterPredictorAfterHVACManagers runs at every HVAC sub-timestep; actuators keep their values, so the
-action is written once per zone timestep. Frame values: year, day of year, hour, minute (when the
+The apply point (native.py registers it): AfterPredictorAfterHVACManagers, where node setpoints and fan
+flows win over the model's setpoint managers; BeginTimestepBeforePredictor for a building whose actions
+are all thermostat setpoints (`Building.before_predictor`), which the zone predictor reads: set after it,
+they would act a timestep late. Actuators keep their values, so the action is written once per zone
+timestep. Frame values: year, day of year, hour, minute (when the
 observation was taken; EnergyPlus's own clock at this point is the last sub-timestep's), then the sensors.
 
 With the C bridge (native.py, eplus_callback.c) the callbacks EnergyPlus calls are C: they hand each call
@@ -49,9 +52,14 @@ class Bridge:
         spin_s: float = 0.0,
         replay: np.ndarray | None = None,
         building: str | None = None,
+        builtin_residual: bool = False,
     ):
         """With no pipes (`--raw`): EnergyPlus alone, for benchmarks. It holds the initial action all run,
-        or with `replay` (steps x actions, physical units) takes each step's action from it instead."""
+        or with `replay` (steps x actions, physical units) takes each step's action from it instead.
+
+        `builtin_residual`: each action is a correction (physical units) to what the building's own controls set
+        each actuator to, its setpoint schedule (`Building.own`), read here at the step it applies to: read on
+        the env's side, with the observation, it would be the step before's, a step late at every change."""
         self.api = api
         self.x = api.exchange
         self.act_fd = act_fd
@@ -59,9 +67,13 @@ class Bridge:
         spec = load_building(building)  # None: the data center, whose variants `model` names
         self.sensors = spec.sensors
         # Meters and scaled values are read here, in Python: the C bridge reads output variables as they are.
-        self.python_only = any(s.meter or s.scale != 1.0 for s in self.sensors)
+        # With `builtin_residual`, each actuator's own schedule is added here too.
+        self.python_only = builtin_residual or any(s.meter or s.scale != 1.0 for s in self.sensors)
+        self.own = spec.own if builtin_residual else None
+        self.own_sensors: list[int] = []  # per actuator handle: the sensor index of its own schedule
         self.step_s = 900.0  # seconds per zone timestep, to turn a meter's joules into watts
         self.elements = spec.actions if building and model != "baseline" else control_model(model).actions
+        self.before_predictor = bool(building) and model != "baseline" and spec.before_predictor  # the apply point
         if len(initial) != len(self.elements):
             raise SystemExit(f"--initial-action needs {len(self.elements)} values, got {len(initial)}")
         self.action = list(initial)
@@ -113,6 +125,9 @@ class Bridge:
                 if h < 0:
                     missing.append(f"actuator '{a.component_type}/{a.control_type}' for '{a.key}'")
                 self.actuator_handles.append((h, i))
+        if self.own is not None:
+            names = [s.name for s in self.sensors]
+            self.own_sensors = [names.index(n) for own in self.own for n in own]  # resolve() checked every one
         if missing:
             raise RuntimeError("the model lacks " + "; ".join(missing))
         self.minutes = 60 // self.x.num_time_steps_in_hour(state)  # minutes per zone timestep
@@ -193,12 +208,24 @@ class Bridge:
             self.pending = False
             set_value = self.x.api.setActuatorValue
             action = self.action
-            for h, i in self.actuator_handles:
-                set_value(state, h, action[i])
+            if self.own is None:
+                for h, i in self.actuator_handles:
+                    set_value(state, h, action[i])
+            else:
+                self._apply_residual(state, set_value)
         if self.native is not None and self.started and not self.python_only:
             self._arm()
         elif not self.started:
             self._hold()
+
+    def _apply_residual(self, state, set_value) -> None:
+        """Each actuator: its own schedule's value now plus the action's correction (none before the run period:
+        sizing and warm-up run the building's own controls), within the action's bounds."""
+        get = self.x.api.getVariableValue
+        for (h, i), j in zip(self.actuator_handles, self.own_sensors, strict=True):
+            e = self.elements[i]
+            value = get(state, self.sensor_handles[j]) + (self.action[i] if self.started else 0.0)
+            set_value(state, h, min(max(value, e.low), e.high))
 
     def _hold(self) -> None:
         """Sizing and warm-up in C (`bridge_hold`): what `_apply_action` and `_observe` do there (write the held

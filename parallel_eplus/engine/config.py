@@ -38,7 +38,10 @@ class SimulationConfig:
     # alone (residual control: learning starts from the hand-tuned loop, not from scratch).
     residual_scale: float = 0.0
     # "action": the correction adds to each of the four normalized actions; "demand": one correction
-    # per zone, in kg/s, to the controller's split-range flow demand (rbc.DEMAND_CORRECTIONS).
+    # per zone, in kg/s, to the controller's split-range flow demand (rbc.DEMAND_CORRECTIONS); "builtin" (a spec
+    # building): each action corrects the building's own choice, its thermostat's setpoint schedule, by up to
+    # `residual_scale` of half the action's range, added on EnergyPlus's side at the step it applies to (bridge.py),
+    # so a zero correction runs the building's own controls exactly.
     residual_space: str = "action"
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     # Envs and vector envs: fork each episode's process from a warm interpreter and start the next episode while
@@ -72,7 +75,7 @@ class SimulationConfig:
     forecast_error: str | None = None  # BOPTEST's "low", "medium" or "high" error on that forecast; None: exact
 
 
-RESIDUAL_SPACES = ("action", "demand")
+RESIDUAL_SPACES = ("action", "demand", "builtin")
 
 
 def forecast_specs(config: SimulationConfig):

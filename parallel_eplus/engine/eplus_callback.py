@@ -36,6 +36,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--building", help="a building spec (TOML); its sensors and actions replace --model's")
     p.add_argument("--steps", type=int, required=True, help="zone timesteps in the run period")
     p.add_argument("--initial-action", type=float, nargs="*", default=[])
+    p.add_argument("--builtin-residual", action="store_true",
+                   help="actions correct the building's own setpoint schedules (bridge.py)")  # fmt: skip
     p.add_argument("--spin-us", type=float, default=0.0, help="poll this long for an action before blocking")
     p.add_argument("--native", help="the compiled C bridge (native.py) to run each step in; default: Python")
     p.add_argument("--replay", help="without pipes: a .npy of one action row per step (physical units) to apply")
@@ -80,8 +82,9 @@ def _run(args: argparse.Namespace, opened: list[int]) -> int:
         api.runtime.set_console_output_status(state, False)
         replay = np.load(args.replay) if args.replay else None
         bridge = Bridge(
-            api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay, args.building
-        )
+            api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay,
+            args.building, args.builtin_residual,
+        )  # fmt: skip
         for s in bridge.sensors:  # EnergyPlus gathers only requested variables: a model need not report them
             if not s.meter:
                 api.exchange.request_variable(state, s.variable, s.key)

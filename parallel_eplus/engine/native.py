@@ -92,7 +92,10 @@ def register(api, state, bridge, native: str | None) -> list:
     Returns what must stay alive while EnergyPlus runs (ctypes callback objects)."""
     rt = api.runtime
     if native is None:
-        rt.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
+        if bridge.before_predictor:  # bridge.py's apply point
+            rt.callback_begin_system_timestep_before_predictor(state, bridge.apply_action)
+        else:
+            rt.callback_after_predictor_after_hvac_managers(state, bridge.apply_action)
         rt.callback_end_zone_timestep_after_zone_reporting(state, bridge.observe)
         return []
     lib = ctypes.CDLL(native)
@@ -121,7 +124,10 @@ def register(api, state, bridge, native: str | None) -> list:
                  r.stopSimulation, x.warmupFlag, x.kindOfSim, x.apiDataFullyReady]  # fmt: skip
     lib.bridge_init(*(ctypes.cast(f, ctypes.c_void_p) for f in [*slow, *functions]))
     fast = [callback(("bridge_apply_action", lib)), callback(("bridge_observe", lib))]
-    r.callbackAfterPredictorAfterHVACManagers(state, fast[0])
+    if bridge.before_predictor:
+        r.callbackBeginTimeStepBeforePredictor(state, fast[0])
+    else:
+        r.callbackAfterPredictorAfterHVACManagers(state, fast[0])
     r.callbackEndOfZoneTimeStepAfterZoneReporting(state, fast[1])
     bridge.native = lib
     return [lib, *slow, *fast]

@@ -59,14 +59,20 @@ class WorkerSetup:
     def process_args(self) -> list[str]:
         """The EnergyPlus-side program's arguments that every episode of this worker shares."""
         building = ["--building", str(self.building.spec.path)] if self.config.building else []
+        own = ["--builtin-residual"] if self.builtin_residual else []
         return ["--model", self.model.name, *building, "--steps", str(self.steps_per_episode),
-                "--initial-action", *map(str, self.initial_action)]  # fmt: skip
+                "--initial-action", *map(str, self.initial_action), *own]  # fmt: skip
+
+    @property
+    def builtin_residual(self) -> bool:
+        """Whether actions are corrections to the building's own setpoint schedules (`residual_space` builtin)."""
+        return bool(self.config.residual_scale) and self.config.residual_space == "builtin"
 
     def residual_base(self) -> RuleBasedController | None:
         """With `residual_scale`, the rule-based controller a residual action corrects (one per episode: it keeps an
         integral state); its feed-forward reads the IT schedule of the model actually run, as the schedule features
         do. None without."""
-        if not self.config.residual_scale:
+        if not self.config.residual_scale or self.builtin_residual:
             return None
         target = self.config.rbc_target_c
         rbc = {"schedule": it_load_schedule(self.idf)} | ({} if target is None else {"target_c": target})
@@ -111,7 +117,9 @@ class WorkerSetup:
             raise ValueError(f"initial_action needs {len(elements)} values in physical units")
         if config.residual_scale < 0:
             raise ValueError("residual_scale must be >= 0")
-        if config.residual_scale and elements != ACTIONS:
+        if config.residual_scale and config.residual_space == "builtin":
+            _check_builtin_residual(config, building)
+        elif config.residual_scale and elements != ACTIONS:
             raise ValueError(f"residual control corrects all four actions; model {config.model!r} has {len(elements)}")
         low, high = (np.array(b, dtype=np.float32) for b in building.bounds())
         return cls(
@@ -146,3 +154,21 @@ class WorkerSetup:
         per_hour, days = self.building.steps_per_day // 24, config.run_days
         forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
         return target, (params, forecaster)
+
+
+def _check_builtin_residual(config: SimulationConfig, building: Building) -> None:
+    """`residual_space` builtin needs a spec building whose every actuator has a schedule of its own to correct."""
+    if not config.building or config.model == "baseline":
+        raise ValueError("--residual-space builtin corrects a spec building's own setpoint schedules: pass --building")
+    lacking = [
+        f"{e.name} ({a.component_type}/{a.control_type} on {a.key})"
+        for e, own in zip(building.actions, building.own, strict=True)
+        for a, name in zip(e.actuators, own, strict=True)
+        if name is None
+    ]
+    if lacking:
+        raise ValueError(
+            f"--residual-space builtin: {', '.join(lacking)} has no setpoint schedule of the building's own to correct "
+            "(only Zone Temperature Control heating and cooling setpoints of a zone with a thermostat have one); use "
+            "--residual-space action with the rule-based controller, or no --residual"
+        )

@@ -62,6 +62,9 @@ class Simulation:
         self.low, self.high = tuple(e.low for e in s.elements), tuple(e.high for e in s.elements)
         self.initial_action, self.policy_names = s.initial_action, s.policy_names
         self._demand = config.residual_scale > 0 and config.residual_space == "demand"
+        # builtin residual: the correction per unit of action (physical units), and each action's own schedule
+        self._own_step = tuple(config.residual_scale * (e.high - e.low) / 2 for e in s.elements)
+        self._own = tuple(own[0] for own in s.building.own) if s.builtin_residual else None
         self._forecaster: Forecaster | None = None
         self.weather_params: dict = {}  # this episode's seed and noise parameters, for its records
         self._tmp = None
@@ -198,7 +201,9 @@ class Simulation:
         if self._prepare_due and not self.supply.spare_busy():
             self._prepare_due = False  # once the spare has finished the episode before: a step never waits for it
             self.prepare()
-        if self.base is None:
+        if self._own is not None:  # corrections; EnergyPlus's side adds them to the schedules (bridge.py)
+            self._action = [v * k for v, k in zip(check_action(action, self.policy_names), self._own_step, strict=True)]
+        elif self.base is None:
             self._action = scale_action(action, self.low, self.high, self.action_names)
         else:
             correction = self.config.residual_scale * np.array(check_action(action, self.policy_names))
@@ -227,7 +232,8 @@ class Simulation:
             bounds = comfort.bounds(info) if comfort.per_step else None
             cost, out = comfort.cost(temps, margin, bounds) if applies else (0.0, 0)
             info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
-        self.records.add(info["time"], (*self._sensed, *self._action, r, *parts.values(), float(applies)))
+        acted = self._action if self._own is None else self._applied(info)
+        self.records.add(info["time"], (*self._sensed, *acted, r, *parts.values(), float(applies)))
         terminated = code == pipe.END
         if terminated:
             self._finish()
@@ -241,6 +247,12 @@ class Simulation:
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
         obs, self._info, self._sensed = self.observer(values, self.weather, self._forecaster)
         return obs, self._info
+
+    def _applied(self, info: dict) -> list[float]:
+        """The setpoints a builtin residual step applied (its first actuator's): the schedule in that step plus the
+        correction, within bounds, as bridge.py computed them."""
+        bounds = zip(self._own, self._action, self.low, self.high, strict=True)
+        return [min(max(info[o] + c, lo), hi) for o, c, lo, hi in bounds]
 
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
         """The frame awaited next, by `self.deadline` (set `limit_s` after the launch or the action)."""

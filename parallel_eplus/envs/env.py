@@ -56,7 +56,9 @@ class EnergyPlusEnv(gym.Env):
     East supply-air setpoints (10–40 °C, written to four setpoint nodes per zone), West and East supply
     fan mass flow (1.75–7.0 kg/s). `model="temp"`: the two setpoints only. With `residual_scale > 0`
     the action corrects the rule-based controller's (`residual_space="action"`: each element;
-    `"demand"`: two elements, each zone's flow demand, up to `residual_scale` kg/s). A non-finite
+    `"demand"`: two elements, each zone's flow demand, up to `residual_scale` kg/s); with a spec building,
+    `residual_space="builtin"` corrects its own thermostat schedules by up to `residual_scale` of each
+    action's half-range (engine/config.py). A non-finite
     action raises `ValueError` naming the element.
 
     ## Observation Space

@@ -114,7 +114,8 @@ def policy_controller(spec: str) -> Controller:
     saved = json.loads(config.read_text()) if config.is_file() else {}
     residual = float(saved.get("residual_scale", 0.0))
     if not label and saved:
-        algorithm = saved.get("algorithm", "trpo").upper() + ("+RBC" if residual else "")
+        corrects = "+own" if saved.get("residual_space") == "builtin" else "+RBC"  # what a residual policy corrects
+        algorithm = saved.get("algorithm", "trpo").upper() + (corrects if residual else "")
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     space = saved.get("residual_space", "action")
     building = saved.get("building")

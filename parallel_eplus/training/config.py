@@ -119,7 +119,7 @@ class TrainConfig:
         if self.residual_space not in RESIDUAL_SPACES:
             raise ValueError(f"unknown --residual-space {self.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
         if self.residual_space != "action" and not self.residual_scale:
-            raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE (kg/s of demand per unit)")
+            raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE")
         self.comfort.check()
         self.evaluation.check(self.weathers)
         from parallel_eplus.buildings.forecast import ERROR_LEVELS

@@ -1,0 +1,64 @@
+"""Thermostat actions land at the step they are meant for, and a policy can correct the building's own schedules.
+
+The small office's thermostats follow HTGSETP_SCH and CLGSETP_SCH: 21.0 and 24.0 °C weekdays 06-22 h, 15.6 and
+26.7 °C set back otherwise. 2006 begins on a Sunday, so the second day has the 06:00 change the tests look at.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from parallel_eplus.envs.env import EnergyPlusEnv
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+from parallel_eplus.evaluation.sweep import run_sweep
+
+DAYS = 2
+
+
+def _episode(out: Path, act, scale: float = 0.3) -> pd.DataFrame:
+    env = EnergyPlusEnv(building="office-small", weather="CA", run_days=DAYS, output_dir=out, residual_scale=scale,
+                        residual_space="builtin")  # fmt: skip
+    try:
+        obs, info = env.reset(seed=0)
+        terminated = False
+        while not terminated:
+            obs, _, terminated, _, info = env.step(act(obs, info))
+        return pd.read_parquet(Path(info["episode_dir"]) / "steps.parquet")
+    finally:
+        env.close()
+
+
+@pytest.mark.slow
+def test_a_zero_correction_is_the_buildings_own_controls_step_for_step(tmp_path, no_leaks):
+    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], DAYS, 1, tmp_path / "own", False,
+                   building="office-small")  # fmt: skip
+    own = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
+    zero = _episode(tmp_path / "zero", lambda obs, info: np.zeros(2, np.float32))
+    # The thermostats are set before the zone predictor reads them: set after it (as node setpoints are), the
+    # 06:00 change would act at 06:10, and the Monday morning's heating would differ by ~16 kW for a step.
+    for column in ("core_temp_c", "perimeter_1_temp_c", "power_w", "gas_w"):
+        np.testing.assert_array_equal(zero[column].to_numpy(), own[column].to_numpy(), err_msg=column)
+    assert (zero.heating_setpoint_c == zero.setpoint_htgsetp_sch).all()
+    assert {21.0, 15.6} <= set(zero.heating_setpoint_c.round(2))  # the schedule changed within the episode
+
+
+@pytest.mark.slow
+def test_a_correction_moves_each_setpoint_from_its_schedule_within_bounds(tmp_path, no_leaks):
+    # +1 cooling: 0.3 of half of 23-30 °C above CLGSETP_SCH; -1 heating: 0.3 of half of 15-22 °C below HTGSETP_SCH,
+    # but never below the action's 15 °C (15.6 - 1.05 is clipped there)
+    df = _episode(tmp_path / "moved", lambda obs, info: np.array([1.0, -1.0], np.float32))
+    np.testing.assert_allclose(df.cooling_setpoint_c - df.setpoint_clgsetp_sch, 1.05)
+    expected = np.maximum(df.setpoint_htgsetp_sch - 1.05, 15.0)
+    np.testing.assert_allclose(df.heating_setpoint_c, expected)
+    assert (df.heating_setpoint_c == 15.0).any() and (df.heating_setpoint_c > 19.0).any()
+
+
+def test_only_a_buildings_thermostats_can_be_corrected():
+    with pytest.raises(ValueError, match=r"supply_temp_c .*no setpoint schedule of the building's own"):
+        EnergyPlusEnv(building="datacenter-crac", residual_scale=0.2, residual_space="builtin")
+    with pytest.raises(ValueError, match="pass --building"):
+        EnergyPlusEnv(residual_scale=0.2, residual_space="builtin")
