@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -18,6 +19,8 @@ from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.runs.policy_files import _saved_policy
 from parallel_eplus.training.config import TrainConfig, TRPOSettings
 from parallel_eplus.training.train import train
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -123,6 +126,20 @@ def test_rule_based_controller_holds_the_target_it_is_given(tmp_path, no_leaks):
     cold, warm = df.loc["RBC 22.7"], df.loc["RBC 23.7"]
     for zone in ("west", "east"):
         assert warm[f"{zone}_temp_mean"] - cold[f"{zone}_temp_mean"] > 0.6, zone
+
+
+def test_a_runs_best_and_cloned_policies_are_read_with_the_runs_settings(tmp_path):
+    # a committed office run (results/weather/runs/), its policy also kept where --eval-every and
+    # --init-from-baseline keep theirs: each reads the run's config.json, not the folder it sits in
+    run = tmp_path / "office-run"
+    shutil.copytree(REPO / "results/weather/runs/office-small-base-seed0", run)
+    for folder in ("best", "cloned"):
+        (run / folder).mkdir()
+        for name in ("model.zip", "vecnormalize.npz"):
+            shutil.copy(run / name, run / folder / name)
+        controller = policy_controller(str(run / folder / "model.zip"))
+        assert (controller.building, controller.run) == ("office-small", "office-small-base-seed0"), folder
+        assert controller.forecast_hours == 0 and controller.time_features
 
 
 @pytest.mark.slow

@@ -50,6 +50,11 @@ def replay_buffer_file(model_zip: Path) -> Path:
 
 
 def run_dir_of(checkpoint: Path) -> Path:
+    """The run a saved policy belongs to: the folder holding its config.json, the checkpoint's own or the one above
+    (checkpoints/, best/ and cloned/ sit inside their run)."""
+    for folder in (checkpoint.parent, checkpoint.parent.parent):
+        if (folder / "config.json").is_file():
+            return folder
     return checkpoint.parent.parent if checkpoint.parent.name == "checkpoints" else checkpoint.parent
 
 
