@@ -40,6 +40,22 @@ def test_the_multiplier_follows_what_each_batch_measured():
         ComfortConstraint(target_pct=100.0).check()
 
 
+def test_the_cost_counts_the_edges_the_share_in_band_counts():
+    """With thermostat bounds (0.2 K of tolerance) a zone held on its bound, as its own thermostat holds it, is in
+    band and costs nothing; the cost reaches 1 where the share in band stops counting the zone."""
+    from parallel_eplus.buildings.building import load_building
+
+    comfort = load_building("office-small").comfort
+    assert comfort.tolerance == pytest.approx(0.2)
+    bounds = ((21.0, 24.0),) * 5
+    on_bound = (21.0, 24.0, 22.5, 22.5, 22.5)
+    assert comfort.cost(on_bound, 0.1, bounds) == (0.0, 0)
+    cost, out = comfort.cost((20.85, 22.5, 22.5, 22.5, 22.5), 0.1, bounds)  # halfway into the ramp, still in band
+    assert cost == pytest.approx(0.5 / 5) and out == 0
+    cost, out = comfort.cost((20.7, 24.3, 22.5, 22.5, 22.5), 0.1, bounds)  # beyond both scored edges
+    assert cost == pytest.approx(2 / 5) and out == 2
+
+
 @pytest.mark.slow
 def test_a_missed_target_raises_the_multiplier_and_resume_restores_it(tmp_path, no_leaks):
     """An untrained policy (the paper's initial spread) keeps far fewer than 99.5 % of samples in 22-25 C: each

@@ -113,14 +113,17 @@ class Comfort:
         return n, dist
 
     def cost(self, temps: tuple[float, ...], margin_c: float, bounds=None) -> tuple[float, int]:
-        """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside its bounds
-        shrunk by `margin_c` on each side, rising linearly to 1 at their edge and 1 beyond, averaged over the zones;
-        and the number of zones outside the bounds themselves. `bounds`: this step's (`bounds`); None: fixed."""
-        total, out = 0.0, 0
+        """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside its scored edges
+        (its bounds widened by `tolerance`, as the share in band counts them) shrunk by `margin_c` on each side,
+        rising linearly to 1 at those edges and 1 beyond, averaged over the zones; and the number of zones outside
+        the edges. `bounds`: this step's (`bounds`); None: fixed. With thermostat bounds the built-in controls hold
+        a zone on its bound: inside the scored edges, they pay nothing for it once the margin is below the
+        tolerance."""
+        total, out, tol = 0.0, 0, self.tolerance
         for t, (low, high) in zip(temps, bounds or self.zone_bands, strict=True):
-            d = max(low + margin_c - t, t - high + margin_c, 0.0) / margin_c
+            d = max(low - tol + margin_c - t, t - high - tol + margin_c, 0.0) / margin_c
             total += d if d < 1.0 else 1.0
-            out += t < low or t > high
+            out += t < low - tol or t > high + tol
         return total / len(temps), out
 
     def summarize(self, steps: pd.DataFrame) -> dict[str, float]:

@@ -18,8 +18,9 @@ allowance raises the multiplier as much as half of it lowers it.
 
 The cost is a surrogate that bounds the indicator from above, so keeping it low keeps the share in band high,
 and it has a slope near the band's edges where an indicator has none: per zone, 0 inside the band shrunk by
-`margin_c` on each side, rising linearly to 1 at the band's edge and 1 beyond; a step's cost is the mean over
-its zones, 0 where the band does not apply. The multiplier adapts to the measured share itself (the indicator),
+`margin_c` on each side, rising linearly to 1 at the band's edge and 1 beyond (the edge the share in band
+counts: the bounds widened by the spec's `tolerance`); a step's cost is the mean over its zones, 0 where the
+band does not apply. The multiplier adapts to the measured share itself (the indicator),
 which is what the target names.
 
 Where the multiplier lives: on the model (`model.comfort`, a `Lagrangian`), so SB3 saves it in every checkpoint
