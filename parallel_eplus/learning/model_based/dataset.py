@@ -189,13 +189,15 @@ class ComfortTimes:
         return np.array([self.applied[k] * 2 > self.seen[k] for k in slots], np.float32)
 
     def bounds(self, times: list[dt.datetime]) -> np.ndarray:
-        """Each zone's (lower, upper) bounds at `times`: [T, K, 2]."""
+        """Each zone's (lower, upper) edges at `times`, [T, K, 2]: its bounds widened by the spec's `tolerance`, the
+        edges the share in band counts (comfort.py `cost`)."""
+        widen = np.array([-self.comfort.tolerance, self.comfort.tolerance], np.float32)
         if not self.comfort.per_step:
-            return np.broadcast_to(self.fixed, (len(times), *self.fixed.shape))
+            return np.broadcast_to(self.fixed + widen, (len(times), *self.fixed.shape))
         slots = [self._slot(t) for t in times]
         seen = self.bound_seen[slots][:, None, None]
         mean = self.bound_sum[slots] / np.maximum(seen, 1)
-        return np.where(seen > 0, mean, self.fixed).astype(np.float32)
+        return (np.where(seen > 0, mean, self.fixed) + widen).astype(np.float32)
 
     def state(self) -> dict[str, np.ndarray]:
         return {"comfort_seen": self.seen, "comfort_applied": self.applied, "bound_sum": self.bound_sum,
