@@ -29,7 +29,7 @@ EXTRA=${EXTRA:-}
 # The recipe for a building nobody tuned: corrections of up to 0.3 of each setpoint's half-range around its own
 # schedule (a zero correction is the building's own controls), small first exploration, the clock observed, comfort
 # held at the built-in's level in its own bounds, the best checkpoint by a year on each training weather.
-RECIPE=(--residual 0.3 --residual-space builtin --log-std-init -1.5 --time-features --batch-size 4096 --gamma 0.95
+RECIPE=(--residual 0.3 --residual-space builtin --log-std-init -2.5 --time-features --batch-size 4096 --gamma 0.95
         --gae-lambda 0.9 --comfort-target 99.9 --comfort-margin 0.1 --eval-every 50000 --eval-days 365
         --target "in_band_pct>=99.9,energy_change_pct<=0")
 
