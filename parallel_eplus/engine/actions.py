@@ -1,11 +1,16 @@
-"""The agent's actions on their way to EnergyPlus: checked for NaN, clipped to [-1, 1], scaled to physical units."""
+"""The agent's actions on their way to EnergyPlus: checked for NaN, clipped to [-1, 1], scaled to physical units,
+or made corrections of another controller's (residual control)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from parallel_eplus.engine.setup import WorkerSetup
 
 
 def check_action(action, names: tuple[str, ...]) -> list[float]:
@@ -29,3 +34,43 @@ def scale_action(action, low: Sequence[float], high: Sequence[float], names: tup
     """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
     a = check_action(action, names)
     return [lo + (v + 1.0) * 0.5 * (hi - lo) for v, lo, hi in zip(a, low, high, strict=True)]
+
+
+class ActionMap:
+    """What a policy's action means on its way to EnergyPlus, per `SimulationConfig.residual_space`: the action
+    itself, scaled to [low, high]; with a residual scale, a correction of the rule-based controller's action
+    ("action") or of its flow demand ("demand"); or ("builtin") corrections, in physical units, which EnergyPlus's
+    side adds to the building's own setpoint schedules at the step they apply to (bridge.py)."""
+
+    def __init__(self, setup: WorkerSetup) -> None:
+        config, elements = setup.config, setup.elements
+        self.names, self.policy_names = tuple(e.name for e in elements), setup.policy_names
+        self.low, self.high = tuple(e.low for e in elements), tuple(e.high for e in elements)
+        self.scale, self._demand = config.residual_scale, config.residual_space == "demand"
+        self._own = tuple(own[0] for own in setup.building.own) if setup.builtin_residual else None
+        self._own_step = tuple(self.scale * (e.high - e.low) / 2 for e in elements)  # a unit of correction
+        self._setup = setup
+        self.base = None  # the rule-based controller a residual action corrects (`start`)
+
+    def start(self) -> None:
+        """A new episode: a fresh rule-based controller (its integral state) where a residual corrects one."""
+        self.base = self._setup.residual_base()
+
+    def frame(self, action, info: dict) -> list[float]:
+        """The values sent to EnergyPlus for `action` given the last observation's `info`."""
+        if self._own is not None:
+            return [v * k for v, k in zip(check_action(action, self.policy_names), self._own_step, strict=True)]
+        if self.base is None:
+            return scale_action(action, self.low, self.high, self.names)
+        correction = self.scale * np.array(check_action(action, self.policy_names))
+        if self._demand:  # one correction per zone, to the controller's split-range flow demand
+            return scale_action(self.base(None, info, demand_correction=correction), self.low, self.high, self.names)
+        return scale_action(self.base(None, info) + correction, self.low, self.high, self.names)
+
+    def applied(self, sent: list[float], info: dict) -> list[float]:
+        """What the step applied, for its record: the values sent, or (builtin) each action's schedule in that step
+        (its first actuator's) plus the correction, within bounds, as bridge.py computed it."""
+        if self._own is None:
+            return sent
+        bounds = zip(self._own, sent, self.low, self.high, strict=True)
+        return [min(max(info[o] + c, lo), hi) for o, c, lo, hi in bounds]

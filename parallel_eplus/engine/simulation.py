@@ -20,11 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.forecast import Forecaster
-from parallel_eplus.buildings.rbc import RuleBasedController
 from parallel_eplus.buildings.reward import reward
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine import native, pipe
-from parallel_eplus.engine.actions import check_action, scale_action
+from parallel_eplus.engine.actions import ActionMap
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import StepRecorder, err_tail, write_records
 from parallel_eplus.engine.observation import Observer
@@ -61,10 +60,7 @@ class Simulation:
         self.weathers, self.weather_paths, self.steps_per_episode = s.weathers, s.weather_paths, s.steps_per_episode
         self.low, self.high = tuple(e.low for e in s.elements), tuple(e.high for e in s.elements)
         self.initial_action, self.policy_names = s.initial_action, s.policy_names
-        self._demand = config.residual_scale > 0 and config.residual_space == "demand"
-        # builtin residual: the correction per unit of action (physical units), and each action's own schedule
-        self._own_step = tuple(config.residual_scale * (e.high - e.low) / 2 for e in s.elements)
-        self._own = tuple(own[0] for own in s.building.own) if s.builtin_residual else None
+        self.actions = ActionMap(s)  # what an action means: physical values, or corrections (residual control)
         self._forecaster: Forecaster | None = None
         self.weather_params: dict = {}  # this episode's seed and noise parameters, for its records
         self._tmp = None
@@ -74,7 +70,6 @@ class Simulation:
         self.output_dir = Path(config.output_dir or self._tmp).absolute()
         self.output_dir.mkdir(parents=True, exist_ok=True)
         self.action_names = tuple(e.name for e in self.elements)
-        self.base: RuleBasedController | None = None  # the controller a residual action corrects
         self._info: dict = {}
         self._sensed: list[float] = []  # the last observation's sensor values, for its step record
         self.episode = 0
@@ -162,7 +157,7 @@ class Simulation:
         self.records = StepRecorder(self.action_names, self.sensor_names)
         self._action = self.initial_action.tolist()
         self.last_summary = None
-        self.base = self.setup.residual_base()  # a fresh integral state per episode
+        self.actions.start()  # a fresh rule-based controller (integral state) per episode, where one is corrected
         if self._from_prepared and not self.process.has_frame():
             self.prepare()  # it is still warming up and the spare is idle: the next starts now (back-to-back short
             # episodes); else at this episode's first action, so a reset that finds it parked returns at once, and a
@@ -201,17 +196,7 @@ class Simulation:
         if self._prepare_due and not self.supply.spare_busy():
             self._prepare_due = False  # once the spare has finished the episode before: a step never waits for it
             self.prepare()
-        if self._own is not None:  # corrections; EnergyPlus's side adds them to the schedules (bridge.py)
-            self._action = [v * k for v, k in zip(check_action(action, self.policy_names), self._own_step, strict=True)]
-        elif self.base is None:
-            self._action = scale_action(action, self.low, self.high, self.action_names)
-        else:
-            correction = self.config.residual_scale * np.array(check_action(action, self.policy_names))
-            if self._demand:
-                a = self.base(None, self._info, demand_correction=correction)
-            else:
-                a = self.base(None, self._info) + correction
-            self._action = scale_action(a, self.low, self.high, self.action_names)
+        self._action = self.actions.frame(action, self._info)
         try:
             self.process.send(pipe.encode(self._action), self.config.step_timeout_s)
         except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
@@ -232,7 +217,7 @@ class Simulation:
             bounds = comfort.bounds(info) if comfort.per_step else None
             cost, out = comfort.cost(temps, margin, bounds) if applies else (0.0, 0)
             info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
-        acted = self._action if self._own is None else self._applied(info)
+        acted = self.actions.applied(self._action, info)
         self.records.add(info["time"], (*self._sensed, *acted, r, *parts.values(), float(applies)))
         terminated = code == pipe.END
         if terminated:
@@ -247,12 +232,6 @@ class Simulation:
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
         obs, self._info, self._sensed = self.observer(values, self.weather, self._forecaster)
         return obs, self._info
-
-    def _applied(self, info: dict) -> list[float]:
-        """The setpoints a builtin residual step applied (its first actuator's): the schedule in that step plus the
-        correction, within bounds, as bridge.py computed them."""
-        bounds = zip(self._own, self._action, self.low, self.high, strict=True)
-        return [min(max(info[o] + c, lo), hi) for o, c, lo, hi in bounds]
 
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
         """The frame awaited next, by `self.deadline` (set `limit_s` after the launch or the action)."""
