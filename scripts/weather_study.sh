@@ -13,6 +13,7 @@
 #                                                   # to the end); stop any time (Ctrl-C checkpoints), run again
 #   bash scripts/weather_study.sh status             # each run's steps
 #   bash scripts/weather_study.sh evaluate BUILDING  # paper weathers, noisy years, unseen climates -> $OUT/BUILDING/
+#                                                   # (each part skipped when its results.csv is there)
 #   bash scripts/weather_study.sh climates BUILDING [RUNS LABEL]  # issue 29's learned controllers (or the policies
 #                                                   # of RUNS/*/model.zip, into $OUT/climates-LABEL) on all 16
 #                                                   # climates against the built-in controls
@@ -126,10 +127,14 @@ evaluate)
     common=(evaluate --building "$b" --baseline "$@" --workers 2 --quiet $(eval_days "$b"))
     snapshot  # the policies run with the code they were trained with
     export PYTHONPATH=$WORK/code-$COMMIT
-    "${CLI[@]}" "${common[@]}" --weathers "$PAPER" --out "$OUT/$b/paper" || true
-    "${CLI[@]}" "${common[@]}" --weathers "$PAPER" --weather-noise "$NOISE" --noisy-years "$NOISY_YEARS" \
-        --out "$OUT/$b/noisy" || true
-    "${CLI[@]}" "${common[@]}" --weathers "$UNSEEN" --out "$OUT/$b/climates" || true
+    part() {  # name, options: one evaluation, skipped when its results are there (delete the folder to redo it)
+        local name=$1; shift
+        if [ -f "$OUT/$b/$name/results.csv" ]; then echo "$b/$name: already evaluated"; return; fi
+        "${CLI[@]}" "${common[@]}" "$@" --out "$OUT/$b/$name" || true
+    }
+    part paper --weathers "$PAPER"
+    part noisy --weathers "$PAPER" --weather-noise "$NOISE" --noisy-years "$NOISY_YEARS"
+    part climates --weathers "$UNSEEN"
     ;;
 climates)
     b=$2 runs=${3:-$REPO/results/learned/$2/runs} label=${4:-}; learned=()
