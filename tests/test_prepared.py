@@ -117,6 +117,34 @@ def test_a_process_whose_main_thread_is_gone_is_not_handed_out():
     assert not _exiting(proc.pid)  # reaped: gone
 
 
+def test_a_long_lived_process_still_tearing_down_is_not_usable(tmp_path):
+    """The path a reset takes (`usable` -> `Episode.poll`), deterministically: a killed process whose main thread is
+    gone while another still exits holds its stdout open (no EOF) and is not reapable (`poll()` None), so only its
+    main thread's state says it will never step. Under load this lasted tens of ms: the intermittent failure."""
+    from parallel_eplus.engine.prepared import EpisodePlan, PreparedEpisode
+    from parallel_eplus.engine.process import EnergyPlusProcess
+    from parallel_eplus.engine.warm_process import Episode
+
+    code = "import ctypes, threading, time; threading.Thread(target=time.sleep, args=(30,)).start(); " \
+           "ctypes.CDLL(None).pthread_exit(None)"  # fmt: skip
+    process = EnergyPlusProcess(0.0, None, warm=True)
+    warm = process.warm
+    warm.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    os.set_blocking(warm.proc.stdout.fileno(), False)
+    process.proc = Episode(warm)  # as `spawn` leaves it: the episode's answer awaited on the process's stdout
+    ready = PreparedEpisode(EpisodePlan(0, "CA", tmp_path / "CA.epw"), process, tmp_path, 1)
+    try:
+        deadline = time.monotonic() + 10
+        while _state(warm.proc.pid) != "Z":
+            assert time.monotonic() < deadline, _state(warm.proc.pid)
+            time.sleep(0.01)
+        assert process.running()  # no EOF, not reapable: poll() alone says alive
+        assert not ready.usable(60.0)
+    finally:
+        process.close()
+    assert warm.proc is None
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("fault", ["killed", "hung"])
 def test_a_dead_or_hung_prepared_process_is_replaced_and_leaves_nothing(tmp_path, no_leaks, fault):
