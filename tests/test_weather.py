@@ -149,11 +149,13 @@ def test_every_climate_the_wheel_ships_has_a_short_name():
 @pytest.mark.slow
 def test_episodes_seeded_alike_see_the_same_weather_and_the_forecast_reads_it(tmp_path, no_leaks):
     """Real EnergyPlus: the outdoor temperature it recorded differs between seeds and repeats for one seed; the
-    forecast observation is the episode's own (perturbed) file, hour by hour."""
+    forecast observation, and the planner's future weather (model-based control), are the episode's own
+    (perturbed) file, hour by hour."""
     from parallel_eplus.envs.env import EnergyPlusEnv
+    from parallel_eplus.learning.model_based.exogenous import Forecasts
 
     env = EnergyPlusEnv(run_days=1, weather_noise="drybulb=3:0:24", forecast_hours=4, output_dir=tmp_path)
-    outdoor, forecasts = {}, {}
+    outdoor, forecasts, planned, planner = {}, {}, {}, Forecasts(None)
     try:
         for run, seed in enumerate((1, 2, 1)):
             obs, info = env.reset(seed=seed)
@@ -161,6 +163,8 @@ def test_episodes_seeded_alike_see_the_same_weather_and_the_forecast_reads_it(tm
             while True:
                 if info["time"].minute == 0:
                     forecasts[run, info["time"].hour] = obs[6:].copy()
+                    ahead = [info["time"] + dt.timedelta(hours=k) for k in range(1, 5)]
+                    planned[run, info["time"].hour] = planner.of(info).at(ahead)[:, 0]
                 obs, _, terminated, _, info = env.step(np.zeros(4, dtype=np.float32))
                 if terminated:
                     break
@@ -172,6 +176,10 @@ def test_episodes_seeded_alike_see_the_same_weather_and_the_forecast_reads_it(tm
             for hour in range(6, 20):  # hour k ahead: the record ending at hour + k, clipped at the day's end
                 ahead = [epw.drybulb[min(hour + k, 24) - 1] for k in range(1, 5)]
                 assert forecasts[run, hour] == pytest.approx(ahead, abs=1e-4)
+                assert planned[run, hour] == pytest.approx(ahead, abs=1e-4)
+            assert info["weather_file"] == str(Path(info["episode_dir"]) / CA.name)
+            _, named = read_epw(CA)
+            assert np.abs(np.array(named.drybulb[:24]) - epw.drybulb[:24]).max() > 0.5  # not the named file
     finally:
         env.close()
     assert np.array_equal(outdoor[0], outdoor[2])

@@ -63,6 +63,7 @@ class Simulation:
         self.actions = ActionMap(s)  # what an action means: physical values, or corrections (residual control)
         self._forecaster: Forecaster | None = None
         self.weather_params: dict = {}  # this episode's seed and noise parameters, for its records
+        self.weather_file: str | None = None  # with weather noise: the episode's perturbed .epw (info["weather_file"])
         self._tmp = None
         if config.output_dir is None:
             self._tmp = tempfile.mkdtemp(prefix="parallel-eplus-episodes-")
@@ -153,6 +154,8 @@ class Simulation:
         self.supply.warm_spare()
         self.plan = plan
         self.weather_index, self.weather = plan.weather_index, plan.weather
+        # a perturbed year is the episode's own file: a planner's forecast must read it, not the named weather's
+        self.weather_file = str(self.episode_dir / plan.epw.name) if self.noise is not None else None
         self.episode += 1
         self.records = StepRecorder(self.action_names, self.sensor_names)
         self._action = self.initial_action.tolist()
@@ -231,6 +234,8 @@ class Simulation:
         if len(values) != self.observer.width:
             raise self._error(f"observation frame has {len(values)} values", ProtocolError)
         obs, self._info, self._sensed = self.observer(values, self.weather, self._forecaster)
+        if self.weather_file is not None:
+            self._info["weather_file"] = self.weather_file
         return obs, self._info
 
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:

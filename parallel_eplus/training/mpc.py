@@ -228,7 +228,7 @@ class _Loop:
 
     def _add(self, obs, nxt, a_prev, a, after: dict, episode: int, step: int, planning: bool) -> None:
         layout = self.mpc.layout
-        x = self.mpc.forecasts(after["weather"]).at([after["time"]])
+        x = self.mpc.forecasts.of(after).at([after["time"]])
         applies = float(after.get("comfort_applies", True))
         times = self.mpc.comfort_times
         times.learn([after["time"]], [applies], times.bounds_of(after))

@@ -53,7 +53,7 @@ class MPC:
         for info in infos:
             t = info["time"]
             times = [t + dt.timedelta(minutes=self.step_minutes * (h + 1)) for h in range(self.settings.horizon)]
-            exo.append(self.forecasts(info["weather"]).at(times))
+            exo.append(self.forecasts.of(info).at(times))
             applies.append(self.comfort_times(times))
             bounds.append(self.comfort_times.bounds(times))
         return np.stack(exo), np.stack(applies), np.stack(bounds)

@@ -1,7 +1,8 @@
 """What the model is told about the future: the weather file (a perfect forecast), the clock and the schedule.
 
-The planner reads the future outdoor conditions from the episode's own .epw file: a perfect forecast, which a
-deployed controller would replace by a weather service's. EnergyPlus interpolates the hourly file between
+The planner reads the future outdoor conditions from the episode's own .epw file (the perturbed year, with
+weather noise: info["weather_file"]): a perfect forecast, which a deployed controller would replace by a weather
+service's. EnergyPlus interpolates the hourly file between
 hours; so does `Forecast.at`. The clock gives hour and weekday (sine/cosine); a model with the data center's
 IT-load schedule adds its value (the operator knows its schedule).
 """
@@ -25,7 +26,7 @@ EXOGENOUS = ("outdoor_drybulb_c", "outdoor_rh", "global_horizontal_kw_m2", "hour
              "weekday_cos")  # fmt: skip
 
 
-@functools.cache
+@functools.lru_cache(maxsize=32)  # noisy runs read a file per episode
 def _epw(path: Path) -> np.ndarray:
     """The hourly values of `_COLUMNS`, one row per hour of the year (8760)."""
     rows = []
@@ -83,13 +84,29 @@ class Forecast:
 
 
 class Forecasts:
-    """One `Forecast` per weather, made on first use."""
+    """One `Forecast` per weather (or per episode's perturbed file), made on first use."""
+
+    _FILES = 16  # perturbed years kept: a few per worker
 
     def __init__(self, building: str | None):
         self.building = building
         self._by_weather: dict[str, Forecast] = {}
+        self._by_file: dict[str, Forecast] = {}
 
     def __call__(self, weather: str) -> Forecast:
         if weather not in self._by_weather:
             self._by_weather[weather] = Forecast(self.building, weather)
         return self._by_weather[weather]
+
+    def of(self, info: dict) -> Forecast:
+        """The weather a step's episode runs: its perturbed file where it has one (weather noise) and this process
+        can read it (a Ray worker on another machine keeps its files: the named weather then, a forecast with
+        error), else its weather."""
+        file = info.get("weather_file")
+        if file is None or not Path(file).is_file():
+            return self(info["weather"])
+        if file not in self._by_file:
+            if len(self._by_file) >= self._FILES:
+                self._by_file.pop(next(iter(self._by_file)))
+            self._by_file[file] = Forecast(self.building, file)
+        return self._by_file[file]
