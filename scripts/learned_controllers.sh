@@ -59,7 +59,9 @@ sac_recipe() {  # the same comfort targets, observations and periods as the clon
 }
 BUILDINGS=${BUILDINGS:-"datacenter-2zone datacenter-crac office-small"}
 
-latest() { ls "$1"/checkpoints/model_*_steps.zip 2>/dev/null | sort -t_ -k2 -n | tail -1; }
+latest() {  # run folder [subfolder, default checkpoints]: its newest checkpoint
+    find "$1/${2-checkpoints}" -maxdepth 1 -name 'model_*_steps.zip' 2>/dev/null | sort -V | tail -1
+}
 
 run_one() {  # building seed: resume or start it, to the end
     local b=$1 s=$2 name="$1$TAG-seed$2" code="$WORK/code-$COMMIT"
@@ -69,7 +71,7 @@ run_one() {  # building seed: resume or start it, to the end
     if [ -f "$dir/model.zip" ] && [ "$("$PY" -c "import json,sys,zipfile; print(json.loads(zipfile.ZipFile(sys.argv[1]).read('data'))['num_timesteps'])" "$dir/model.zip")" -ge "$target" ]; then
         echo "$name: done"; return 0
     fi
-    if [ ! -d "$dir" ] && [ -f "$SAVED/$b/runs/$name/checkpoint/model.zip" ]; then  # a chunk from another machine
+    if [ ! -d "$dir" ] && [ -n "$(latest "$SAVED/$b/runs/$name/checkpoint" "")" ]; then  # a chunk from another machine
         mkdir -p "$dir/checkpoints"
         cp -r "$SAVED/$b/runs/$name/checkpoint/." "$dir/checkpoints/"
         cp "$SAVED/$b/runs/$name/config.json" "$SAVED/$b/runs/$name/episodes.csv" "$dir/" 2>/dev/null || true
