@@ -103,10 +103,11 @@ class Forecasts:
         can read it (a Ray worker on another machine keeps its files: the named weather then, a forecast with
         error), else its weather."""
         file = info.get("weather_file")
+        if file in self._by_file:
+            return self._by_file[file]
         if file is None or not Path(file).is_file():
             return self(info["weather"])
-        if file not in self._by_file:
-            if len(self._by_file) >= self._FILES:
-                self._by_file.pop(next(iter(self._by_file)))
-            self._by_file[file] = Forecast(self.building, file)
+        if len(self._by_file) >= self._FILES:
+            self._by_file.pop(next(iter(self._by_file)))
+        self._by_file[file] = Forecast(self.building, file)
         return self._by_file[file]
