@@ -2,9 +2,8 @@
 
 The planner reads the future outdoor conditions from the episode's own .epw file (the perturbed year, with
 weather noise: info["weather_file"]): a perfect forecast, which a deployed controller would replace by a weather
-service's. EnergyPlus interpolates the hourly file between
-hours; so does `Forecast.at`. The clock gives hour and weekday (sine/cosine); a model with the data center's
-IT-load schedule adds its value (the operator knows its schedule).
+service's. EnergyPlus interpolates the hourly file between hours; so does `Forecast.at`. The clock gives hour and
+weekday (sine/cosine); a model with the data center's IT-load schedule adds its value (the operator knows it).
 """
 
 from __future__ import annotations
