@@ -80,6 +80,28 @@ def test_comfort_bounds_follow_the_setpoint_schedules(baseline_episode, no_leaks
 
 
 @pytest.mark.slow
+def test_discomfort_counts_every_step_and_apart_the_occupied_ones(tmp_path, no_leaks):
+    """BOPTEST's discomfort integrates each zone's slack at every step, against the setbacks while unoccupied; the
+    occupied figure (an "occupied discomfort" goal's) counts the occupied steps alone. The office's own heating
+    schedule 1 K lower (a correction of its own schedules): cold enough at night to leave the setback too."""
+    action = np.array([0.0, -1.0 / 3.5], dtype=np.float32)  # heating -1 K: the action's half-range is 3.5 K
+    colder = Controller(
+        "colder", "policy", act=lambda obs, info: action, residual_scale=1.0, residual_space="builtin",
+        building=str(spec_file("office-small")), time_features=True,
+    )  # fmt: skip
+    df = run_sweep([colder], ["CO"], 2, 1, tmp_path, False, building="office-small")
+    episode = Path(df["episode_dir"][0])
+    steps, summary = pd.read_parquet(episode / "steps.parquet"), json.loads((episode / "summary.json").read_text())
+    low, high = steps["setpoint_htgsetp_sch"], steps["setpoint_clgsetp_sch"]
+    zones = [c for c in steps if c.endswith("_temp_c") and c != "outdoor_temp_c"]
+    slack = sum((low - steps[z]).clip(lower=0) + (steps[z] - high).clip(lower=0) for z in zones) / len(zones) / 6
+    occupied = steps["comfort_applies"] > 0
+    assert 0 < slack[occupied].sum() < slack.sum()
+    assert summary["discomfort_kh"] == pytest.approx(slack.sum())
+    assert summary["occupied_discomfort_kh"] == pytest.approx(slack[occupied].sum())
+
+
+@pytest.mark.slow
 def test_hvac_energy_excludes_lights_and_plugs(baseline_episode, no_leaks):
     steps, summary, _ = baseline_episode
     h = 10 / 60 / 1000  # kWh per W over a 10-minute step

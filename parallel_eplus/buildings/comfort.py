@@ -8,7 +8,8 @@ unoccupied setpoints, as BOPTEST scores). Beside it, the figures BOPTEST reports
 optimization testing framework (BOPTEST) for simulation-based benchmarking of control strategies"):
 - thermal discomfort, K·h per zone: the integral over time of each zone's distance outside its bounds, averaged
   over the zones (BOPTEST's `tdis_tot`); each zone's own integral beside it. Counted while the band applies; with
-  thermostat bounds at every step, as BOPTEST does (the bounds are then the setbacks while unoccupied);
+  thermostat bounds at every step, as BOPTEST does (the bounds are then the setbacks while unoccupied), and
+  beside it over the occupied steps alone (`occupied_discomfort_kh`);
 - HVAC energy, cost, emissions and peak per fuel (buildings/kpis.py);
 - energy, kWh over the period: every fuel the spec's `energy` observations meter (BOPTEST's `ener_tot`, here
   not divided by floor area);
@@ -137,7 +138,7 @@ class Comfort:
         out["peak_power_kw"] = float(steps[self.power].max() / 1000)
         if self.kpis is not None and all(c in steps for _, c in self.kpis.hvac):
             out.update(self.kpis.summarize(steps, self.step_minutes))
-        in_band, discomfort = [], []
+        in_band, discomfort, occupied = [], [], []
         for k, col in enumerate(self.temperatures):
             zone = col.removesuffix("_temp_c")
             low, high = self._bound_columns(steps, k)
@@ -151,16 +152,20 @@ class Comfort:
             lo, hi = (low[applies], high[applies]) if np.ndim(low) else (low, high)
             ok = (t >= lo - self.tolerance) & (t <= hi + self.tolerance)
             out[f"{zone}_in_band_pct"] = float(100 * ok.mean()) if t.size else float("nan")
+            in_use = float(np.sum(np.maximum(lo - t, 0) + np.maximum(t - hi, 0)) * hours)
             if self.per_step:  # BOPTEST's tdis: every step, against the occupied and unoccupied setpoints
                 kh = float(np.sum(np.maximum(low - every, 0) + np.maximum(every - high, 0)) * hours)
             else:
-                kh = float(np.sum(np.maximum(lo - t, 0) + np.maximum(t - hi, 0)) * hours)
+                kh = in_use
             out[f"{zone}_discomfort_kh"] = kh
             in_band.append(ok)
             discomfort.append(kh)
+            occupied.append(in_use)
         both = np.concatenate(in_band) if in_band else np.zeros(0, bool)
         out["in_band_pct"] = float(100 * both.mean()) if both.size else float("nan")
         out["discomfort_kh"] = float(np.mean(discomfort)) if discomfort else 0.0  # per zone, as BOPTEST's tdis_tot
+        if self.per_step:  # and while the band applies alone: what a goal of "no more occupied discomfort" counts
+            out["occupied_discomfort_kh"] = float(np.mean(occupied)) if occupied else 0.0
         return out
 
     def _bound_columns(self, steps: pd.DataFrame, k: int):

@@ -22,6 +22,7 @@ METRICS = {
     "emissions_change_pct": "emissions vs built-in (%)",
     "in_band_pct": "in band (%)",
     "discomfort_kh": "discomfort (K·h/zone)",
+    "occupied_discomfort_kh": "occupied discomfort (K·h/zone)",  # thermostat bounds (buildings/comfort.py)
     "power_kw": "power (kW)",
     "energy_kwh": "energy (kWh)",
 }
