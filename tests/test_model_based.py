@@ -12,6 +12,7 @@ import signal
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import torch as th
 
@@ -174,6 +175,36 @@ def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_
     assert np.all(bounds[..., 0] < bounds[..., 1])
     unseen = monday + dt.timedelta(minutes=float(times.step_minutes * np.flatnonzero(times.bound_seen == 0)[0]))
     np.testing.assert_allclose(times.bounds([unseen])[0], times.fixed + [-0.2, 0.2])  # nothing seen: the spec's band
+
+
+@pytest.mark.slow
+def test_the_planner_reads_the_thermostats_by_date_across_daylight_saving_time(tmp_path, no_leaks):
+    """The office's schedules follow daylight-saving time (from March 12, 2006, its day starts and ends an hour
+    earlier on the simulation's standard-time clock); by weekday and time alone, the planner's bounds at either end
+    of its day blended both weeks, and it let the zones go an hour early."""
+    from parallel_eplus.evaluation.scenarios import Period
+    from parallel_eplus.learning.model_based.dataset import ComfortTimes
+
+    march = Period("test", day=64, start_day=65, weekday="Monday", run_days=14, warmup_days=0)  # March 6-19
+    df = run_sweep([Controller("Baseline", "baseline")], ["CA"], 14, 1, tmp_path, False, building="office-small",
+                   periods={"CA": march})  # fmt: skip
+    steps = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
+    times = list(steps["time"].dt.to_pydatetime())
+    low, high = steps["setpoint_htgsetp_sch"].to_numpy(), steps["setpoint_clgsetp_sch"].to_numpy()
+    bounds = np.broadcast_to(np.stack([low, high], -1)[:, None, :], (len(times), 5, 2))
+    weekday_21h = [
+        (t.day, lo) for t, lo in zip(times, low, strict=True) if t.weekday() < 5 and t.hour == 21 and t.minute == 30
+    ]
+    assert {lo for d, lo in weekday_21h if d < 12} == {21.0} and {lo for d, lo in weekday_21h if d > 12} == {15.6}
+
+    comfort = ComfortTimes("office-small", 10)
+    comfort.learn(times, np.ones(len(times)), bounds)
+    np.testing.assert_allclose(comfort.bounds(times), bounds + [-0.2, 0.2], atol=1e-5)  # every step, as recorded
+    again = ComfortTimes("office-small", 10)  # a planner saved and loaded reads the same bounds
+    again.load({k: th.as_tensor(v).numpy() for k, v in comfort.state().items()})
+    np.testing.assert_allclose(again.bounds(times), comfort.bounds(times))
+    next_year = [t.replace(year=2007) for t in times]  # other weekdays: the weekly slots, the spec's band unseen
+    assert np.all(np.isfinite(again.bounds(next_year)))
 
 
 @pytest.mark.slow

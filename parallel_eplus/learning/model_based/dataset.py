@@ -154,20 +154,35 @@ class ComfortTimes:
     weekday and time of day in the data so far, counted by majority. With each zone's own thermostat bounds
     (`band = "thermostat"`, the office) at every step: BOPTEST's discomfort counts every step against the occupied
     and the setback bounds. The bounds: the spec's band per zone, or the thermostat's schedules as they were at
-    that weekday and time of day in the data (the mean of what was seen; the spec's band where nothing was)."""
+    that date and time in the data (every episode runs the model's calendar year, and the building's own controls
+    are recorded over it), else at that weekday and time of day (the mean of what was seen; the spec's band where
+    nothing was). The date first: a model's schedules follow its holidays and daylight-saving time, which moves an
+    office's day an hour earlier from March to November against the simulation's standard-time clock; by weekday
+    and time alone, the hours at either end of its day were a blend of both, and the planner let the zones go an
+    hour early (2026-11-27)."""
 
     def __init__(self, building: str | None, step_minutes: float):
         self.comfort = load_building(building).comfort
-        self.slots = int(round(24 * 60 / step_minutes)) * 7
+        self.day_slots = int(round(24 * 60 / step_minutes))
+        self.slots = self.day_slots * 7
         self.step_minutes = step_minutes
         self.seen = np.zeros(self.slots)
         self.applied = np.zeros(self.slots)
         self.fixed = np.array(self.comfort.zone_bands, np.float32)  # [K, 2]
         self.bound_sum = np.zeros((self.slots, *self.fixed.shape))
         self.bound_seen = np.zeros(self.slots)
+        # per date and time of the year (thermostat bounds only): the last bounds seen there, and the weekday
+        # they were seen on (-1: none), so that a period run on another weekday falls back to the weekly slots
+        dated = 366 * self.day_slots if self.comfort.per_step else 0
+        self.dated = np.zeros((dated, *self.fixed.shape), np.float32)
+        self.dated_weekday = np.full(dated, -1, np.int8)
 
     def _slot(self, t: dt.datetime) -> int:
         return int((t.weekday() * 24 * 60 + t.hour * 60 + t.minute) // self.step_minutes) % self.slots
+
+    def _date_slot(self, t: dt.datetime) -> int:
+        minute = (t.timetuple().tm_yday - 1) * 24 * 60 + t.hour * 60 + t.minute
+        return int(minute // self.step_minutes) % len(self.dated)
 
     def learn(self, times: list[dt.datetime], applies: np.ndarray, bounds: np.ndarray | None = None) -> None:
         """`bounds` [T, K, 2]: each zone's bounds at those times (per-step thermostat bounds), else None."""
@@ -178,6 +193,8 @@ class ComfortTimes:
             if bounds is not None and self.comfort.per_step:
                 self.bound_sum[k] += bounds[i]
                 self.bound_seen[k] += 1
+                d = self._date_slot(t)
+                self.dated[d], self.dated_weekday[d] = bounds[i], t.weekday()
 
     def __call__(self, times: list[dt.datetime]) -> np.ndarray:
         c = self.comfort
@@ -196,12 +213,24 @@ class ComfortTimes:
             return np.broadcast_to(self.fixed + widen, (len(times), *self.fixed.shape))
         slots = [self._slot(t) for t in times]
         seen = self.bound_seen[slots][:, None, None]
-        mean = self.bound_sum[slots] / np.maximum(seen, 1)
-        return (np.where(seen > 0, mean, self.fixed) + widen).astype(np.float32)
+        mean = np.where(seen > 0, self.bound_sum[slots] / np.maximum(seen, 1), self.fixed)
+        dates = [self._date_slot(t) for t in times]
+        known = (self.dated_weekday[dates] == [t.weekday() for t in times])[:, None, None]
+        return (np.where(known, self.dated[dates], mean) + widen).astype(np.float32)
 
     def state(self) -> dict[str, np.ndarray]:
-        return {"comfort_seen": self.seen, "comfort_applied": self.applied, "bound_sum": self.bound_sum,
-                "bound_seen": self.bound_seen}  # fmt: skip
+        """The weekly slots' counts and sums; the dated bounds only where they differ from those slots' means
+        (holidays, daylight-saving hours: a few thousand of a year's steps, not the year)."""
+        out = {"comfort_seen": self.seen, "comfort_applied": self.applied, "bound_sum": self.bound_sum,
+               "bound_seen": self.bound_seen}  # fmt: skip
+        if len(self.dated):
+            at = np.flatnonzero(self.dated_weekday >= 0)
+            weekly = self.bound_sum / np.maximum(self.bound_seen, 1)[:, None, None]
+            slot = (self.dated_weekday[at].astype(int) * self.day_slots + at % self.day_slots) % self.slots
+            at = at[np.abs(self.dated[at] - weekly[slot]).max(axis=(1, 2)) > 1e-4]
+            out |= {"dated_at": at.astype(np.int32), "dated_bounds": self.dated[at],
+                    "dated_weekday": self.dated_weekday[at]}  # fmt: skip
+        return out
 
     def load(self, state: dict) -> None:
         """From `state()`'s arrays (a planner saved before the bounds were learned has none: the spec's band)."""
@@ -210,6 +239,10 @@ class ComfortTimes:
         if "bound_sum" in state:
             self.bound_sum = np.asarray(state["bound_sum"], float)
             self.bound_seen = np.asarray(state["bound_seen"], float)
+        if "dated_at" in state and len(self.dated):  # elsewhere the weekly slots' means are the same bounds
+            at = np.asarray(state["dated_at"], int)
+            self.dated[at] = np.asarray(state["dated_bounds"], np.float32)
+            self.dated_weekday[at] = np.asarray(state["dated_weekday"], np.int8)
 
     def bounds_of(self, values: dict) -> np.ndarray | None:
         """[1, K, 2]: a step's per-zone thermostat bounds from its sensor values (info), or None."""
