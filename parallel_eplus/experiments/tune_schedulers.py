@@ -46,5 +46,8 @@ def make_scheduler(spec: SweepSpec):
     if s.kind == "asha":
         return recording(ASHAScheduler)(max_t=max(planned, s.grace_period), grace_period=s.grace_period,
                                         reduction_factor=s.reduction_factor, **common)  # fmt: skip
+    # synchronous: every trial reaches the decision step before any is compared. Asynchronous PBT compares a trial
+    # with those that have reported so far; on a busy machine a small population's leader could finish before the
+    # trailing trial's first report, and nobody was ever replaced (a flaky test, 2026-11-27).
     return recording(PopulationBasedTraining)(perturbation_interval=s.interval, quantile_fraction=s.quantile_fraction,
-                                              hyperparam_mutations=dict(s.mutations), **common)  # fmt: skip
+                                              hyperparam_mutations=dict(s.mutations), synch=True, **common)  # fmt: skip
