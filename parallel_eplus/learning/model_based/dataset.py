@@ -219,17 +219,16 @@ class ComfortTimes:
         return (np.where(known, self.dated[dates], mean) + widen).astype(np.float32)
 
     def state(self) -> dict[str, np.ndarray]:
-        """The weekly slots' counts and sums; the dated bounds only where they differ from those slots' means
-        (holidays, daylight-saving hours: a few thousand of a year's steps, not the year)."""
+        """The weekly slots' counts and sums; the dated bounds as runs (each entry holds until the next: a
+        schedule changes a few times a day, so a year is a few thousand entries, not 52,560)."""
         out = {"comfort_seen": self.seen, "comfort_applied": self.applied, "bound_sum": self.bound_sum,
                "bound_seen": self.bound_seen}  # fmt: skip
         if len(self.dated):
-            at = np.flatnonzero(self.dated_weekday >= 0)
-            weekly = self.bound_sum / np.maximum(self.bound_seen, 1)[:, None, None]
-            slot = (self.dated_weekday[at].astype(int) * self.day_slots + at % self.day_slots) % self.slots
-            at = at[np.abs(self.dated[at] - weekly[slot]).max(axis=(1, 2)) > 1e-4]
-            out |= {"dated_at": at.astype(np.int32), "dated_bounds": self.dated[at],
-                    "dated_weekday": self.dated_weekday[at]}  # fmt: skip
+            flat, day = self.dated.reshape(len(self.dated), -1), self.dated_weekday
+            starts = np.ones(len(day), bool)
+            starts[1:] = (day[1:] != day[:-1]) | np.any(flat[1:] != flat[:-1], axis=1)
+            at = np.flatnonzero(starts)
+            out |= {"dated_runs": at.astype(np.int32), "dated_bounds": self.dated[at], "dated_weekday": day[at]}
         return out
 
     def load(self, state: dict) -> None:
@@ -239,10 +238,15 @@ class ComfortTimes:
         if "bound_sum" in state:
             self.bound_sum = np.asarray(state["bound_sum"], float)
             self.bound_seen = np.asarray(state["bound_seen"], float)
-        if "dated_at" in state and len(self.dated):  # elsewhere the weekly slots' means are the same bounds
+        if not len(self.dated) or "dated_bounds" not in state:
+            return
+        bounds, day = np.asarray(state["dated_bounds"], np.float32), np.asarray(state["dated_weekday"], np.int8)
+        if "dated_runs" in state:  # each run holds until the next one starts
+            run = np.searchsorted(np.asarray(state["dated_runs"], int), np.arange(len(self.dated)), side="right") - 1
+            self.dated, self.dated_weekday = bounds[run], day[run]
+        else:  # the first planners (2026-11-27): the entries that differ from the weekly slots' means
             at = np.asarray(state["dated_at"], int)
-            self.dated[at] = np.asarray(state["dated_bounds"], np.float32)
-            self.dated_weekday[at] = np.asarray(state["dated_weekday"], np.int8)
+            self.dated[at], self.dated_weekday[at] = bounds, day
 
     def bounds_of(self, values: dict) -> np.ndarray | None:
         """[1, K, 2]: a step's per-zone thermostat bounds from its sensor values (info), or None."""
