@@ -183,7 +183,7 @@ def test_the_planner_reads_the_thermostats_by_date_across_daylight_saving_time(t
     earlier on the simulation's standard-time clock); by weekday and time alone, the planner's bounds at either end
     of its day blended both weeks, and it let the zones go an hour early."""
     from parallel_eplus.evaluation.scenarios import Period
-    from parallel_eplus.learning.model_based.dataset import ComfortTimes
+    from parallel_eplus.learning.model_based.calendar import ComfortTimes
 
     march = Period("test", day=64, start_day=65, weekday="Monday", run_days=14, warmup_days=0)  # March 6-19
     df = run_sweep([Controller("Baseline", "baseline")], ["CA"], 14, 1, tmp_path, False, building="office-small",

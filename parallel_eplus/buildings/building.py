@@ -205,3 +205,11 @@ def load_building(path: str | Path | None = None) -> Building:
     from parallel_eplus.buildings.resources import spec_file
 
     return _load(spec_file(path) if path else model.DEFAULT_SPEC)
+
+
+def weather_path(building: str | None, weather: str) -> Path:
+    """The .epw of a weather as a building's spec names it (its short names, the paper's codes, or a path)."""
+    from parallel_eplus.buildings.weather import resolve_weather
+
+    named = load_building(building).spec.weathers
+    return Path(named.get(weather) or resolve_weather(weather))

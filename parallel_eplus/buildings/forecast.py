@@ -21,19 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.epw import column_index, read_epw, records_per_hour
+from parallel_eplus.buildings.weather_forecast import ERROR_LEVELS, ar1_solar_error, ar1_temperature_error
 
-# BOPTEST's levels (forecast/forecast_uncertainty_params.json): dry bulb in K, global horizontal solar in W/m2.
-TEMPERATURE_ERROR = {
-    "low": {"F0": 0.0, "K0": 0.6, "F": 0.92, "K": 0.4, "mu": 0.0},
-    "medium": {"F0": 0.15, "K0": 1.2, "F": 0.93, "K": 0.6, "mu": 0.0},
-    "high": {"F0": -0.58, "K0": 1.5, "F": 0.95, "K": 0.7, "mu": -0.015},
-}
-SOLAR_ERROR = {
-    "low": {"ag0": 4.44, "bg0": 57.42, "phi": 0.62, "ag": 1.86, "bg": 45.64},
-    "medium": {"ag0": 15.02, "bg0": 122.6, "phi": 0.63, "ag": 4.44, "bg": 91.97},
-    "high": {"ag0": 32.09, "bg0": 119.94, "phi": 0.67, "ag": 10.63, "bg": 87.44},
-}
-ERROR_LEVELS = tuple(TEMPERATURE_ERROR)
 TEMPERATURES = ("drybulb", "dewpoint")
 SOLAR = ("glohorrad", "dirnorrad", "difhorrad")
 OUTDOOR = "outdoor_forecast"  # `train --forecast N`'s observation name
@@ -71,24 +60,6 @@ class ForecastSpec:
 def outdoor_forecast(hours: int, error: str | None = None) -> ForecastSpec:
     """`train --forecast N`: the outdoor dry bulb over the next N hours, hourly."""
     return ForecastSpec(OUTDOOR, "drybulb", hours, 1.0, False, error)
-
-
-def ar1_temperature_error(n: int, level: str, rng: np.random.Generator) -> np.ndarray:
-    p = TEMPERATURE_ERROR[level]
-    e = np.empty(n)
-    e[0] = rng.normal(p["F0"], p["K0"])
-    for j in range(1, n):
-        e[j] = rng.normal(p["F"] * e[j - 1] + p["mu"], p["K"])
-    return e
-
-
-def ar1_solar_error(n: int, level: str, rng: np.random.Generator) -> np.ndarray:
-    p = SOLAR_ERROR[level]
-    e = np.empty(n)
-    e[0] = rng.laplace(p["ag0"], p["bg0"])
-    for j in range(1, n):
-        e[j] = rng.laplace(p["phi"] * e[j - 1] + p["ag"], p["bg"])
-    return e
 
 
 class Forecaster:

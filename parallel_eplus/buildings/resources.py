@@ -85,3 +85,12 @@ def spec_file(building: str | Path) -> Path:
 def is_builtin_spec(path: Path) -> bool:
     """Whether a spec file is one of the package's own (bare file names in it are built-in files)."""
     return Path(path).resolve().parent == spec_dir().resolve()
+
+
+def saved_building(saved: dict) -> str | None:
+    """The spec a run trained on (its config.json's `building`), as `load_building` takes it: a built-in spec by
+    name (saved by path by another checkout or install), a user's by path; None: the data center."""
+    building = saved.get("building")
+    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
+        building = Path(building).stem
+    return building

@@ -47,7 +47,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus.learning.model_based.control import planner_controller
 
     for path in args.policy or []:  # a model-based run's planner, else a policy or a folder of runs (seeds)
-        planner = planner_controller(path)
+        planner = planner_controller(path, args.planner)
         controllers += [planner] if planner else policy_controllers(path)
     controllers += [http_controller(url) for url in args.controller_url or []]
     if not controllers:

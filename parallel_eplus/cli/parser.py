@@ -169,6 +169,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     ev = sub.add_parser("evaluate", help="controllers x weathers sweep: the paper's table and figures")
     ev.add_argument("--policy", action="append", help="a trained model.zip (or run dir); PATH=LABEL sets the label")
+    ev.add_argument(
+        "--planner", metavar="forecast=perfect|low|medium|high,NAME=VALUE,...",
+        help="how each --policy that is a planner (runs/<name>/planner) runs: its weather forecast (the file, or it "
+        "with BOPTEST's forecast errors) and planner settings overriding its own, e.g. candidates=128",
+    )  # fmt: skip
     ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
     ev.add_argument("--rbc", action="store_true", help="include the rule-based controller")
     ev.add_argument(

@@ -176,7 +176,7 @@ class _Loop:
                         zones += len(temps)
                 if dones[i]:
                     a_last[i], step_of[i], episode_of[i] = self.mpc.initial, 0, episode_of[i] + n
-                    self.mpc.planner.reset(i)
+                    self.mpc.reset(i)
                     if explorer is not None:
                         explorer.reset(i)
                 else:
@@ -201,8 +201,8 @@ class _Loop:
             if every and self.steps // every != (self.steps - n) // every:
                 self._evaluate()
             if planning:
-                self.logger.record_mean("planner/ms_per_step", self.mpc.planner.last_ms)
-                self.logger.record_mean("planner/cost", float(self.mpc.planner.last_cost.mean()))
+                self.logger.record_mean("planner/ms_per_step", self.mpc.last.ms)
+                self.logger.record_mean("planner/cost", float(self.mpc.last.cost.mean()))
 
     def _evaluate(self) -> None:
         """`--eval-every`: the planner as it stands, saved and run frozen through `evaluate`'s own code."""
@@ -251,7 +251,8 @@ class _Loop:
             block = max(block // 4, 1)
             held = self.data.held_out(block)
         loss = self.mpc.model.fit(self.data, np.flatnonzero(~held), epochs)
-        self.mpc.planner.set_support(self.data.array("a"))
+        self.mpc.refresh()
+        self.mpc.set_support(self.data.array("a"))
         errors = self.mpc.model.errors(self.data, held, self.s.horizon)
         for key, value in errors.items():
             self.logger.record(f"model/{key}", value)
@@ -260,8 +261,8 @@ class _Loop:
         self.logger.record("model/fit_s", time.perf_counter() - t0)
         self.logger.record("planner/comfort_weight", self.mpc.comfort_weight)
         for i, name in enumerate(a.name for a in self.building.actions):
-            self.logger.record(f"planner/support/{name}_low", float(self.mpc.planner.support[0][i]))
-            self.logger.record(f"planner/support/{name}_high", float(self.mpc.planner.support[1][i]))
+            self.logger.record(f"planner/support/{name}_low", float(self.mpc.support[0][i]))
+            self.logger.record(f"planner/support/{name}_high", float(self.mpc.support[1][i]))
         self.logger.dump(self.steps)
         io.write_text(self.cfg.run_dir / "model_error.json", __import__("json").dumps(errors, indent=2))
         log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,

@@ -9,8 +9,7 @@ weight and the comfort calendar) one episode at a time (`PlannerActor`).
 
 from __future__ import annotations
 
-import datetime as dt
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,10 +17,15 @@ import torch as th
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.learning.model_based.dataset import ComfortTimes, Layout
+from parallel_eplus.buildings.resources import saved_building
+from parallel_eplus.buildings.weather_forecast import FORECASTS
+from parallel_eplus.learning.model_based.calendar import ComfortTimes
+from parallel_eplus.learning.model_based.dataset import Layout
 from parallel_eplus.learning.model_based.dynamics import Ensemble
+from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
 from parallel_eplus.learning.model_based.exogenous import Forecasts
-from parallel_eplus.learning.model_based.planner import Planner
+from parallel_eplus.learning.model_based.features import step_times
+from parallel_eplus.learning.model_based.planner import Plan, Planner, decision_seed
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 PLANNER_FILE = "planner.pt"
@@ -42,18 +46,39 @@ class MPC:
         self.model = model or Ensemble(self.layout, settings, seed)
         self.comfort_times = ComfortTimes(building, self.step_minutes)
         self.margin_c, self.power_weight = margin_c, power_weight
-        self.planner = Planner(self.model, settings, margin_c, power_weight, workers, seed)
+        self.seed = seed
+        self.planner = Planner(None, settings.members, len(self.layout.temperatures), settings, margin_c, power_weight)
+        self.refresh()
         self.comfort_weight = 10.0
+        n_actions = self.layout.n_actions
+        self.support = (-np.ones(n_actions, np.float32), np.ones(n_actions, np.float32))  # `set_support`
+        self.warm = np.zeros((workers, settings.horizon, n_actions), np.float32)
+        self.last: Plan | None = None
         self.initial = np.array([2 * (a.initial - a.low) / (a.high - a.low) - 1 for a in b.actions], np.float32)
+
+    def refresh(self) -> None:
+        """The planner's forward from the model's current weights (after every fit)."""
+        self.planner.forward = OnnxEnsemble(build_graph(self.model.arrays()))
+
+    def set_support(self, actions: np.ndarray) -> None:
+        """Keep the actions within the range of each action in the data widened by `support_margin`: it can only
+        grow (the data only grow), by up to the margin at each refit where the planner's own steps reach its edge."""
+        if len(actions):
+            m = self.settings.support_margin
+            lo, hi = actions.min(axis=0), actions.max(axis=0)
+            self.support = (np.maximum(lo - m, -1.0).astype(np.float32), np.minimum(hi + m, 1.0).astype(np.float32))
+
+    def reset(self, worker: int) -> None:
+        """A new episode for `worker`: forget its warm start."""
+        self.warm[worker] = 0.0
 
     def future(self, infos: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(exogenous inputs [W, H, X], whether the band applies [W, H], each zone's bounds [W, H, K, 2]) over each
         worker's horizon."""
         exo, applies, bounds = [], [], []
         for info in infos:
-            t = info["time"]
-            times = [t + dt.timedelta(minutes=self.step_minutes * (h + 1)) for h in range(self.settings.horizon)]
-            exo.append(self.forecasts.of(info).at(times))
+            times = step_times(info["time"], self.step_minutes, self.settings.horizon)
+            exo.append(self.forecasts.of(info).ahead(info["time"], times))
             applies.append(self.comfort_times(times))
             bounds.append(self.comfort_times.bounds(times))
         return np.stack(exo), np.stack(applies), np.stack(bounds)
@@ -62,14 +87,19 @@ class MPC:
         """Every worker's next normalized action from its observation (sensors first) and info (time, weather)."""
         exo, applies, bounds = self.future(infos)
         s = self.layout.state(np.asarray(obs)[:, : len(self.layout.sensors)])
-        return self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight)
+        a_last = np.asarray(a_last, np.float32)
+        seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
+        self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
+                                      self.warm[: len(s)], seeds)  # fmt: skip
+        self.warm[: len(s)] = self.last.increments
+        return self.last.action
 
     # -- saving: a planner checkpoint -----------------------------------------------------------
     def state(self) -> dict:
         return {
             "building": self.building, "ensemble": self.model.state(), "settings": asdict(self.settings),
             "margin_c": self.margin_c, "power_weight": self.power_weight, "comfort_weight": self.comfort_weight,
-            "support_low": self.planner.support[0], "support_high": self.planner.support[1],
+            "support_low": th.as_tensor(self.support[0]), "support_high": th.as_tensor(self.support[1]),
             **{k: th.as_tensor(v) for k, v in self.comfort_times.state().items()},
         }  # fmt: skip
 
@@ -84,8 +114,8 @@ class MPC:
         settings = MPCSettings(**state["settings"])
         model = Ensemble.from_state(state["ensemble"])
         mpc = cls(state["building"], settings, state["margin_c"], state["power_weight"], workers, seed, model)
-        mpc.comfort_weight = state["comfort_weight"]
-        mpc.planner.support = (state["support_low"], state["support_high"])
+        mpc.comfort_weight = float(state["comfort_weight"])
+        mpc.support = tuple(np.asarray(state[k], np.float32) for k in ("support_low", "support_high"))
         mpc.comfort_times.load(state)
         return mpc
 
@@ -95,9 +125,10 @@ class MPC:
         return cls.from_state(state, workers, seed)
 
 
-def planner_controller(spec: str):
+def planner_controller(spec: str, options: str | None = None):
     """`evaluate --policy runs/<name>/planner[=LABEL]` (or a planner.pt): the planner as an evaluation
-    controller; None when `spec` names anything else (a policy)."""
+    controller; None when `spec` names anything else (a policy). `options` (`evaluate --planner`): its forecast
+    and settings for this evaluation (`PlannerOptions`)."""
     import functools
     import json
 
@@ -114,13 +145,12 @@ def planner_controller(spec: str):
         )
     config = found.parent / "config.json"
     saved = json.loads(config.read_text()) if config.is_file() else {}
-    building = saved.get("building")
-    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
-        building = Path(building).stem  # a built-in spec, saved by path by another checkout or install
+    building = saved_building(saved)
     label = label or f"MPC planner ({'-'.join(saved.get('weathers', []))})"
     run = saved.get("run_name") or found.parent.parent.name
+    PlannerOptions.parse(options)  # refused here, before any episode
     return Controller(label, "planner", found, building=building, run=run,
-                      factory=functools.partial(PlannerActor, found))  # fmt: skip
+                      factory=functools.partial(PlannerActor, found, options))  # fmt: skip
 
 
 def planner_file(path: str | Path) -> Path | None:
@@ -132,12 +162,44 @@ def planner_file(path: str | Path) -> Path | None:
     return None
 
 
+@dataclass(frozen=True)
+class PlannerOptions:
+    """How a saved planner runs in an evaluation: its forecast (`FORECASTS`: the weather file, or it with BOPTEST's
+    low, medium or high errors) and settings overriding its own (`MPCSettings` fields: candidates, iterations, ...)."""
+
+    forecast: str = "perfect"
+    settings: str = ""
+
+    @classmethod
+    def parse(cls, text: str | None) -> PlannerOptions:
+        """`"forecast=medium,candidates=128"`: `forecast` and any of MPCSettings' planner fields."""
+        forecast, rest = "perfect", []
+        for item in filter(None, (p.strip() for p in (text or "").split(","))):
+            key, _, value = item.partition("=")
+            if key.strip() == "forecast":
+                forecast = value.strip()
+                if forecast not in FORECASTS:
+                    raise ValueError(f"--planner forecast={forecast!r}: one of {', '.join(FORECASTS)}")
+            else:
+                rest.append(item)
+        MPCSettings.from_text(",".join(rest))  # refused by name here
+        return cls(forecast, ",".join(rest))
+
+    def apply(self, mpc: MPC) -> MPC:
+        if self.settings:
+            mpc.settings = mpc.planner.settings = MPCSettings.from_text(self.settings, mpc.settings)
+            mpc.warm = np.zeros((len(mpc.warm), mpc.settings.horizon, mpc.layout.n_actions), np.float32)
+        if self.forecast != "perfect":
+            mpc.forecasts = Forecasts(mpc.building, self.forecast, mpc.seed)
+        return mpc
+
+
 class PlannerActor:
     """A saved planner as an evaluation controller: (observation, info) -> normalized action, one episode."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, options: str | None = None):
         th.set_num_threads(1)  # the cores belong to EnergyPlus (as in training); more threads only contend
-        self.mpc = MPC.load(path)
+        self.mpc = PlannerOptions.parse(options).apply(MPC.load(path))
         self.last = self.mpc.initial.copy()
 
     def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:

@@ -16,6 +16,7 @@ import numpy as np
 import torch as th
 
 from parallel_eplus.learning.model_based.dataset import Layout, Transitions, next_state
+from parallel_eplus.learning.model_based.ensemble_graph import EnsembleArrays
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 log = logging.getLogger(__name__)
@@ -108,6 +109,15 @@ class Ensemble(th.nn.Module):
                 out[f"{name}/{h}_step_persistence"] = float(still[i])
             out[f"rows/{h}_step"] = float(len(runs))
         return out
+
+    def arrays(self) -> EnsembleArrays:
+        """The weights and normalizers as numbers, for the planner's graph (ensemble_graph.py)."""
+
+        def numpy(t: th.Tensor) -> np.ndarray:
+            return t.detach().cpu().numpy().astype(np.float32).copy()
+
+        return EnsembleArrays([numpy(w) for w in self.weights], [numpy(b) for b in self.biases],
+                              *(numpy(getattr(self, n)) for n in ("x_mean", "x_std", "y_mean", "y_std")))  # fmt: skip
 
     # -- saving ---------------------------------------------------------------------------------
     def state(self) -> dict:

@@ -1,9 +1,9 @@
-"""What the model is told about the future: the weather file (a perfect forecast), the clock and the schedule.
+"""What the model is told about the weather: the year as it happened (its data) and a forecast (its plans).
 
-The planner reads the future outdoor conditions from the episode's own .epw file (the perturbed year, with
-weather noise: info["weather_file"]): a perfect forecast, which a deployed controller would replace by a weather
-service's. EnergyPlus interpolates the hourly file between hours; so does `Forecast.at`. The clock gives hour and
-weekday (sine/cosine); a model with the data center's IT-load schedule adds its value (the operator knows it).
+The model learns from the weather that happened: the episode's own .epw file (the perturbed year, with weather
+noise: info["weather_file"]), interpolated between hours as EnergyPlus does. The planner reads the coming hours
+through buildings/weather_forecast.py's one interface (the file, the file with BOPTEST's forecast errors, or a
+caller's forecast); features.py turns them, with the clock and the model's schedule, into the model's inputs.
 """
 
 from __future__ import annotations
@@ -14,38 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.model import IT_SCHEDULE, it_load_schedule, time_features
-from parallel_eplus.buildings.weather import resolve_weather
-
-# EPW columns (0-based): dry bulb (C), relative humidity (%), global horizontal radiation (Wh/m2)
-_COLUMNS = (6, 8, 13)
-_SCALE = np.array([1.0, 0.01, 0.001])  # to numbers of order one
-EXOGENOUS = ("outdoor_drybulb_c", "outdoor_rh", "global_horizontal_kw_m2", "hour_sin", "hour_cos", "weekday_sin",
-             "weekday_cos")  # fmt: skip
-
-
-@functools.lru_cache(maxsize=32)  # noisy runs read a file per episode
-def _epw(path: Path) -> np.ndarray:
-    """The hourly values of `_COLUMNS`, one row per hour of the year (8760)."""
-    rows = []
-    with open(path, encoding="latin-1") as f:
-        for i, line in enumerate(f):
-            if i < 8:
-                continue
-            parts = line.split(",")
-            rows.append([float(parts[c]) for c in _COLUMNS])
-    return np.array(rows) * _SCALE
-
-
-def weather_path(building: str | None, weather: str) -> Path:
-    """The .epw of a weather as the spec names it (its short names, the paper's codes, or a path)."""
-    named = load_building(building).spec.weathers
-    return Path(named.get(weather) or resolve_weather(weather))
+from parallel_eplus.buildings.building import load_building, weather_path
+from parallel_eplus.buildings.model import IT_SCHEDULE, it_load_schedule
+from parallel_eplus.buildings.weather_forecast import ErroredForecast, PerfectForecast, WeatherSource
+from parallel_eplus.learning.model_based.features import Schedule, exogenous, width
 
 
 @functools.cache
-def _schedule(building: str | None) -> tuple[tuple[float, float], ...] | None:
+def model_schedule(building: str | None) -> Schedule | None:
+    """The model's IT-load schedule where it has one (the data centers), else None."""
     try:
         return it_load_schedule(load_building(building).control().idf, IT_SCHEDULE)
     except (ValueError, OSError):
@@ -53,48 +30,40 @@ def _schedule(building: str | None) -> tuple[tuple[float, float], ...] | None:
 
 
 class Forecast:
-    """Exogenous inputs at any time of one weather's year: `at(times)` -> [len(times), width]."""
+    """One weather's exogenous inputs: `at(times)` as they happened (the model's data), `ahead(now, times)` as the
+    planner is told them at `now` (the source's forecast)."""
 
-    def __init__(self, building: str | None, weather: str):
-        self.hourly = _epw(weather_path(building, weather))
-        self.schedule = _schedule(building)
+    def __init__(self, building: str | None, weather: str, error: str | None = None, seed: int = 0):
+        path = weather_path(building, weather)
+        self.file = PerfectForecast(path)
+        self.source: WeatherSource = self.file if error in (None, "perfect") else ErroredForecast(path, error, seed)
+        self.schedule = model_schedule(building)
 
     @property
     def width(self) -> int:
-        return len(EXOGENOUS) + (self.schedule is not None)
+        return width(self.schedule)
 
     def at(self, times: list[dt.datetime]) -> np.ndarray:
-        hours = np.array([(t.timetuple().tm_yday - 1) * 24 + t.hour + t.minute / 60 for t in times])
-        n = len(self.hourly)
-        # value i of the file is the hour ending at i + 1; wrap at the year's end
-        x = np.concatenate([[0.0], np.arange(1, n + 1)])
-        table = np.concatenate([self.hourly[-1:], self.hourly])
-        weather = np.stack([np.interp(hours % n, x, table[:, j]) for j in range(table.shape[1])], axis=1)
-        clock = np.array([time_features(t) for t in times])
-        parts = [weather, clock]
-        if self.schedule is not None:
-            # the load during the step that ends at t
-            parts.append(np.array([[self._load(t - dt.timedelta(minutes=1))] for t in times]))
-        return np.concatenate(parts, axis=1).astype(np.float32)
+        return exogenous(self.file.truth(times), times, self.schedule)
 
-    def _load(self, t: dt.datetime) -> float:
-        hour = t.hour + t.minute / 60
-        return next((v for until, v in self.schedule if hour < until), self.schedule[-1][1])
+    def ahead(self, now: dt.datetime, times: list[dt.datetime]) -> np.ndarray:
+        return exogenous(self.source.weather(now, times), times, self.schedule)
 
 
 class Forecasts:
-    """One `Forecast` per weather (or per episode's perturbed file), made on first use."""
+    """One `Forecast` per weather (or per episode's perturbed file), made on first use; `error`: the planner's
+    forecast (None or "perfect": the file; BOPTEST's "low", "medium", "high": with its errors)."""
 
     _FILES = 16  # perturbed years kept: a few per worker
 
-    def __init__(self, building: str | None):
-        self.building = building
+    def __init__(self, building: str | None, error: str | None = None, seed: int = 0):
+        self.building, self.error, self.seed = building, error, seed
         self._by_weather: dict[str, Forecast] = {}
         self._by_file: dict[str, Forecast] = {}
 
     def __call__(self, weather: str) -> Forecast:
         if weather not in self._by_weather:
-            self._by_weather[weather] = Forecast(self.building, weather)
+            self._by_weather[weather] = Forecast(self.building, weather, self.error, self.seed)
         return self._by_weather[weather]
 
     def of(self, info: dict) -> Forecast:
@@ -108,5 +77,5 @@ class Forecasts:
             return self(info["weather"])
         if len(self._by_file) >= self._FILES:
             self._by_file.pop(next(iter(self._by_file)))
-        self._by_file[file] = Forecast(self.building, file)
+        self._by_file[file] = Forecast(self.building, file, self.error, self.seed)
         return self._by_file[file]

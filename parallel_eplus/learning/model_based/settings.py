@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 
 @dataclass
@@ -52,9 +52,10 @@ class MPCSettings:
     dagger_share: float = 0.25
 
     @classmethod
-    def from_text(cls, text: str | None) -> MPCSettings:
-        """`train --mpc "horizon=12,explore_steps=5000"`: fields by name, each converted to its default's type."""
-        settings = cls()
+    def from_text(cls, text: str | None, base: MPCSettings | None = None) -> MPCSettings:
+        """`train --mpc "horizon=12,explore_steps=5000"`: fields by name, each converted to its default's type,
+        over `base` (default: the defaults)."""
+        settings = replace(base) if base is not None else cls()
         for item in filter(None, (p.strip() for p in (text or "").split(","))):
             key, sep, value = item.partition("=")
             key = key.strip().replace("-", "_")

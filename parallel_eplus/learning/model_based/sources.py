@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from parallel_eplus.learning.model_based.dataset import ORIGINS, ComfortTimes, Transitions
+from parallel_eplus.learning.model_based.calendar import ComfortTimes
+from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.exogenous import Forecasts
 
 
