@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
-import time
-import urllib.request
 from pathlib import Path
 
 import pandas as pd
@@ -21,6 +18,8 @@ from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.settings import SACSettings
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
+
+from .serving import free_port, get, serving
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "results" / "paper" / "models"  # policies trained for results/paper (a year each, committed)
@@ -149,15 +148,6 @@ def test_a_residual_policy_is_refused_with_the_reason(tmp_path):
     assert not (tmp_path / "out" / "controller.onnx").exists()
 
 
-def test_a_model_based_planner_is_refused_and_its_distilled_policy_named(tmp_path):
-    run = Path(__file__).resolve().parents[1] / "results/model-based/pilot-datacenter-14d/run"
-    for given in (run / "planner", run / "planner" / "planner.pt"):
-        refused = f"model-based planner.*Export its distilled policy instead: parallel-eplus export {run}$"
-        with pytest.raises(ValueError, match=refused):
-            export(given, tmp_path / "out")
-    assert not (tmp_path / "out" / "controller.onnx").exists()
-
-
 def test_a_policy_observing_forecasts_is_refused_with_the_reason(tmp_path):
     import shutil
 
@@ -208,41 +198,11 @@ def test_exported_controller_gives_the_policys_setpoints_over_a_recorded_episode
     assert observations(Contract.read(out), steps).shape == (96, 6 + len(features))
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def get(url: str) -> dict:
-    with urllib.request.urlopen(url, timeout=5) as r:
-        return json.loads(r.read())
-
-
 @pytest.fixture
 def served(controller, tmp_path):
-    """`parallel-eplus serve` in its own process (its log in a file: a pipe nobody reads would fill up)."""
-    port = free_port()
     log = tmp_path / "server.log"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "parallel_eplus.cli", "serve", str(controller), "--port", str(port)],
-        stdout=log.open("w"), stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
-    url = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                get(url + "/health")
-                break
-            except OSError:
-                if proc.poll() is not None or time.monotonic() > deadline:
-                    raise AssertionError(f"the server did not start: {log.read_text()}") from None
-                time.sleep(0.2)
+    with serving(controller, log) as url:
         yield url, log
-    finally:
-        proc.terminate()
-        proc.wait(timeout=30)
 
 
 @pytest.mark.slow

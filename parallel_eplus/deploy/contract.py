@@ -17,7 +17,8 @@ import numpy as np
 
 from parallel_eplus.buildings.clock import SCHEDULE_FEATURES, TIME_FEATURES, schedule_features, time_features
 
-FORMAT = 1
+FORMAT = 1  # a policy's contract; a planner's is 2 (planner_export.py)
+READS = 2  # the newest format this version reads
 CONTRACT_FILE = "controller.json"
 ONNX_FILE = "controller.onnx"
 # A sensor's unit when its spec gives none, from its name's suffix (the shipped specs name every sensor this way).
@@ -43,6 +44,24 @@ def _same_unit(a: str, b: str) -> bool:
     return UNIT_ALIASES.get(a.strip().lower(), a.strip()) == UNIT_ALIASES.get(b.strip().lower(), b.strip())
 
 
+def sensor_entries(building) -> list[dict]:
+    """The contract's readings: each observed sensor with its unit, bounds and where EnergyPlus reads it."""
+    return [
+        {"name": s.name, "source": "sensor", "variable": s.variable, "key": s.key, "meter": s.meter,
+         "unit": unit_of(s.name, o.unit), "low": s.low, "high": s.high, "scale": s.scale}
+        for s, o in zip(building.observed, building.spec.observations, strict=True)
+    ]  # fmt: skip
+
+
+def output_entries(building) -> list[dict]:
+    """The contract's setpoints: each action with its unit, bounds and the actuators it drives."""
+    return [
+        {"name": a.name, "unit": unit_of(a.name, a.unit), "low": a.low, "high": a.high,
+         "actuators": [{"component": x.component_type, "control": x.control_type, "key": x.key} for x in a.actuators]}
+        for a in building.actions
+    ]  # fmt: skip
+
+
 @dataclass
 class Contract:
     """controller.json as read back: the raw dict, with the lookups a request needs."""
@@ -55,7 +74,7 @@ class Contract:
         if not path.is_file():
             raise FileNotFoundError(f"{path} not found: `parallel-eplus export RUN -o {directory}` writes it")
         data = json.loads(path.read_text())
-        if int(data.get("format", 0)) > FORMAT:
+        if int(data.get("format", 0)) > READS:
             raise ValueError(f"{path}: written by a newer parallel-eplus (format {data['format']})")
         return cls(data)
 

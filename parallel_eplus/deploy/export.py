@@ -18,7 +18,8 @@ import numpy as np
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES, it_load_schedule
-from parallel_eplus.deploy.contract import CONTRACT_FILE, FORMAT, ONNX_FILE, unit_of
+from parallel_eplus.buildings.resources import saved_building
+from parallel_eplus.deploy.contract import CONTRACT_FILE, FORMAT, ONNX_FILE, output_entries, sensor_entries
 from parallel_eplus.deploy.graph import INPUT, OPSET, OUTPUT, Layer, PolicyArrays, build_model
 from parallel_eplus.engine.actions import scale_action
 
@@ -29,15 +30,7 @@ PARITY_TOLERANCE = 1e-5  # physical units: the most a setpoint may differ from t
 
 def model_file(path: Path) -> Path:
     """A model.zip, a checkpoint .zip, or a run folder (its model.zip)."""
-    from parallel_eplus.learning.model_based.control import PLANNER_FILE
-
     path = Path(path)
-    if path.name == PLANNER_FILE or (path / PLANNER_FILE).is_file():
-        raise ValueError(
-            f"{path} is a model-based planner: it plans on a learned model of the building with the weather file's "
-            "coming hours, which no controller file can carry. Export its distilled policy instead: "
-            f"parallel-eplus export {path.parent.parent if path.name == PLANNER_FILE else path.parent}"
-        )
     if path.is_dir():
         path = path / "model.zip"
     if not path.is_file():
@@ -52,12 +45,6 @@ def run_settings(model_zip: Path) -> dict:
     return json.loads(config.read_text()) if config.is_file() else {}
 
 
-def spec_name(saved: dict) -> str | None:
-    """The spec a run trained on, as `load_building` takes it (a built-in spec by name; None: the data center)."""
-    building = saved.get("building")
-    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
-        building = Path(building).stem
-    return building
 
 
 def _refuse_unexportable(model_zip: Path, saved: dict) -> None:
@@ -156,7 +143,7 @@ def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
     stats_file = require_policy_files(model_zip)
     saved = run_settings(model_zip)
     _refuse_unexportable(model_zip, saved)
-    building_name = spec_name(saved)
+    building_name = saved_building(saved)
     building = load_building(building_name)
     if building.spec.forecasts:
         raise ValueError(
@@ -186,20 +173,12 @@ def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
     if len(obs_low) != n_obs:
         raise ValueError(f"{model_zip} observes {n_obs} values; its building and features make {len(obs_low)}")
     spec = building.spec
-    inputs = [
-        {"name": s.name, "source": "sensor", "variable": s.variable, "key": s.key, "meter": s.meter,
-         "unit": unit_of(s.name, o.unit), "low": s.low, "high": s.high, "scale": s.scale}
-        for s, o in zip(building.observed, spec.observations, strict=True)
-    ]  # fmt: skip
+    inputs = sensor_entries(building)
     inputs += [
         {"name": f, "source": "time" if f in TIME_FEATURES else "schedule", "unit": "", "low": -1.0, "high": 1.0}
         for f in features
     ]
-    outputs = [
-        {"name": a.name, "unit": unit_of(a.name, a.unit), "low": a.low, "high": a.high,
-         "actuators": [{"component": x.component_type, "control": x.control_type, "key": x.key} for x in a.actuators]}
-        for a in building.actions
-    ]  # fmt: skip
+    outputs = output_entries(building)
     algorithm = saved.get("algorithm", "sac" if squash else "trpo")
     contract = {
         "format": FORMAT,
@@ -233,7 +212,7 @@ def reference_actions(model_zip: Path, observations: np.ndarray) -> np.ndarray:
 
     act = load_policy(model_zip)
     saved = run_settings(model_zip)
-    actions = load_building(spec_name(saved)).actions
+    actions = load_building(saved_building(saved)).actions
     low, high, names = [a.low for a in actions], [a.high for a in actions], tuple(a.name for a in actions)
     return np.array([scale_action(act(o[None, :])[0], low, high, names) for o in observations])
 
@@ -256,10 +235,16 @@ def onnx_actions(path: Path, observations: np.ndarray) -> np.ndarray:
     return session.run([OUTPUT], {INPUT: observations.astype(np.float32)})[0]
 
 
-def export(run_or_model: Path, out_dir: Path) -> Path:
-    """Write controller.onnx and controller.json into `out_dir`; returns the contract's path."""
+def export(run_or_model: Path, out_dir: Path, **planner_options) -> Path:
+    """Write controller.onnx and controller.json into `out_dir`; returns the contract's path. A model-based run (or
+    its planner) is exported as its planner (planner_export.py, `planner_options` its settings)."""
     import onnx
 
+    from parallel_eplus.deploy.planner_export import export_planner, planner_source
+
+    planner = planner_source(run_or_model)
+    if planner is not None:
+        return export_planner(planner, out_dir, **planner_options)
     model_zip = model_file(run_or_model)
     arrays, contract = build(model_zip)
     model = build_model(arrays, doc=f"parallel-eplus controller from {model_zip}")

@@ -1,13 +1,15 @@
 """`parallel-eplus serve DIR`: an exported controller over HTTP (FastAPI on uvicorn, onnxruntime; no torch).
 
-`POST /act` takes `{"time": ISO, "sensors": {name: value or {"value", "unit"}}}` in physical units and answers
-`{"setpoints": {name: {"value", "unit"}}, ...}`; `GET /health`, `GET /contract`. A bad request is a 4xx whose
-JSON names the field (`{"error", "field"}`), never a crash; every request is logged with its status and time.
+`POST /act` takes `{"time": ISO, "sensors": {name: value or {"value", "unit"}}}` in physical units (a planner also
+`last_setpoints` and `forecast`: planner_runtime.py) and answers `{"setpoints": {name: {"value", "unit"}}, ...}`;
+`GET /health`, `GET /contract`. A bad request is a 4xx whose JSON names the field (`{"error", "field"}`), never a
+crash; every request is logged with its status and time, never with its token (`--token-file`: `BearerToken`).
 """
 
 from __future__ import annotations
 
 import hashlib
+import hmac
 import json
 import logging
 import sys
@@ -67,30 +69,87 @@ class RequestLog:
             log.info("%s %s %d %.2f ms", scope["method"], scope["path"], status[0], ms)
 
 
-def create_app(directory: Path) -> FastAPI:
-    """The app for one exported controller; the ONNX file is checked against its contract's hash."""
+class PolicyRuntime:
+    """An exported policy network: readings (and time) in, setpoints out, one onnxruntime call."""
+
+    def __init__(self, directory: Path, contract: Contract):
+        self.contract = contract
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = 1  # one row per request: threads cost more than they give
+        path = directory / contract.data["onnx"].get("file", ONNX_FILE)
+        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        self.io_names = contract.data["onnx"]["input"], contract.data["onnx"]["output"]
+
+    def act(self, body: dict) -> dict:
+        obs = self.contract.observation(body)
+        row = self.session.run([self.io_names[1]], {self.io_names[0]: obs})[0][0]
+        if not np.all(np.isfinite(row)):  # pragma: no cover - the graph clips every value it is given
+            raise InputError("setpoints", "the controller produced a non-finite setpoint", 500)
+        return {"setpoints": self.contract.setpoints(row), "time": body.get("time")}
+
+
+def _verified(directory: Path, entry: dict, what: str) -> Path:
+    """A file the contract names, checked against its hash (a file edited or swapped after export is refused)."""
+    path = directory / entry["file"]
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found beside {directory / 'controller.json'}")
+    expected = entry.get("sha256")
+    if expected and hashlib.sha256(path.read_bytes()).hexdigest() != expected:
+        raise ValueError(f"{path} is not the {what} its contract was written for (sha256 differs): export again")
+    return path
+
+
+def load_runtime(directory: Path):
+    """The runtime an exported folder holds: a policy network or a planner (`kind`), its files verified."""
     directory = Path(directory)
     contract = Contract.read(directory)
-    onnx_path = directory / contract.data["onnx"].get("file", ONNX_FILE)
-    if not onnx_path.is_file():
-        raise FileNotFoundError(f"{onnx_path} not found beside {directory / 'controller.json'}")
-    expected = contract.data["onnx"].get("sha256")
-    if expected and hashlib.sha256(onnx_path.read_bytes()).hexdigest() != expected:
-        raise ValueError(f"{onnx_path} is not the file its contract was written for (sha256 differs): export again")
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1  # one row per request: threads cost more than they give
-    session = ort.InferenceSession(str(onnx_path), options, providers=["CPUExecutionProvider"])
-    io_names = contract.data["onnx"]["input"], contract.data["onnx"]["output"]
+    _verified(directory, {"file": ONNX_FILE, **contract.data["onnx"]}, "graph")
+    if contract.data.get("kind") == "planner":
+        from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+
+        _verified(directory, contract.data["arrays"], "arrays")
+        return PlannerRuntime(directory, contract)
+    return PolicyRuntime(directory, contract)
+
+
+class BearerToken:
+    """Every request must carry `Authorization: Bearer <token>` (compared in constant time); anything else is a 401
+    that names the header. The token is never logged (RequestLog logs method, path, status and time only)."""
+
+    def __init__(self, app, token: str):
+        self.app, self.expected = app, f"Bearer {token}".encode()
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        given = dict(scope.get("headers") or []).get(b"authorization", b"")
+        if hmac.compare_digest(given, self.expected):
+            return await self.app(scope, receive, send)
+        field = "authorization: missing" if not given else "authorization: wrong token"
+        log.warning("refused %s %s: %s", scope.get("method"), scope.get("path"), field)
+        response = JSONResponse({"error": f"{field}; send Authorization: Bearer <token>", "field": "authorization"},
+                                status_code=401, headers={"WWW-Authenticate": "Bearer"})  # fmt: skip
+        await response(scope, receive, send)
+
+
+def create_app(directory: Path, token: str | None = None) -> FastAPI:
+    """The app for one exported controller (a policy or a planner), its files checked against the contract's
+    hashes; with `token`, every request must carry it."""
+    directory = Path(directory)
+    runtime = load_runtime(directory)
+    contract = runtime.contract
     app = FastAPI(title=f"parallel-eplus controller: {contract.data['building']['name']}", docs_url=None)
-    app.add_middleware(RequestLog)
+    if token is not None:
+        app.add_middleware(BearerToken, token=token)
+    app.add_middleware(RequestLog)  # added last, so outermost: a request refused for its token is logged too
     started = time.time()
-    served = {"act": 0, "refused": 0}
+    served = {"act": 0, "refused": 0, "fallback": 0}
 
     @app.get("/health")
     def health() -> dict:
         return {
             "status": "ok", "building": contract.data["building"]["name"], "run": contract.data["policy"]["run"],
-            "uptime_s": round(time.time() - started, 1), **served,
+            "kind": contract.data.get("kind", "policy"), "uptime_s": round(time.time() - started, 1), **served,
             "loaded": {m: m in sys.modules for m in ("onnxruntime", "torch", "stable_baselines3")},
         }  # fmt: skip
 
@@ -103,31 +162,57 @@ def create_app(directory: Path) -> FastAPI:
         try:
             kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
             if kind != "application/json":
-                served["refused"] += 1
-                return _error(415, "content-type", f"{kind or 'none'}; send application/json")
+                raise InputError("content-type", f"{kind or 'none'}; send application/json", 415)
             raw = await _body(request)
             try:
                 body = json.loads(raw)
             except (ValueError, UnicodeDecodeError) as e:
                 raise InputError("body", f"not valid JSON ({e})", 400) from None
-            obs = contract.observation(body)
+            if not isinstance(body, dict):
+                raise InputError("body", "must be a JSON object with 'sensors' (and 'time')", 400)
+            answer = runtime.act(body)
         except InputError as e:
             served["refused"] += 1
             log.warning("refused: %s", e)
             return _error(e.status, e.field, str(e))
-        row = session.run([io_names[1]], {io_names[0]: obs})[0][0]
-        if not np.all(np.isfinite(row)):  # pragma: no cover - the graph clips every value it is given
-            return _error(500, "setpoints", "the controller produced a non-finite setpoint")
         served["act"] += 1
-        return JSONResponse({"setpoints": contract.setpoints(row), "time": body.get("time")})
+        served["fallback"] += bool(answer.get("fallback"))
+        return JSONResponse(answer)
 
     return app
 
 
-def serve(directory: Path, host: str = "127.0.0.1", port: int = 8000) -> None:
-    """Run the controller's server until Ctrl-C or SIGTERM."""
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def read_token(path: Path | None) -> str | None:
+    """The bearer token in `path` (its first line), or None; an empty file is refused."""
+    if path is None:
+        return None
+    lines = Path(path).read_text().strip().splitlines()
+    token = lines[0].strip() if lines else ""
+    if not token:
+        raise ValueError(f"--token-file {path} is empty: put the token on its first line")
+    return token
+
+
+def serve(directory: Path, host: str = "127.0.0.1", port: int = 8000, token_file: Path | None = None,
+          ssl_keyfile: Path | None = None, ssl_certfile: Path | None = None) -> None:  # fmt: skip
+    """Run the controller's server until Ctrl-C or SIGTERM. Off loopback it needs a token (`token_file`)."""
     import uvicorn
 
-    app = create_app(directory)
-    log.info("serving %s on http://%s:%d (POST /act, GET /health, GET /contract)", directory, host, port)
-    uvicorn.run(app, host=host, port=port, access_log=False, log_level="warning")
+    if host not in LOOPBACK and not host.startswith("127.") and token_file is None:
+        raise ValueError(
+            f"--host {host} lets other machines reach the controller: give --token-file FILE (a secret on its first "
+            "line; clients send Authorization: Bearer <it>), and --ssl-keyfile/--ssl-certfile for TLS"
+        )
+    if (ssl_keyfile is None) != (ssl_certfile is None):
+        raise ValueError("TLS needs both --ssl-keyfile and --ssl-certfile")
+    app = create_app(directory, read_token(token_file))
+    scheme = "https" if ssl_certfile else "http"
+    log.info("serving %s on %s://%s:%d (POST /act, GET /health, GET /contract%s)", directory, scheme, host, port,
+             "; bearer token required" if token_file else "")  # fmt: skip
+    # SIGTERM stops it within seconds even with a client's connection left open (uvicorn waits for them otherwise)
+    uvicorn.run(app, host=host, port=port, access_log=False, log_level="warning", timeout_graceful_shutdown=3,
+                ssl_keyfile=None if ssl_keyfile is None else str(ssl_keyfile),
+                ssl_certfile=None if ssl_certfile is None else str(ssl_certfile))  # fmt: skip

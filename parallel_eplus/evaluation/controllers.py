@@ -17,6 +17,7 @@ import numpy as np
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
+from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.errors import EnergyPlusError
@@ -118,9 +119,7 @@ def policy_controller(spec: str) -> Controller:
         algorithm = saved.get("algorithm", "trpo").upper() + (corrects if residual else "")
         label = f"{algorithm} ({'-'.join(saved['weathers'])})"
     space = saved.get("residual_space", "action")
-    building = saved.get("building")
-    if building and (not Path(building).is_file() or Path(building).parent.match("parallel_eplus/buildings/specs")):
-        building = Path(building).stem  # a built-in spec, saved by path by another checkout or install
+    building = saved_building(saved)
     time_features, schedule_features = policy_features(path, building)
     sim = SimulationConfig(
         model=saved.get("model", "temp_fan"), building=building, residual_scale=residual,

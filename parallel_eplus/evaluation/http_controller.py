@@ -7,6 +7,7 @@ kept-alive connection per episode), so the evaluation adds no HTTP client depend
 
 from __future__ import annotations
 
+import datetime as dt
 import hashlib
 import http.client
 import json
@@ -16,8 +17,9 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.building import load_building, weather_path
 from parallel_eplus.buildings.model import DEFAULT
+from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
 
 
 class HttpController:
@@ -34,6 +36,11 @@ class HttpController:
         self.low = np.array([o["low"] for o in self.contract["outputs"]])
         self.high = np.array([o["high"] for o in self.contract["outputs"]])
         self.outputs = [o["name"] for o in self.contract["outputs"]]
+        self.planner = self.contract.get("kind") == "planner"
+        if self.planner:  # a planner is also told the last setpoints, a forecast, and its last plan
+            self.last = {o["name"]: float(o["initial"]) for o in self.contract["outputs"]}
+            self.plan = None
+            self.forecasts: dict[str, PerfectForecast] = {}
 
     def _request(self, method: str, path: str, body: dict | None = None) -> dict:
         payload = None if body is None else json.dumps(body).encode()
@@ -70,11 +77,34 @@ class HttpController:
         # The readings as the in-process policy sees them: the env's float32 observation (clipped to the spec's
         # bounds), in physical units.
         sensors = {n: float(v) for n, v in zip(self.names, obs[: len(self.names)].tolist(), strict=True)}
-        answer = self._request("POST", "/act", {"time": info["time"].isoformat(), "sensors": sensors})
+        body = {"time": info["time"].isoformat(), "sensors": sensors}
+        if self.planner:
+            body |= {"last_setpoints": self.last, "forecast": self._forecast(info), "plan": self.plan}
+        answer = self._request("POST", "/act", body)
         physical = np.array([answer["setpoints"][n]["value"] for n in self.outputs])
         if not all(map(math.isfinite, physical)):
             raise ValueError(f"controller at {self.url} returned non-finite setpoints: {answer}")
+        if self.planner:
+            self.last, self.plan = dict(zip(self.outputs, physical.tolist(), strict=True)), answer.get("plan")
+            self.fallbacks += bool(answer.get("fallback"))
         return 2 * (physical - self.low) / (self.high - self.low) - 1
+
+    fallbacks = 0  # answers a served planner marked as fallbacks
+
+    def _forecast(self, info: dict) -> dict[str, list[float]]:
+        """The coming steps' weather from the episode's own file, as the contract's forecast block asks for it: the
+        perfect forecast the in-process planner reads."""
+        block = self.contract["forecast"]
+        file = info.get("weather_file") or str(weather_path(self.building(), info["weather"]))
+        if file not in self.forecasts:
+            self.forecasts[file] = PerfectForecast(Path(file))
+        step = dt.timedelta(seconds=block["step_s"])
+        times = [info["time"] + step * (k + 1) for k in range(block["steps"])]
+        values = self.forecasts[file].truth(times)
+        names = [v["name"] for v in block["variables"]]
+        if tuple(names) != WEATHER:
+            raise ValueError(f"controller at {self.url} asks for forecast {names}; this client sends {WEATHER}")
+        return {n: values[:, i].tolist() for i, n in enumerate(names)}
 
     def close(self) -> None:
         if self.conn is not None:

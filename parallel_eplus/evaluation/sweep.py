@@ -69,10 +69,10 @@ def run_sweep(
 
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
+    swept = load_building(building).spec.path  # None: the data center's spec, as a run that named it
     for c in controllers:  # a policy acts only in the building it was trained on
         acting = c.kind in ("policy", "http", "planner")
-        trained = str(load_building(c.building).spec.path) if acting and c.building else None
-        if acting and trained != (building or None):
+        if acting and load_building(c.building).spec.path != swept:
             raise ValueError(
                 f"{c.path or c.url} was trained on building {c.building or 'datacenter-2zone (default)'}, "
                 f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"

@@ -1,0 +1,247 @@
+"""Shipping the planner: export, the stateless server (last setpoints, forecast, plan), its fallback, the token,
+and a served planner in closed loop with EnergyPlus against the in-process one."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from parallel_eplus.buildings.building import load_building, weather_path
+from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
+from parallel_eplus.deploy.contract import Contract
+from parallel_eplus.deploy.export import export
+from parallel_eplus.evaluation.controllers import http_controller
+from parallel_eplus.evaluation.sweep import run_sweep
+from parallel_eplus.learning.model_based.control import MPC, planner_controller
+from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
+
+from .serving import get, serving
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0"  # committed, 52.5k steps
+READINGS = {
+    "outdoor_temp_c": 12.5, "west_temp_c": 23.1, "east_temp_c": 23.4,
+    "power_w": 95000.0, "it_power_w": 70000.0, "hvac_power_w": 25000.0,
+}  # fmt: skip
+LAST = {"west_setpoint_c": 12.0, "east_setpoint_c": 12.0, "west_fan_kg_s": 4.0, "east_fan_kg_s": 4.0}
+TOKEN = "kq3-planner-test-token-9f"
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("planner")
+    export(RUN, out, record_days=2)  # the own controls' record: two days of each training weather
+    return out
+
+
+@pytest.fixture(scope="module")
+def client(exported):
+    from fastapi.testclient import TestClient
+
+    from parallel_eplus.deploy.server import create_app
+
+    with TestClient(create_app(exported)) as c:
+        yield c
+
+
+def forecast(when: dt.datetime, steps: int = 8, weather: str = "CA") -> dict:
+    times = [when + dt.timedelta(minutes=15 * (k + 1)) for k in range(steps)]
+    values = PerfectForecast(weather_path("datacenter-2zone", weather)).truth(times)
+    return {n: values[:, i].tolist() for i, n in enumerate(WEATHER)}
+
+
+def body(**changes) -> dict:
+    when = dt.datetime(2021, 1, 5, 10, 0)
+    out = {"time": when.isoformat(), "sensors": dict(READINGS), "last_setpoints": dict(LAST)}
+    return {**out, "forecast": forecast(when), **changes}
+
+
+def act(client, payload, **kw):
+    return client.post("/act", content=json.dumps(payload), headers={"content-type": "application/json", **kw})
+
+
+def test_the_ensemble_graph_predicts_what_the_torch_ensemble_does():
+    mpc = MPC.load(RUN / "best/planner/planner.pt")
+    forward = OnnxEnsemble(build_graph(mpc.model.arrays()))
+    rng = np.random.default_rng(0)
+    x = (mpc.model.x_mean.numpy() + mpc.model.x_std.numpy() * rng.standard_normal((5, 64, forward.n_inputs)))
+    import torch as th
+
+    with th.no_grad():
+        xn = (th.as_tensor(x, dtype=th.float32) - mpc.model.x_mean) / mpc.model.x_std
+        expected = (mpc.model(xn) * mpc.model.y_std + mpc.model.y_mean).numpy()
+    got = forward(x.astype(np.float32))
+    assert got.shape == (5, 64, mpc.layout.n_state)
+    assert np.allclose(got, expected, rtol=1e-4, atol=1e-3 * np.abs(expected).max()), np.abs(got - expected).max()
+
+
+@pytest.mark.slow
+def test_export_writes_the_planner_and_checks_it_served_against_in_process(exported):
+    assert sorted(p.name for p in exported.iterdir()) == ["controller.json", "ensemble.onnx", "planner.npz"]
+    c = Contract.read(exported).data
+    assert c["kind"] == "planner" and c["format"] == 2 and c["policy"]["algorithm"] == "mpc"
+    assert c["export_check"]["decisions"] == 48 and c["export_check"]["max_abs_diff"] <= 1e-5
+    assert [v["name"] for v in c["forecast"]["variables"]] == list(WEATHER) and c["forecast"]["steps"] == 8
+    assert c["forecast"]["sensor"] == "outdoor_temp_c" and c["forecast"]["missing"] == "refuse"
+    assert c["fallback"]["max_spread_k"] >= 0.5 and c["fallback"]["max_input_z"] == 6.0
+    assert [o["initial"] for o in c["outputs"]] == [a.initial for a in load_building("datacenter-2zone").actions]
+    own = np.load(exported / "planner.npz")["own_controls"]
+    assert own.shape == (12, 24, 4) and np.all((own[..., :2] >= 10) & (own[..., :2] <= 40))
+
+
+@pytest.mark.slow
+def test_the_same_request_gets_the_same_answer_and_its_plan_warm_starts_the_next(client):
+    first, again = act(client, body()), act(client, body())
+    assert first.status_code == 200, first.text
+    answer = first.json()
+    assert answer.pop("plan_ms") > 0
+    assert {k: v for k, v in again.json().items() if k != "plan_ms"} == answer  # the sampler is seeded from the request
+    assert answer["fallback"] is False and answer["forecast"] == "given"
+    assert np.array(answer["plan"]).shape == (8, 4)
+    for name, v in answer["setpoints"].items():
+        assert v["unit"] in ("C", "kg/s") and np.isfinite(v["value"]), name
+    warm = act(client, body(plan=answer["plan"]))
+    assert warm.status_code == 200 and warm.json()["setpoints"] != answer["setpoints"]
+
+
+BAD = {
+    "no forecast": ({"forecast": None}, "forecast"),
+    "a short forecast": ({"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "outdoor_rh_pct": [50.0] * 3}},
+                         "forecast.outdoor_rh_pct"),  # fmt: skip
+    "a NaN in the forecast": ({"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)),
+                                            "outdoor_drybulb_c": [float("nan")] * 8}}, "forecast.outdoor_drybulb_c"),
+    "no last setpoints": ({"last_setpoints": None}, "last_setpoints"),
+    "a last setpoint out of range": ({"last_setpoints": {**LAST, "west_fan_kg_s": 70.0}},
+                                     "last_setpoints.west_fan_kg_s"),  # fmt: skip
+    "a plan of the wrong shape": ({"plan": [[0.0, 0.0]]}, "plan"),
+    "no time": ({"time": None}, "time"),
+    "a missing reading": ({"sensors": {k: v for k, v in READINGS.items() if k != "east_temp_c"}},
+                          "sensors.east_temp_c"),  # fmt: skip
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", list(BAD))
+def test_a_request_missing_what_the_planner_needs_is_refused_naming_it(client, case):
+    changes, field = BAD[case]
+    payload = {k: v for k, v in body(**changes).items() if v is not None}
+    r = act(client, json.loads(json.dumps(payload).replace("NaN", "1e999")))
+    assert r.status_code == 422 and r.json()["field"] == field, r.text
+    assert act(client, body()).status_code == 200  # still serving
+
+
+@pytest.mark.slow
+def test_a_reading_far_from_the_data_falls_back_to_the_buildings_own_setpoints(client, exported, caplog):
+    with caplog.at_level(logging.WARNING, logger="parallel_eplus.deploy.planner"):
+        r = act(client, body(sensors={**READINGS, "west_temp_c": 35.0}))
+    answer = r.json()
+    assert r.status_code == 200 and answer["fallback"] is True and answer["plan"] is None
+    assert "west_temp_c is" in answer["reason"] and "standard deviations" in answer["reason"]
+    own = np.load(exported / "planner.npz")["own_controls"][0, 10]  # January, 10:00
+    assert [v["value"] for v in answer["setpoints"].values()] == pytest.approx(own.tolist())
+    assert "fallback at 2021-01-05T10:00:00: west_temp_c" in caplog.text
+
+
+@pytest.mark.slow
+def test_a_forecast_that_contradicts_the_outdoor_sensor_falls_back(client):
+    hot = forecast(dt.datetime(2021, 1, 5, 10))
+    hot["outdoor_drybulb_c"] = [v + 15 for v in hot["outdoor_drybulb_c"]]
+    answer = act(client, body(forecast=hot)).json()
+    assert answer["fallback"] is True and "the forecast's first dry bulb" in answer["reason"]
+    assert client.get("/health").json()["fallback"] >= 1
+
+
+@pytest.mark.slow
+def test_a_planner_exported_with_persistence_answers_without_a_forecast_and_says_so(tmp_path):
+    export(RUN, tmp_path, record_days=1, persistence=True)
+    from fastapi.testclient import TestClient
+
+    from parallel_eplus.deploy.server import create_app
+
+    with TestClient(create_app(tmp_path)) as c:
+        answer = act(c, {k: v for k, v in body().items() if k != "forecast"}).json()
+    assert answer["forecast"] == "persistence" and answer["fallback"] is False
+
+
+@pytest.mark.slow
+def test_with_a_token_every_request_needs_it_and_the_log_never_shows_it(exported, caplog):
+    from fastapi.testclient import TestClient
+
+    from parallel_eplus.deploy.server import create_app
+
+    with caplog.at_level(logging.INFO), TestClient(create_app(exported, token=TOKEN)) as c:
+        missing = act(c, body())
+        wrong = act(c, body(), authorization="Bearer not-the-token")
+        right = act(c, body(), authorization=f"Bearer {TOKEN}")
+        health = c.get("/health")
+    assert missing.status_code == 401 and missing.json()["field"] == "authorization"
+    assert "missing" in missing.json()["error"] and missing.headers["www-authenticate"] == "Bearer"
+    assert wrong.status_code == 401 and "wrong token" in wrong.json()["error"]
+    assert right.status_code == 200 and health.status_code == 401
+    assert "POST /act 401" in caplog.text and "POST /act 200" in caplog.text
+    assert TOKEN not in caplog.text
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "parallel_eplus.cli", *args], capture_output=True, text=True,
+                          timeout=120)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_serving_off_loopback_needs_a_token_file_and_tls_needs_both_files(exported, tmp_path):
+    r = cli("serve", str(exported), "--host", "0.0.0.0")
+    assert r.returncode == 2 and "--token-file" in r.stderr
+    (tmp_path / "empty").write_text("\n")
+    r = cli("serve", str(exported), "--host", "0.0.0.0", "--token-file", str(tmp_path / "empty"))
+    assert r.returncode == 2 and "is empty" in r.stderr
+    r = cli("serve", str(exported), "--ssl-keyfile", str(tmp_path / "key.pem"))
+    assert r.returncode == 2 and "both --ssl-keyfile and --ssl-certfile" in r.stderr
+
+
+@pytest.mark.slow
+def test_over_tls_with_a_token(exported, tmp_path):
+    """uvicorn's TLS with a self-signed certificate (openssl), and the token, as a plant room would run it."""
+    key, cert, token = tmp_path / "key.pem", tmp_path / "cert.pem", tmp_path / "token"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", key, "-out", cert,
+                    "-days", "1", "-subj", "/CN=127.0.0.1"], check=True, capture_output=True)  # fmt: skip
+    token.write_text(TOKEN + "\n")
+    import ssl
+    import urllib.error
+    import urllib.request
+
+    context = ssl.create_default_context(cafile=str(cert))
+    context.check_hostname = False
+    args = ("--token-file", str(token), "--ssl-keyfile", str(key), "--ssl-certfile", str(cert))
+    with serving(exported, tmp_path / "server.log", *args, scheme="https", context=context,
+                 headers={"Authorization": f"Bearer {TOKEN}"}) as url:  # fmt: skip
+        assert url.startswith("https://")
+        assert get(url + "/health", {"Authorization": f"Bearer {TOKEN}"}, context)["kind"] == "planner"
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            get(url + "/health", {}, context)
+        assert refused.value.code == 401
+        refused.value.close()
+    assert TOKEN not in (tmp_path / "server.log").read_text()
+
+
+@pytest.mark.slow
+def test_closed_loop_through_the_served_planner_equals_the_in_process_planner(exported, tmp_path, no_leaks):
+    log = tmp_path / "server.log"
+    with serving(exported, log) as url:
+        health = get(url + "/health")
+        assert health["loaded"] == {"onnxruntime": True, "torch": False, "stable_baselines3": False}
+        planner = planner_controller(f"{RUN / 'best/planner'}=Planner")
+        df = run_sweep([planner, http_controller(url)], ["CA"], 1, 2, tmp_path / "eval", progress=False,
+                       building="datacenter-2zone")  # fmt: skip
+        assert get(url + "/health")["act"] == 96
+    in_process, over_http = (pd.read_parquet(Path(d) / "steps.parquet") for d in df.episode_dir)
+    assert len(in_process) == 96
+    pd.testing.assert_frame_equal(in_process, over_http, check_exact=True)  # every reading and setpoint, every step
+    assert log.read_text().count("POST /act 200") == 96
