@@ -42,6 +42,9 @@ from parallel_eplus.training.callbacks import CallbackHost, EpisodeMetrics, tens
 from parallel_eplus.training.config import TrainConfig
 
 log = logging.getLogger(__name__)
+# The student takes over (DAgger) once it has this many of the planner's steps to learn from: a day of one worker.
+# (A short run whose exploration ended within DAgger's share fitted a student on one step and let it act.)
+DAGGER_MIN_ROWS = 96
 
 
 def train_mpc(cfg: TrainConfig, checkpoint: Path | None, progress: bool, make_vec_env, new_model,
@@ -149,7 +152,7 @@ class _Loop:
         while self.steps < self.cfg.timesteps:
             planning = self.steps >= self.s.explore_steps or explorer is None
             dagger = planning and self.s.distill and self.steps >= (1 - self.s.dagger_share) * self.cfg.timesteps
-            if dagger and not self.student_fitted and self.policy_obs:
+            if dagger and not self.student_fitted and sum(map(len, self.policy_obs)) >= DAGGER_MIN_ROWS:
                 self._refit_student()
             if planning:
                 planned = self.mpc.act(obs, infos, a_last)

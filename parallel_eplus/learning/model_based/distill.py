@@ -25,7 +25,8 @@ from parallel_eplus.runs.checkpoints import save_checkpoint
 from parallel_eplus.runs.run_files import MODEL_FILE
 
 log = logging.getLogger(__name__)
-MIN_UPDATES = 3000
+MIN_UPDATES = 3000  # gradient steps for a large record (a half-year of the planner's steps)
+MAX_EPOCHS = 50  # passes over a small record: the fit's cost in proportion to the data, not 3,000 steps on 300 rows
 
 
 def demonstrations(building: str | None, observations: np.ndarray, actions: np.ndarray) -> Demonstrations:
@@ -39,8 +40,10 @@ def demonstrations(building: str | None, observations: np.ndarray, actions: np.n
 def fit(model, env: VecNormalize, cfg, observations: np.ndarray, actions: np.ndarray) -> dict:
     """Fit `model`'s policy to the planner's actions (`cfg`: the run's TrainConfig); returns the fit's report."""
     demos = demonstrations(cfg.building, observations, actions)
-    # at least `MIN_UPDATES` gradient steps: the imitation settings' epochs are sized for a year of records
-    epochs = max(cfg.imitation.epochs, math.ceil(MIN_UPDATES * cfg.imitation.batch_size / max(len(demos), 1)))
+    # `MIN_UPDATES` gradient steps where the record is large (the imitation settings' epochs are sized for a year of
+    # records), at most `MAX_EPOCHS` passes where it is small: a 2k-step run's refits took minutes on a few hundred rows
+    wanted = math.ceil(MIN_UPDATES * cfg.imitation.batch_size / max(len(demos), 1))
+    epochs = max(cfg.imitation.epochs, min(wanted, MAX_EPOCHS))
     report = clone(model, env, demos, replace(cfg.imitation, epochs=epochs), cfg.seed)
     spread = demos.physical.std(axis=0)  # a constant (the mean action) scores this
     report["rmse_of_mean_action"] = dict(zip(demos.names, spread.round(4).tolist(), strict=True))
