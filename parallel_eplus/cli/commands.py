@@ -210,6 +210,18 @@ def cmd_building_check(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from parallel_eplus.bench import BenchConfig, format_table, replay_run, run
 
+    if args.planner:
+        import json
+
+        from parallel_eplus.bench.decisions import decisions, format_decisions
+
+        r = decisions(args.planner, repeats=args.repeats, options=args.planner_options)
+        print(format_decisions(r))
+        out = args.out.with_name("bench_planner.json") if args.out.name == "bench.json" else args.out
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(r, indent=2) + "\n")
+        print(f"written: {out}")
+        return 0
     if args.replay_run:
         with tempfile.TemporaryDirectory(prefix="parallel-eplus-replay-") as tmp:
             r = replay_run(args.replay_run, args.workers, Path(tmp))

@@ -236,6 +236,11 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--short", action="store_true", help="also short episodes: consecutive ones against EnergyPlus "
                     "alone, reset latency, TRPO steps/s at 1, 7, 14 and 365-day episodes (docs/speed.md)")  # fmt: skip
     be.add_argument(
+        "--planner", type=Path, metavar="RUN",
+        help="instead: a model-based run's planner, ms per decision beside its distilled policy network's",
+    )  # fmt: skip
+    be.add_argument("--planner-options", metavar="NAME=VALUE,...", help="with --planner: as evaluate --planner")
+    be.add_argument(
         "--replay-run", type=Path, metavar="RUN_DIR",
         help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",
     )  # fmt: skip

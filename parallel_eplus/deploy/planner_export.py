@@ -128,8 +128,8 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         "plan": {"required": False, "meaning": "the last answer's `plan` (the rest of its plan, normalized "
                  "increments), sent back to warm-start the search; without it the search starts from holding"},
         "planner": {
-            "settings": {k: settings[k] for k in ("horizon", "candidates", "iterations", "elites", "max_increment",
-                                                  "init_std", "disagreement_weight")},
+            "settings": {k: settings[k] for k in ("horizon", "candidates", "iterations", "elites", "shrink",
+                                                  "max_increment", "init_std", "disagreement_weight")},
             "margin_c": mpc.margin_c, "power_weight": mpc.power_weight, "comfort_weight": mpc.comfort_weight,
             "seed": mpc.seed, "step_minutes": mpc.step_minutes,
             "layout": asdict(mpc.layout), "calendar": mpc.comfort_times.settings(),

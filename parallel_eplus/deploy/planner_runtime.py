@@ -39,6 +39,7 @@ class _Settings:
     """The planner's settings from the contract (the fields `Planner` reads)."""
 
     def __init__(self, values: dict):
+        self.shrink = 1.0  # contracts written before the setting existed
         self.__dict__.update(values)
 
 

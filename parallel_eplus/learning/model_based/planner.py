@@ -64,19 +64,22 @@ class Planner:
         actions' support (low [A], high [A]), the warm start [W, H, A] and one sampler seed per worker."""
         t0 = time.perf_counter()
         c = self.settings
-        w, h, a_n, n = len(s), c.horizon, a_last.shape[1], c.candidates
+        w, h, a_n = len(s), c.horizon, a_last.shape[1]
         s, a_last = np.asarray(s, np.float32), np.asarray(a_last, np.float32)
         low, high = (np.asarray(b, np.float32) for b in support)
         rngs = [np.random.default_rng(seed) for seed in seeds]
         mean, std = np.asarray(warm, np.float32).copy(), np.full((w, h, a_n), c.init_std, np.float32)
-        for _ in range(c.iterations):
+        for i in range(c.iterations):
+            # each iteration searches a narrower distribution: `shrink` of the last one's candidates and elites
+            n = max(int(round(c.candidates * c.shrink**i)), 2)
+            elites = max(int(round(c.elites * c.shrink**i)), 2)
             noise = np.stack([r.standard_normal((n, h, a_n), np.float32) for r in rngs])
             delta = mean[:, None] + std[:, None] * noise
             delta[:, 0] = mean  # the warm start itself is always a candidate
             np.clip(delta, -c.max_increment, c.max_increment, out=delta)
             actions = np.clip(a_last[:, None, None, :] + np.cumsum(delta, axis=2), low, high)
             cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight)  # [W, N]
-            elite = np.argpartition(cost, c.elites - 1, axis=1)[:, : c.elites]
+            elite = np.argpartition(cost, elites - 1, axis=1)[:, :elites]
             chosen = np.take_along_axis(delta, elite[:, :, None, None], axis=1)
             mean, std = chosen.mean(1), np.maximum(chosen.std(1, ddof=1), 0.01)
         rows = np.arange(w)

@@ -30,6 +30,7 @@ class MPCSettings:
     candidates: int = 256
     iterations: int = 3
     elites: int = 32
+    shrink: float = 1.0  # each CEM iteration after the first tries this share of the last one's candidates (elites)
     max_increment: float = 0.15  # per control step, normalized action units
     init_std: float = 0.1
     # The planner's actions stay within the range of each action in the data widened by this
