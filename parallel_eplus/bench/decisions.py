@@ -50,8 +50,7 @@ def decisions(run: Path, days: int = 2, repeats: int = 3, options: str | None = 
     import torch as th
 
     from parallel_eplus.buildings.resources import saved_building
-    from parallel_eplus.deploy.planner_export import planner_source
-    from parallel_eplus.learning.model_based.control import MPC, PlannerOptions
+    from parallel_eplus.learning.model_based.control import MPC, PlannerOptions, planner_source
     from parallel_eplus.runs.policy_files import load_policy
 
     th.set_num_threads(1)

@@ -37,17 +37,6 @@ SAMPLED_DECISIONS = 48
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 
-def planner_source(path: Path) -> Path | None:
-    """The planner.pt a path names: a planner file or folder, or a model-based run (its `best/planner`, the one
-    `--eval-every` chose, else its final `planner`); None for anything else."""
-    from parallel_eplus.learning.model_based.control import PLANNER_FILE, planner_file
-
-    path = Path(path)
-    if path.is_dir() and (path / "best" / "planner" / PLANNER_FILE).is_file():
-        return path / "best" / "planner" / PLANNER_FILE
-    return planner_file(path)
-
-
 def own_controls(building: str | None, weathers: list[str], days: int, workers: int):
     """([12, 24, actions], the run): the building's own setpoints (physical) by month and hour at the step's start,
     the mean over a run of its own controls on `weathers`; months the run did not reach take the nearest month's."""
