@@ -34,6 +34,8 @@ log = logging.getLogger(__name__)
 
 PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (format 1) refuse it
 SAMPLED_DECISIONS = 48
+PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
+                    "disagreement_weight", "comfort_risk")  # what a served plan needs of MPCSettings
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 
@@ -117,8 +119,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         "plan": {"required": False, "meaning": "the last answer's `plan` (the rest of its plan, normalized "
                  "increments), sent back to warm-start the search; without it the search starts from holding"},
         "planner": {
-            "settings": {k: settings[k] for k in ("horizon", "candidates", "iterations", "elites", "shrink",
-                                                  "max_increment", "init_std", "disagreement_weight")},
+            "settings": {k: settings[k] for k in PLANNER_SETTINGS},
             "margin_c": mpc.margin_c, "power_weight": mpc.power_weight, "comfort_weight": mpc.comfort_weight,
             "seed": mpc.seed, "step_minutes": mpc.step_minutes,
             "layout": asdict(mpc.layout), "calendar": mpc.comfort_times.settings(),

@@ -39,7 +39,7 @@ class _Settings:
     """The planner's settings from the contract (the fields `Planner` reads)."""
 
     def __init__(self, values: dict):
-        self.shrink = 1.0  # contracts written before the setting existed
+        self.shrink, self.comfort_risk = 1.0, "mean"  # contracts written before the settings existed
         self.__dict__.update(values)
 
 

@@ -11,7 +11,9 @@ plus `comfort_weight` times the comfort surrogate of the constraint (training/la
 bounds shrunk by the margin, rising by 1 per margin beyond, here unbounded so the search is pushed back in), where
 the band applies (the bounds: the spec's band, or each zone's thermostat schedules, calendar.py),
 plus `disagreement_weight` times the members' spread of each zone temperature (K): the planner stays where the
-model knows the building. Each member follows its own trajectory (PETS's "TS-inf").
+model knows the building. Each member follows its own trajectory (PETS's "TS-inf"); the comfort term is the
+members' mean, or with `comfort_risk = "worst"` the worst member's (a chance constraint: the band held by every
+member's prediction, not by their average).
 
 Numpy and onnxruntime only, and a function of its arguments: the sampler is seeded per decision from what the
 decision sees (`decision_seed`), so a served planner answers a request exactly as the in-process one acts.
@@ -102,13 +104,15 @@ class Planner:
         lo, hi = lo + self.margin, hi - self.margin
         applied = np.repeat(applies, n, axis=0) * (comfort_weight / self.margin / k)  # [W*N, H]
         total, worst = np.zeros(b, np.float32), np.zeros(b, np.float32)
+        worst_case = self.settings.comfort_risk == "worst"
         for step in range(h):
             inputs[:, :, ns + a_n : ns + 2 * a_n] = actions[:, :, step].reshape(b, a_n)
             inputs[:, :, ns + 2 * a_n :] = np.repeat(exo[:, step], n, axis=0)
             out = self.forward(inputs)  # [E, W*N, ns]
             temps = inputs[:, :, :k] + out[:, :, :k]
             energy = out[:, :, k:].sum(-1).mean(0) * self.power_weight  # [W*N]
-            over = np.maximum(np.maximum(lo[:, step] - temps, temps - hi[:, step]), 0).sum(-1).mean(0)
+            over = np.maximum(np.maximum(lo[:, step] - temps, temps - hi[:, step]), 0).sum(-1)  # [E, W*N]
+            over = over.max(0) if worst_case else over.mean(0)
             if e > 1:
                 centred = temps - temps.mean(0)
                 sd = np.sqrt((centred * centred).sum(0) / (e - 1))  # [W*N, K]

@@ -43,6 +43,9 @@ class MPCSettings:
     # outweighed the data center's savings tenfold and held the planner at the built-in controls' corner (-2 %
     # in a 14-day pilot); at 0.2 the planner goes where its data are thin, learns there (Dyna), and saves 25 %.
     disagreement_weight: float = 0.2
+    # The comfort term over the members: "mean" (their average violation), or "worst" (the largest: the band kept
+    # if every member's prediction keeps it, a chance constraint from the ensemble's spread).
+    comfort_risk: str = "mean"
     noise: float = 0.0  # exploration added to the planner's action in training (normalized units)
     # Distillation (distill.py): the policy network fitted to the planner's own actions.
     distill: bool = True
@@ -51,6 +54,12 @@ class MPCSettings:
     # own states alone drifted to 30 C in closed loop (2 % in band on CA). A worker more than 2 K outside the band
     # is steered by the planner meanwhile.
     dagger_share: float = 0.25
+
+    def __post_init__(self):
+        if self.comfort_risk not in ("mean", "worst"):
+            raise ValueError(f"comfort_risk {self.comfort_risk!r}: 'mean' or 'worst'")
+        if not 0 < self.shrink <= 1:
+            raise ValueError(f"shrink {self.shrink}: within (0, 1]")
 
     @classmethod
     def from_text(cls, text: str | None, base: MPCSettings | None = None) -> MPCSettings:
@@ -71,4 +80,5 @@ class MPCSettings:
             else:
                 parsed = type(default)(float(value)) if isinstance(default, int) else type(default)(value)
             setattr(settings, key, parsed)
+        settings.__post_init__()
         return settings
