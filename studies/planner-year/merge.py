@@ -1,0 +1,47 @@
+"""The planner-year study's per-seed evaluations as one table per building and forecast, written by `evaluate`'s own
+report code (results.csv, results.md with the seeds' intervals, seeds.csv, figures) into
+results/model-based/<building>/year-planner[-<forecast>]/.
+
+    .venv/bin/python studies/planner-year/merge.py WORK RESULTS
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from parallel_eplus.evaluation.controllers import BASELINE_LABEL
+from parallel_eplus.evaluation.results import write_results
+
+log = logging.getLogger("planner-year")
+
+
+def merge(folder: Path, out: Path) -> None:
+    parts = sorted(folder.glob("seed*/results.csv"))
+    if not parts:
+        return
+    frames = [pd.read_csv(p) for p in parts]
+    df = pd.concat(frames, ignore_index=True)
+    df = df[[c for c in df.columns if not c.endswith("_vs_builtin")]]
+    baseline = df[df.controller == BASELINE_LABEL].drop_duplicates("weather")  # the same episode in every seed's
+    df = pd.concat([baseline, df[df.controller != BASELINE_LABEL]], ignore_index=True)
+    write_results(df, out)
+    log.info("%s: %d seeds -> %s", folder, len(parts), out)
+
+
+def main() -> None:
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    work, results = Path(sys.argv[1]), Path(sys.argv[2])
+    for folder in sorted(p for p in work.glob("*/*") if p.is_dir() and p.parent.name != "code"):
+        building, forecast = folder.parent.name, folder.name
+        if building.startswith("code-"):
+            continue
+        name = "year-planner" if forecast == "perfect" else f"year-planner-{forecast}"
+        merge(folder, results / building / name)
+
+
+if __name__ == "__main__":
+    main()
