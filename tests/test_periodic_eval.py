@@ -39,6 +39,7 @@ def steps_of(model_zip: Path) -> int:
         (EvalSettings(every=0, target="in_band_pct>=99"), "--eval-every"),
         (EvalSettings(every=192, target="in band >= 99"), "KPI>=VALUE"),
         (EvalSettings(every=-1), ">= 0"),
+        (EvalSettings(every=192, scenarios=["summer"]), "--eval-scenarios summer"),
     ],
 )
 def test_bad_evaluation_settings_are_refused_before_anything_runs(tmp_path, settings, message):
@@ -114,3 +115,21 @@ def test_a_target_not_met_is_not_recorded(tmp_path, no_leaks):
     assert list(table["timesteps"].unique()) == [192] and not table["target_met"].any()
     assert not (run / "target.json").exists()
     assert (run / "best" / "model.zip").is_file()  # the best so far is kept whether or not it meets the target
+
+
+@pytest.mark.slow
+def test_evaluation_periods_can_cover_the_seasons(tmp_path, no_leaks):
+    """`--eval-scenarios start,peak_cool`: each weather's January days and BOPTEST's peak-cooling fortnight, the
+    figures their mean, the built-in controls run once per period; a controller chosen in winter meets summer too."""
+    cfg = config(tmp_path, "seasons", 192, every=192, weathers=["CA"], scenarios=["start", "peak_cool"])
+    train(cfg, progress=False)
+    run = tmp_path / "runs" / "seasons"
+    table = pd.read_csv(run / "evaluations.csv")
+    assert set(table["weather"]) == {"all", "CA", "CA peak_cool"}
+    rows = table.set_index("weather")
+    assert rows.loc["CA", "energy_kwh"] < rows.loc["CA peak_cool", "energy_kwh"] / 10  # a day against two weeks
+    assert rows.loc["all", "in_band_pct"] == pytest.approx(rows.loc[["CA", "CA peak_cool"], "in_band_pct"].mean())
+    assert set(json.loads((run / "eval_baseline.json").read_text())) == {"CA|1", "CA|1|peak_cool"}
+    periods = json.loads((run / "eval-periods" / "scenarios.json").read_text())
+    assert periods["CA"]["peak_cool"]["start_day"] > 150  # summer
+

@@ -139,6 +139,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             weathers=[w.strip() for w in (args.eval_weathers or "").split(",") if w.strip()],
             days=args.eval_days,
             target=args.target,
+            scenarios=[s.strip() for s in args.eval_scenarios.split(",") if s.strip()],
         ),  # fmt: skip
         mpc=MPCSettings.from_text(args.mpc),
     )

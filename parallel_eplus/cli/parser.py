@@ -154,6 +154,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--eval-weathers", metavar="W,...", help="default: the training weathers (never IL or VA)")
     tr.add_argument("--eval-days", type=int, metavar="N", help="evaluation episode length (default: --run-days)")
     tr.add_argument(
+        "--eval-scenarios", metavar="S,...", default="start",
+        help="the periods of each evaluation weather, averaged: start (--eval-days from January 1) and BOPTEST's "
+        "peak_heat, typical_heat, peak_cool, typical_cool (two weeks after a week's warm-up); e.g. start,peak_cool "
+        "so a controller chosen in winter must hold summer too",
+    )  # fmt: skip
+    tr.add_argument(
         "--target", metavar="KPI>=X,...",
         help='e.g. "in_band_pct>=99.6,energy_change_pct<=-22" (energy against the built-in controller): the step '
         "and wall time it is first met go to runs/<name>/target.json; with a target, best = met, then lowest energy",

@@ -34,6 +34,9 @@ class EvalSettings:
     weathers: list[str] = field(default_factory=list)  # none: the training weathers
     days: int | None = None  # episode length; None: the run's own
     target: str | None = None  # e.g. "in_band_pct>=99.6,energy_change_pct<=-22"
+    # the periods each weather is evaluated on: "start" (`days` from January 1) and BOPTEST's two-week scenarios
+    # (peak_heat, typical_heat, peak_cool, typical_cool, evaluation/scenarios.py); the figures are their means
+    scenarios: list[str] = field(default_factory=lambda: ["start"])
 
     def check(self, training_weathers: list[str]) -> None:
         if self.every < 0:
@@ -47,6 +50,10 @@ class EvalSettings:
                 "evaluate`; choosing checkpoints on them would tune on them. Use training or other weathers (default: "
                 f"{','.join(training_weathers)})"
             )
+        known = ("start", "peak_heat", "typical_heat", "peak_cool", "typical_cool")
+        unknown = [s for s in self.scenarios if s not in known]
+        if unknown or not self.scenarios:
+            raise ValueError(f"--eval-scenarios {','.join(unknown) or '(none)'}: one or more of {', '.join(known)}")
         if self.target is not None:
             parse_target(self.target)
             if not self.every:

@@ -93,32 +93,56 @@ class Evaluator:
             self._last_step = int(done.max()) if done is not False and len(done) else -1
         return self._last_step
 
-    def _config(self, controller: Controller, weather: str, out: Path) -> SimulationConfig:
-        cfg = _job_config(controller, weather, self.sim.building, self.days, self.sim.reward, out)
+    def _config(self, controller: Controller, weather: str, scenario: str, out: Path) -> SimulationConfig:
+        folder = out if scenario == "start" else out / scenario
+        cfg = _job_config(controller, weather, self.sim.building, self.days, self.sim.reward, folder)
         model = "baseline" if controller.kind == "baseline" else self.sim.model
         # the run's own objective (what the reward's energy term counts); the weather as it is, without noise
-        return dataclasses.replace(cfg, model=model, step_timeout_s=self.sim.step_timeout_s, keep_episodes=1,
-                                   objective=self.sim.objective)  # fmt: skip
+        cfg = dataclasses.replace(cfg, model=model, step_timeout_s=self.sim.step_timeout_s, keep_episodes=1,
+                                  objective=self.sim.objective)  # fmt: skip
+        if scenario != "start":  # BOPTEST's two weeks of this weather, after a week's warm-up
+            p = self._periods(scenario)[weather_label(weather)]
+            cfg.run_days, cfg.start_day, cfg.start_weekday, cfg.warmup_days = (
+                p.run_days, p.start_day, p.weekday, p.warmup_days
+            )  # fmt: skip
+        return cfg
 
-    def _run(self, controller: Controller, weathers: list[str], out: Path) -> dict[str, dict]:
-        jobs = [(controller, self._config(controller, w, out)) for w in weathers]
+    def _periods(self, scenario: str) -> dict:
+        """Each weather's period for a BOPTEST scenario, from a year of the built-in controls (once per run)."""
+        from parallel_eplus.evaluation.scenarios import find_periods
+
+        return find_periods(scenario, self.weathers, self.sim.building, self.run_dir / "eval-periods", self.workers,
+                            progress=False)  # fmt: skip
+
+    def _run(self, controller: Controller, cases: list[tuple[str, str]], out: Path) -> dict[str, dict]:
+        """`cases`: (weather, scenario) pairs; rows keyed `_case(weather, scenario)`."""
+        jobs = [(controller, self._config(controller, w, s, out)) for w, s in cases]
         rows, _ = run_local(jobs, min(self.workers, len(jobs)), _NoBar())
-        return {str(r["weather"]): r for r in rows}
+
+        def scenario_of(row: dict) -> str:  # a period's episodes run in a folder of its name (`_config`)
+            return next((s for s in self.settings.scenarios if s in Path(row["episode_dir"]).parts), "start")
+
+        return {_case(str(r["weather"]), scenario_of(r)): r for r in rows}
+
+    @property
+    def cases(self) -> list[tuple[str, str]]:
+        return [(w, s) for w in self.weathers for s in self.settings.scenarios]
 
     def baseline(self) -> dict[str, dict]:
-        """The built-in controller's KPIs per evaluation weather: run once, then read from the run folder."""
+        """The built-in controller's KPIs per evaluation weather and period: run once, then read from the run
+        folder."""
         path = self.run_dir / BASELINE_FILE
         cached = json.loads(path.read_text()) if path.is_file() else {}
-        key = lambda w: f"{weather_label(w)}|{self.days}"  # noqa: E731
-        missing = [w for w in self.weathers if key(w) not in cached]
+        key = lambda w, s: f"{weather_label(w)}|{self.days}" + ("" if s == "start" else f"|{s}")  # noqa: E731
+        missing = [(w, s) for w, s in self.cases if key(w, s) not in cached]
         if missing:
-            log.info("evaluation: the built-in controller on %s (%d days), once", ",".join(missing), self.days)
+            log.info("evaluation: the built-in controller on %s, once", ", ".join(_case(w, s) for w, s in missing))
             out = self.run_dir / "eval-episodes" / "baseline"
             rows = self._run(Controller(BASELINE_LABEL, "baseline"), missing, out)
-            cached |= {key(w): _kpis(rows[weather_label(w)]) for w in missing}
+            cached |= {key(w, s): _kpis(rows[_case(weather_label(w), s)]) for w, s in missing}
             io.write_text(path, json.dumps(cached, indent=2))
             shutil.rmtree(out, ignore_errors=True)
-        return {weather_label(w): cached[key(w)] for w in self.weathers}
+        return {_case(weather_label(w), s): cached[key(w, s)] for w, s in self.cases}
 
     def evaluate(self, act: Callable[[np.ndarray], np.ndarray], steps: int, wall_s: float,
                  features: tuple[bool, bool]) -> EvalResult:  # fmt: skip
@@ -138,7 +162,7 @@ class Evaluator:
         out = self.run_dir / "eval-episodes" / "latest"
         shutil.rmtree(out, ignore_errors=True)
         t0 = time.monotonic()
-        rows = self._run(controller, self.weathers, out)
+        rows = self._run(controller, self.cases, out)
         eval_s = time.monotonic() - t0
         per_weather = {}
         for weather, row in rows.items():
@@ -183,6 +207,11 @@ def record(result: EvalResult, logger, save_best: Callable[[], None], run_dir: P
         save_best()
         io.write_text(run_dir / BEST_DIR / "evaluation.json",
                       json.dumps({"timesteps": result.steps, **result.kpis}, indent=2))  # fmt: skip
+
+
+def _case(weather: str, scenario: str) -> str:
+    """An evaluation episode's name: its weather, and its BOPTEST period where it has one (`CA peak_cool`)."""
+    return weather if scenario == "start" else f"{weather} {scenario}"
 
 
 class _NoBar:
