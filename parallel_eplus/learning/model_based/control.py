@@ -165,42 +165,39 @@ def planner_file(path: str | Path) -> Path | None:
 @dataclass(frozen=True)
 class PlannerOptions:
     """How a saved planner runs in an evaluation: its forecast (`FORECASTS`: the weather file, or it with BOPTEST's
-    low, medium or high errors) and settings overriding its own (`MPCSettings` fields: candidates, iterations, ...)."""
+    low, medium or high errors), its sampler's seed, and settings overriding its own (`MPCSettings` fields:
+    candidates, iterations, ...)."""
 
     forecast: str = "perfect"
     settings: str = ""
+    seed: int | None = None  # None: the planner's own
 
     @classmethod
     def parse(cls, text: str | None) -> PlannerOptions:
-        """`"forecast=medium,candidates=128"`: `forecast` and any of MPCSettings' planner fields."""
-        forecast, rest = "perfect", []
+        """`"forecast=medium,seed=1,candidates=128"`: `forecast`, `seed` and any of MPCSettings' fields."""
+        forecast, seed, rest = "perfect", None, []
         for item in filter(None, (p.strip() for p in (text or "").split(","))):
             key, _, value = item.partition("=")
             if key.strip() == "forecast":
                 forecast = value.strip()
                 if forecast not in FORECASTS:
                     raise ValueError(f"--planner forecast={forecast!r}: one of {', '.join(FORECASTS)}")
+            elif key.strip() == "seed":
+                seed = int(value)
             else:
                 rest.append(item)
         MPCSettings.from_text(",".join(rest))  # refused by name here
-        return cls(forecast, ",".join(rest))
+        return cls(forecast, ",".join(rest), seed)
 
     def apply(self, mpc: MPC) -> MPC:
         if self.settings:
             mpc.settings = mpc.planner.settings = MPCSettings.from_text(self.settings, mpc.settings)
             mpc.warm = np.zeros((len(mpc.warm), mpc.settings.horizon, mpc.layout.n_actions), np.float32)
+        if self.seed is not None:
+            mpc.seed = self.seed
         if self.forecast != "perfect":
             mpc.forecasts = Forecasts(mpc.building, self.forecast, mpc.seed)
         return mpc
-
-
-def planner_source(path: Path) -> Path | None:
-    """The planner.pt a path names: a planner file or folder, or a model-based run (its `best/planner`, the one
-    `--eval-every` chose, else its final `planner`); None for anything else."""
-    path = Path(path)
-    if path.is_dir() and (path / "best" / "planner" / PLANNER_FILE).is_file():
-        return path / "best" / "planner" / PLANNER_FILE
-    return planner_file(path)
 
 
 class PlannerActor:
