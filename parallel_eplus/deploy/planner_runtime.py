@@ -39,7 +39,7 @@ class _Settings:
     """The planner's settings from the contract (the fields `Planner` reads)."""
 
     def __init__(self, values: dict):
-        self.shrink, self.comfort_risk = 1.0, "mean"  # contracts written before the settings existed
+        self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
         self.__dict__.update(values)
 
 

@@ -13,7 +13,8 @@ the band applies (the bounds: the spec's band, or each zone's thermostat schedul
 plus `disagreement_weight` times the members' spread of each zone temperature (K): the planner stays where the
 model knows the building. Each member follows its own trajectory (PETS's "TS-inf"); the comfort term is the
 members' mean, or with `comfort_risk = "worst"` the worst member's (a chance constraint: the band held by every
-member's prediction, not by their average).
+member's prediction, not by their average); `terminal_weight` weighs the horizon's last step's comfort more (a
+plan must not end at the band's edge, where the next plan has no room).
 
 Numpy and onnxruntime only, and a function of its arguments: the sampler is seeded per decision from what the
 decision sees (`decision_seed`), so a served planner answers a request exactly as the in-process one acts.
@@ -117,7 +118,8 @@ class Planner:
             over = np.maximum(lo[:, step] - temps, temps - hi[:, step])
             np.maximum(over, 0, out=over)
             over = over.sum(-1)  # [E, W*N]
-            total += (over.max(0) if worst_case else over.sum(0) * (1 / e)) * applied[:, step]
+            weight = applied[:, step] * (1 + self.settings.terminal_weight if step == h - 1 else 1)
+            total += (over.max(0) if worst_case else over.sum(0) * (1 / e)) * weight
             if e > 1:
                 centred = temps - temps.sum(0) * (1 / e)
                 sd = np.sqrt((centred * centred).sum(0) * (1 / (e - 1)))  # [W*N, K]

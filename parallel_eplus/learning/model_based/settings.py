@@ -46,6 +46,7 @@ class MPCSettings:
     # The comfort term over the members: "mean" (their average violation), or "worst" (the largest: the band kept
     # if every member's prediction keeps it, a chance constraint from the ensemble's spread).
     comfort_risk: str = "mean"
+    terminal_weight: float = 0.0  # the horizon's last step's comfort term counts 1 + this many times
     noise: float = 0.0  # exploration added to the planner's action in training (normalized units)
     # Distillation (distill.py): the policy network fitted to the planner's own actions.
     distill: bool = True
