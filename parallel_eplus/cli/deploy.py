@@ -16,6 +16,17 @@ def add_commands(sub) -> None:
     se.add_argument("controller", type=Path, metavar="DIR", help="a folder written by `export`")
     se.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
     se.add_argument("--port", type=int, default=8000)
+    bn = se.add_argument_group("BACnet supervisor (docs/deploy.md#bacnet; needs the [bacnet] extra)")
+    bn.add_argument("--bacnet", metavar="ADDRESS", help="supervise the BACnet/IP device at host[:port] instead of "
+                    "serving HTTP: read its points, write the setpoints at --priority every control step")  # fmt: skip
+    bn.add_argument("--point-map", type=Path, default=Path("points.toml"),
+                    help="the device's points (TOML; `simulate --bacnet` writes one; default points.toml)")  # fmt: skip
+    bn.add_argument("--priority", type=int, default=8, help="command priority, 8-16 (default 8; 1-7 refused)")
+    bn.add_argument("--local", metavar="ADDRESS", help="this supervisor's own host[/mask][:port] (default: the "
+                    "device's host, its port + 1)")  # fmt: skip
+    bn.add_argument("--device-id", type=int, default=598, help="this supervisor's BACnet device instance")
+    bn.add_argument("--bbmd", metavar="HOST:PORT", help="register as a foreign device with this BBMD")
+    bn.add_argument("--bbmd-ttl", type=int, default=900, help="foreign device registration lifetime, s")
     se.set_defaults(func=cmd_serve, needs="serve")  # not `train`: a plant room's install
 
 
@@ -36,7 +47,22 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def needs_bacnet() -> None:
+    from parallel_eplus.cli import extras
+
+    if (absent := extras.missing("bacnet")) is not None:
+        raise ValueError(extras.install_hint(absent, "bacnet"))
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
+    if args.bacnet:
+        needs_bacnet()
+        from parallel_eplus.deploy.bacnet_supervisor import SupervisorConfig, supervise
+
+        return supervise(SupervisorConfig(
+            args.controller, args.bacnet, args.point_map, args.priority, args.local, args.device_id, args.bbmd,
+            args.bbmd_ttl,
+        ))  # fmt: skip
     try:
         from parallel_eplus.deploy.server import serve  # no torch: onnxruntime, FastAPI and the contract only
     except ImportError as e:

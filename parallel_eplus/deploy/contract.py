@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import datetime as dt
 import difflib
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -134,3 +135,20 @@ class Contract:
 
     def setpoints(self, row: np.ndarray) -> dict[str, dict]:
         return {o["name"]: {"value": float(v), "unit": o["unit"]} for o, v in zip(self.outputs, row, strict=True)}
+
+
+def load_session(directory: Path, contract: Contract):
+    """The controller's onnxruntime session and its (input, output) names; an ONNX file that is not the one its
+    contract was exported with (sha256) is refused."""
+    import onnxruntime as ort
+
+    onnx_path = Path(directory) / contract.data["onnx"].get("file", ONNX_FILE)
+    if not onnx_path.is_file():
+        raise FileNotFoundError(f"{onnx_path} not found beside {Path(directory) / CONTRACT_FILE}")
+    expected = contract.data["onnx"].get("sha256")
+    if expected and hashlib.sha256(onnx_path.read_bytes()).hexdigest() != expected:
+        raise ValueError(f"{onnx_path} is not the file its contract was written for (sha256 differs): export again")
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1  # one row per call: threads cost more than they give
+    session = ort.InferenceSession(str(onnx_path), options, providers=["CPUExecutionProvider"])
+    return session, (contract.data["onnx"]["input"], contract.data["onnx"]["output"])

@@ -7,7 +7,6 @@ JSON names the field (`{"error", "field"}`), never a crash; every request is log
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import sys
@@ -15,11 +14,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
+import onnxruntime  # noqa: F401 - loaded here, not on the first request
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 
-from parallel_eplus.deploy.contract import ONNX_FILE, Contract, InputError
+from parallel_eplus.deploy.contract import Contract, InputError, load_session
 
 log = logging.getLogger("parallel_eplus.deploy.server")
 
@@ -71,16 +70,7 @@ def create_app(directory: Path) -> FastAPI:
     """The app for one exported controller; the ONNX file is checked against its contract's hash."""
     directory = Path(directory)
     contract = Contract.read(directory)
-    onnx_path = directory / contract.data["onnx"].get("file", ONNX_FILE)
-    if not onnx_path.is_file():
-        raise FileNotFoundError(f"{onnx_path} not found beside {directory / 'controller.json'}")
-    expected = contract.data["onnx"].get("sha256")
-    if expected and hashlib.sha256(onnx_path.read_bytes()).hexdigest() != expected:
-        raise ValueError(f"{onnx_path} is not the file its contract was written for (sha256 differs): export again")
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = 1  # one row per request: threads cost more than they give
-    session = ort.InferenceSession(str(onnx_path), options, providers=["CPUExecutionProvider"])
-    io_names = contract.data["onnx"]["input"], contract.data["onnx"]["output"]
+    session, io_names = load_session(directory, contract)
     app = FastAPI(title=f"parallel-eplus controller: {contract.data['building']['name']}", docs_url=None)
     app.add_middleware(RequestLog)
     started = time.time()
