@@ -27,6 +27,9 @@ def add_commands(sub) -> None:
     bn.add_argument("--device-id", type=int, default=598, help="this supervisor's BACnet device instance")
     bn.add_argument("--bbmd", metavar="HOST:PORT", help="register as a foreign device with this BBMD")
     bn.add_argument("--bbmd-ttl", type=int, default=900, help="foreign device registration lifetime, s")
+    bn.add_argument("--no-advance", dest="advance", action="store_false",
+                    help="on a lockstep device, leave `advance` to another client (a co-simulation clock)",
+                    )  # fmt: skip
     se.set_defaults(func=cmd_serve, needs="serve")  # not `train`: a plant room's install
 
 
@@ -61,7 +64,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
         return supervise(SupervisorConfig(
             args.controller, args.bacnet, args.point_map, args.priority, args.local, args.device_id, args.bbmd,
-            args.bbmd_ttl,
+            args.bbmd_ttl, advance=args.advance,
         ))  # fmt: skip
     try:
         from parallel_eplus.deploy.server import serve  # no torch: onnxruntime, FastAPI and the contract only

@@ -40,6 +40,7 @@ class SupervisorConfig:
     bbmd_ttl: int = 900
     poll_s: float = 0.005  # how often to look for the device's next step
     give_up_s: float = 60.0  # the device silent this long: give the building back and exit
+    advance: bool = True  # a lockstep device (its map has `advance`): write the next step's number after acting
 
     def __post_init__(self):
         if not 8 <= self.priority <= 16:
@@ -130,22 +131,28 @@ class Supervisor:
             await self.relinquish()
         for p, value in zip(self.setpoints, [] if row is None else row.tolist(), strict=False):
             by = self._override(p, state[p.name])
-            if by is not None:
-                if self.overridden.get(p.name) != by:
-                    log.warning("%s is overridden at priority %d (value %.3f): not fighting it; ours (priority %d) "
-                                "waits", p.name, by, state[p.name][by], self.config.priority)  # fmt: skip
-                self.overridden[p.name] = by
-                self.written.pop(p.name, None)  # never relinquish a slot someone else holds
+            if by is not None and self.overridden.get(p.name) != by:
+                log.warning("%s is overridden at priority %d (value %.3f): not fighting it%s", p.name, by,
+                            state[p.name][by], "; ours stays current below it" if by < self.config.priority else
+                            ": someone else's command in our slot, left alone")  # fmt: skip
+            elif by is None and self.overridden.get(p.name) is not None:
+                log.info("%s: the override is gone; priority %d acts again", p.name, self.config.priority)
+            if by is None:
+                self.overridden.pop(p.name, None)
+                await self.write(p, value, self.config.priority)
+                self.written[p.name] = float(np.float32(value))
                 continue
-            if self.overridden.pop(p.name, None) is not None:
-                log.info("%s: the override is gone; writing at priority %d again", p.name, self.config.priority)
-            await self.write(p, value, self.config.priority)
+            self.overridden[p.name] = by
+            if by == self.config.priority:
+                self.written.pop(p.name, None)  # never write, nor relinquish, a slot someone else holds
+                continue
+            await self.write(p, value, self.config.priority)  # below a higher priority's command: not fighting it
             self.written[p.name] = float(np.float32(value))
         self.acted += 1
-        await self.write(self.map.one("heartbeat"), float(k)) if self.map.one("heartbeat") else None
-        await self.write(self.map.one("priority"), float(self.config.priority)) if self.map.one("priority") else None
-        if self.map.one("advance") is not None:
-            await self.write(self.map.one("advance"), float(k + 1))
+        control = {"heartbeat": k, "priority": self.config.priority, "advance": k + 1 if self.config.advance else None}
+        for role, value in control.items():  # what the device's watchdog reads; the lockstep clock
+            if value is not None and (point := self.map.one(role)) is not None:
+                await self.write(point, float(value))
 
     async def relinquish(self) -> None:
         """Null at our priority on every point we hold: the device's own control (or a lower priority) resumes."""
