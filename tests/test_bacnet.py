@@ -266,6 +266,36 @@ def test_a_lower_priority_write_loses_and_an_operator_override_wins_unfought(loo
     assert steps[["west_setpoint_c", "east_fan_kg_s"]][30:].isna().all().all()  # the rogue gone, the supervisor too
 
 
+@pytest.mark.slow
+def test_with_no_command_at_any_priority_the_device_runs_the_building_s_own_controls_exactly(loop, tmp_path):
+    """Warmed up under its own controls and never commanded, the device's day is `evaluate --baseline`'s."""
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
+
+    loop.device("--warmup", "builtin")
+
+    async def drive():
+        async with Client(loop) as c:
+            await c.clock(0, 96, supervised=False)
+
+    asyncio.run(drive())
+    assert loop.wait("device") == 0, loop.log("device")
+    device = loop.steps()
+    sim = Simulation(SimulationConfig(weather="CA", run_days=1, model="baseline", output_dir=str(tmp_path / "b")))
+    try:
+        sim.launch()
+        sim.first_observation()
+        terminated = False
+        while not terminated:
+            sim.send(np.zeros(0))  # the built-in controller: no action
+            terminated = sim.receive()[2]
+    finally:
+        sim.close()
+    builtin = pd.read_parquet(glob.glob(str(tmp_path / "b" / "*" / "steps.parquet"))[0])
+    assert device[["west_setpoint_c", "east_setpoint_c", "west_fan_kg_s", "east_fan_kg_s"]].isna().all().all()
+    pd.testing.assert_frame_equal(device[builtin.columns], builtin, check_exact=True)
+
+
 def test_the_point_map_is_checked_against_the_contract(tmp_path):
     m = PointMap.generate([("a_c", "C")], [("s_c", "C", 10.0, 40.0)], lockstep=True, device=f"{HOST}:47808")
     path = m.write(tmp_path / "points.toml")
