@@ -267,6 +267,36 @@ def test_a_lower_priority_write_loses_and_an_operator_override_wins_unfought(loo
 
 
 @pytest.mark.slow
+def test_in_accelerated_real_time_the_supervisor_follows_the_device_s_clock(loop, controller):
+    """A step every 0.25 s: the supervisor acts on each step from when it connects; SIGTERM gives the building back
+    within a step (no watchdog warning: it said it left); the stopped device keeps the records so far."""
+    loop.device("--step-seconds", "0.25")
+    loop.supervisor(controller)
+
+    async def drive():
+        async with Client(loop) as c:
+            start = await c.read("heartbeat")
+            await c.until("heartbeat", 0)
+            first = int(await c.read("heartbeat"))
+            await c.until("heartbeat", first + 6)
+            loop.procs["supervisor"].send_signal(signal.SIGTERM)
+            assert loop.wait("supervisor", 30) == 0
+            last = int(await c.read("heartbeat"))
+            await c.until("step", last + 3)
+            return start, first, last
+
+    start, first, last = asyncio.run(drive())
+    loop.procs["device"].send_signal(signal.SIGTERM)
+    assert loop.wait("device") == 130, loop.log("device")
+    steps = loop.steps()
+    commanded = steps["west_setpoint_c"].notna()
+    # step `last` ran the supervisor's last answer or, if its relinquish came first, the building's own: either
+    assert start == -1 and not commanded[:first].any() and commanded[first:last].all()
+    assert not commanded[last + 1 :].any()
+    assert len(steps) >= last + 2 and "did not act" not in loop.log("device")
+
+
+@pytest.mark.slow
 def test_with_no_command_at_any_priority_the_device_runs_the_building_s_own_controls_exactly(loop, tmp_path):
     """Warmed up under its own controls and never commanded, the device's day is `evaluate --baseline`'s."""
     from parallel_eplus.engine.config import SimulationConfig

@@ -211,12 +211,15 @@ class Supervisor:
             loop.remove_signal_handler(s)
         if self.app is None:
             return
-        if self.written:
-            try:
-                await asyncio.wait_for(self.relinquish(), timeout=10)
+        try:
+            held = bool(self.written)
+            await asyncio.wait_for(self.relinquish(), timeout=10)
+            if held:
                 log.info("relinquished priority %d: the building's own controls act", self.config.priority)
-            except Exception as e:  # noqa: BLE001 - the device may be gone; nothing more can be done from here
-                log.error("could not relinquish priority %d (%s): the device's watchdog must", self.config.priority, e)
+            if self.acted and (point := self.map.one("priority")) is not None:  # gone: nothing for a watchdog
+                await asyncio.wait_for(self.write(point, 0.0), timeout=10)
+        except Exception as e:  # noqa: BLE001 - the device may be gone; nothing more can be done from here
+            log.error("could not relinquish priority %d (%s): the device's watchdog must", self.config.priority, e)
         await bacnet.stop(self.app)
 
 
