@@ -297,6 +297,34 @@ def test_in_accelerated_real_time_the_supervisor_follows_the_device_s_clock(loop
 
 
 @pytest.mark.slow
+def test_a_device_with_only_its_points_is_supervised_on_the_supervisor_s_own_clock(loop, controller):
+    """A real device's points list: sensors and setpoints, no step, time or heartbeat. The supervisor acts every
+    --step-seconds on its own clock (its local time for the clock features) and relinquishes on SIGTERM."""
+    loop.device("--step-seconds", "0.3")
+    full = PointMap.read(loop.map)
+    real = PointMap([p for p in full.points if p.role in ("sensor", "setpoint")], full.device, full.device_instance)
+    real.write(loop.tmp / "real.toml")
+
+    async def drive():
+        async with Client(loop) as c:
+            loop.start("supervisor", "serve", str(controller), "--bacnet", loop.address, "--point-map",
+                       str(loop.tmp / "real.toml"), "--local", f"{HOST}:{loop.ports['supervisor']}",
+                       "--step-seconds", "0.3")  # fmt: skip
+            await c.until("step", 20)
+            loop.procs["supervisor"].send_signal(signal.SIGTERM)
+            assert loop.wait("supervisor", 30) == 0
+            await c.until("step", await c.read("step") + 3)
+
+    asyncio.run(drive())
+    loop.procs["device"].send_signal(signal.SIGTERM)
+    assert loop.wait("device") == 130, loop.log("device")
+    commanded = loop.steps()["west_setpoint_c"].notna()
+    assert commanded.sum() >= 5 and not commanded.iloc[-2:].any()
+    log = loop.log("supervisor")
+    assert "no `time` point" in log and "relinquished priority 8" in log
+
+
+@pytest.mark.slow
 def test_with_no_command_at_any_priority_the_device_runs_the_building_s_own_controls_exactly(loop, tmp_path):
     """Warmed up under its own controls and never commanded, the device's day is `evaluate --baseline`'s."""
     from parallel_eplus.engine.config import SimulationConfig
@@ -331,12 +359,12 @@ def test_the_point_map_is_checked_against_the_contract(tmp_path):
     path = m.write(tmp_path / "points.toml")
     back = PointMap.read(path)
     assert back == m
-    back.check(["a_c"], ["s_c"], needs_time=True)
+    back.check(["a_c"], ["s_c"])
     with pytest.raises(ValueError, match="no sensor point for b_c"):
-        back.check(["a_c", "b_c"], ["s_c"], needs_time=False)
-    back.points = [p for p in back.points if p.role != "time"]
-    with pytest.raises(ValueError, match="`time` point"):
-        back.check(["a_c"], ["s_c"], needs_time=True)
+        back.check(["a_c", "b_c"], ["s_c"])
+    back.points[0].role = "thermostat"
+    with pytest.raises(ValueError, match="role 'thermostat'"):
+        back.check(["a_c"], ["s_c"])
 
 
 @pytest.mark.parametrize("priority", [1, 7, 17])

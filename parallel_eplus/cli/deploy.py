@@ -27,6 +27,8 @@ def add_commands(sub) -> None:
     bn.add_argument("--device-id", type=int, default=598, help="this supervisor's BACnet device instance")
     bn.add_argument("--bbmd", metavar="HOST:PORT", help="register as a foreign device with this BBMD")
     bn.add_argument("--bbmd-ttl", type=int, default=900, help="foreign device registration lifetime, s")
+    bn.add_argument("--step-seconds", type=float, help="a device without a `step` point (a real one): act every this "
+                    "many seconds (default: the map's control_step_s)")  # fmt: skip
     bn.add_argument("--no-advance", dest="advance", action="store_false",
                     help="on a lockstep device, leave `advance` to another client (a co-simulation clock)",
                     )  # fmt: skip
@@ -64,7 +66,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
         return supervise(SupervisorConfig(
             args.controller, args.bacnet, args.point_map, args.priority, args.local, args.device_id, args.bbmd,
-            args.bbmd_ttl, advance=args.advance,
+            args.bbmd_ttl, advance=args.advance, step_seconds=args.step_seconds,
         ))  # fmt: skip
     try:
         from parallel_eplus.deploy.server import serve  # no torch: onnxruntime, FastAPI and the contract only

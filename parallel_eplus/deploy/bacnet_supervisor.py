@@ -11,6 +11,7 @@ higher priority, or someone else's at its own, is an operator's override: logged
 from __future__ import annotations
 
 import asyncio
+import datetime as dt
 import logging
 import signal
 import time
@@ -41,6 +42,8 @@ class SupervisorConfig:
     poll_s: float = 0.005  # how often to look for the device's next step
     give_up_s: float = 60.0  # the device silent this long: give the building back and exit
     advance: bool = True  # a lockstep device (its map has `advance`): write the next step's number after acting
+    step_seconds: float | None = None  # a device without a `step` point: act every this many s (default: the map's
+    # control_step_s)
 
     def __post_init__(self):
         if not 8 <= self.priority <= 16:
@@ -59,7 +62,9 @@ class Supervisor:
         self.session, self.io_names = load_session(config.controller, self.contract)
         self.map = PointMap.read(config.point_map)
         names = [o["name"] for o in self.contract.outputs]
-        self.map.check([s["name"] for s in self.contract.sensors], names, self.contract.needs_time)
+        self.map.check([s["name"] for s in self.contract.sensors], names)
+        if self.contract.needs_time and self.map.one("time") is None:
+            log.info("no `time` point: the policy's clock features from this machine's local time")
         by_name = {p.name: p for p in self.map.points}
         self.sensors = [by_name[s["name"]] for s in self.contract.sensors]
         self.setpoints = [next(p for p in self.map.role("setpoint") if p.name == n) for n in names]
@@ -103,8 +108,8 @@ class Supervisor:
     def answer(self, state: dict) -> np.ndarray | None:
         """The controller's setpoints for the readings, or None (a fallback) where it cannot take them."""
         body = {"sensors": {p.name: float(state[p.name]) for p in self.sensors}}
-        if self.contract.needs_time:
-            body["time"] = str(state.get("time", ""))
+        if self.contract.needs_time:  # the device's clock, else ours: the local time the coming step starts
+            body["time"] = str(state.get("time") or dt.datetime.now().isoformat(timespec="seconds"))
         try:
             obs = self.contract.observation(body)
         except InputError as e:
@@ -177,7 +182,13 @@ class Supervisor:
                                           self.config.bbmd_ttl)  # fmt: skip
             log.info("supervising %s at priority %d with %s (%s)", self.device, self.config.priority,
                      self.config.controller, self.contract.data["policy"]["run"])  # fmt: skip
+            timer = self.map.one("step") is None  # a real device: our own clock, a step every control step
+            period = self.config.step_seconds or self.map.control_step_s
+            tick = time.monotonic()
             while not self.stopping.is_set():
+                if timer and time.monotonic() < tick:
+                    await asyncio.sleep(min(0.1, tick - time.monotonic()))
+                    continue
                 try:
                     state = await asyncio.wait_for(self.read(), timeout=10)
                     heard = time.monotonic()
@@ -189,6 +200,8 @@ class Supervisor:
                         break
                     await asyncio.sleep(1.0)
                     continue
+                if timer:
+                    state["step"], tick = self.acted, tick + period
                 step, steps = state.get("step"), state.get("steps")
                 if steps is not None and bacnet.real(step) >= bacnet.real(steps) > 0:
                     log.info("the device's episode is over (step %d)", int(bacnet.real(step)))

@@ -75,9 +75,9 @@ class PointMap:
         points += [Point(r, r, *CONTROL_POINTS[r]) for r in roles]
         return cls(points, device, device_instance, control_step_s)
 
-    def check(self, sensors: list[str], setpoints: list[str], needs_time: bool) -> None:
-        """Every contract sensor and setpoint has exactly one point of its role; the time too where the policy
-        observes the clock; types and roles are known. A ValueError names what is wrong and where."""
+    def check(self, sensors: list[str], setpoints: list[str]) -> None:
+        """Every contract sensor and setpoint has a point of its role; types and roles are known, objects listed
+        once. A ValueError names what is wrong and where. (Without a `time` point the supervisor's clock serves.)"""
         for p in self.points:
             if p.role not in ROLES:
                 raise ValueError(f"point map: {p.name}: role {p.role!r} is not one of {', '.join(ROLES)}")
@@ -91,8 +91,6 @@ class PointMap:
             missing = [n for n in names if n not in mapped]
             if missing:
                 raise ValueError(f"point map: no {role} point for {', '.join(missing)} (the contract needs them)")
-        if needs_time and self.one("time") is None:
-            raise ValueError("point map: the policy observes the clock, so a `time` point is needed (local time)")
 
     def to_toml(self) -> str:
         lines = ["# BACnet points of one device (parallel-eplus, docs/deploy.md#bacnet). Edit object types and",
