@@ -268,9 +268,9 @@ def test_a_lower_priority_write_loses_and_an_operator_override_wins_unfought(loo
 
 @pytest.mark.slow
 def test_in_accelerated_real_time_the_supervisor_follows_the_device_s_clock(loop, controller):
-    """A step every 0.25 s: the supervisor acts on each step from when it connects; SIGTERM gives the building back
+    """A step every 0.5 s: the supervisor acts on each step from when it connects; SIGTERM gives the building back
     within a step (no watchdog warning: it said it left); the stopped device keeps the records so far."""
-    loop.device("--step-seconds", "0.25")
+    loop.device("--step-seconds", "0.5")
     loop.supervisor(controller)
 
     async def drive():
@@ -290,8 +290,9 @@ def test_in_accelerated_real_time_the_supervisor_follows_the_device_s_clock(loop
     assert loop.wait("device") == 130, loop.log("device")
     steps = loop.steps()
     commanded = steps["west_setpoint_c"].notna()
-    # step `last` ran the supervisor's last answer or, if its relinquish came first, the building's own: either
-    assert start == -1 and not commanded[:first].any() and commanded[first:last].all()
+    # its first answer and its relinquish can each land after the step they were meant for (a loaded machine: the
+    # first answer loads onnxruntime's session), so the steps `first` and `last` may be either
+    assert start == -1 and not commanded[:first].any() and commanded[first + 1 : last].all()
     assert not commanded[last + 1 :].any()
     assert len(steps) >= last + 2 and "did not act" not in loop.log("device")
 

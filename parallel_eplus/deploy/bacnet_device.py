@@ -104,8 +104,9 @@ class Device:
                                     description=desc, is_commandable=True)  # fmt: skip
             elif p.object_type == "characterstring-value":
                 made = character_string(instance=p.instance, name=p.name, presentValue="")
-            elif p.object_type == "analog-input":
-                made = analog_input(instance=p.instance, name=p.name, properties=units, presentValue=0.0)
+            elif p.object_type == "analog-input":  # `step` -1: no observation yet (EnergyPlus warming up)
+                start = -1.0 if p.role == "step" else 0.0
+                made = analog_input(instance=p.instance, name=p.name, properties=units, presentValue=start)
             else:
                 start = {"advance": 0.0, "heartbeat": -1.0}.get(p.role, 0.0)
                 made = analog_value(instance=p.instance, name=p.name, properties=units, presentValue=start)

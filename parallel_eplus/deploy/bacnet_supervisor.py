@@ -206,7 +206,7 @@ class Supervisor:
                 if steps is not None and bacnet.real(step) >= bacnet.real(steps) > 0:
                     log.info("the device's episode is over (step %d)", int(bacnet.real(step)))
                     break
-                if step == last:
+                if step == last or bacnet.real(step) < 0:  # no new observation (-1: the device is still starting)
                     await asyncio.sleep(self.config.poll_s)
                     continue
                 await self.act(state)
