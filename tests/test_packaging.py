@@ -167,6 +167,8 @@ def test_the_serve_extra_installs_a_controller_server_without_the_training_stack
     assert {"onnxruntime", "fastapi", "uvicorn", "numpy", "parallel-eplus"} <= set(serve), sorted(serve)
     heavy = {"torch", "stable-baselines3", "sb3-contrib", "pyenergyplus-lbnl", "gymnasium", "pandas", "matplotlib"}
     assert not heavy & set(serve), f"the serve extra pulls {sorted(heavy & set(serve))}"
+    supervisor = _resolve(f"{wheel}[serve,bacnet]")  # `serve --bacnet`: BAC0 on bacpypes3, still no training stack
+    assert {"bac0", "bacpypes3", "onnxruntime"} <= set(supervisor) and not heavy & set(supervisor), sorted(supervisor)
     extras = PYPROJECT["project"]["optional-dependencies"]
     assert any(r.startswith("torch==") for r in extras["train"]) and "parallel-eplus[train]" in extras["export"]
 

@@ -46,6 +46,8 @@ def _format_summary(summary: dict) -> str:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
+    if args.bacnet:
+        return _simulate_bacnet(args)
     from tqdm import tqdm
 
     from parallel_eplus.envs.env import EnergyPlusEnv
@@ -76,6 +78,24 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             print(f"episode records: {info['episode_dir']}")
     finally:
         env.close()
+    return 0
+
+
+def _simulate_bacnet(args: argparse.Namespace) -> int:
+    from parallel_eplus.cli.deploy import needs_bacnet
+
+    needs_bacnet()
+    from parallel_eplus.deploy.bacnet_device import DeviceConfig, simulate
+
+    summary = simulate(DeviceConfig(
+        args.bacnet, args.device_id, args.building, args.weather, args.days, args.step_seconds, args.point_map,
+        args.output_dir, args.warmup, args.watchdog,
+    ))  # fmt: skip
+    if summary is None:
+        return 130
+    print(_format_summary(summary))
+    if args.output_dir:
+        print(f"episode records: {summary['episode_dir']}")
     return 0
 
 

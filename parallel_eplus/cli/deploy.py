@@ -32,6 +32,22 @@ def add_commands(sub) -> None:
                     "(required off loopback)")
     se.add_argument("--ssl-keyfile", type=Path, help="TLS: the server's private key (PEM), with --ssl-certfile")
     se.add_argument("--ssl-certfile", type=Path, help="TLS: the server's certificate chain (PEM)")
+    bn = se.add_argument_group("BACnet supervisor (docs/deploy.md#bacnet; needs the [bacnet] extra)")
+    bn.add_argument("--bacnet", metavar="ADDRESS", help="supervise the BACnet/IP device at host[:port] instead of "
+                    "serving HTTP: read its points, write the setpoints at --priority every control step")  # fmt: skip
+    bn.add_argument("--point-map", type=Path, default=Path("points.toml"),
+                    help="the device's points (TOML; `simulate --bacnet` writes one; default points.toml)")  # fmt: skip
+    bn.add_argument("--priority", type=int, default=8, help="command priority, 8-16 (default 8; 1-7 refused)")
+    bn.add_argument("--local", metavar="ADDRESS", help="this supervisor's own host[/mask][:port] (default: the "
+                    "device's host, its port + 1)")  # fmt: skip
+    bn.add_argument("--device-id", type=int, default=598, help="this supervisor's BACnet device instance")
+    bn.add_argument("--bbmd", metavar="HOST:PORT", help="register as a foreign device with this BBMD")
+    bn.add_argument("--bbmd-ttl", type=int, default=900, help="foreign device registration lifetime, s")
+    bn.add_argument("--step-seconds", type=float, help="a device without a `step` point (a real one): act every this "
+                    "many seconds (default: the map's control_step_s)")  # fmt: skip
+    bn.add_argument("--no-advance", dest="advance", action="store_false",
+                    help="on a lockstep device, leave `advance` to another client (a co-simulation clock)",
+                    )  # fmt: skip
     se.set_defaults(func=cmd_serve, needs="serve")  # not `train`: a plant room's install
 
 
@@ -55,7 +71,22 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def needs_bacnet() -> None:
+    from parallel_eplus.cli import extras
+
+    if (absent := extras.missing("bacnet")) is not None:
+        raise ValueError(extras.install_hint(absent, "bacnet"))
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
+    if args.bacnet:
+        needs_bacnet()
+        from parallel_eplus.deploy.bacnet_supervisor import SupervisorConfig, supervise
+
+        return supervise(SupervisorConfig(
+            args.controller, args.bacnet, args.point_map, args.priority, args.local, args.device_id, args.bbmd,
+            args.bbmd_ttl, advance=args.advance, step_seconds=args.step_seconds,
+        ))  # fmt: skip
     try:
         from parallel_eplus.deploy.server import serve  # no torch: onnxruntime, FastAPI and the contract only
     except ImportError as e:

@@ -10,11 +10,13 @@ from importlib import metadata
 # 'torch==2.13.0; extra == "train"', 'parallel-eplus[train]; extra == "export"'
 REQUIREMENT = re.compile(r"\s*([A-Za-z0-9_.-]+)\s*(?:\[([^\]]*)\])?[^;]*;.*extra\s*==\s*[\"'](\w+)[\"']")
 PACKAGE = "parallel-eplus"
+IMPORT_NAMES = {"bac0": "BAC0"}  # distributions imported by another name than theirs lower-cased
 
 
 def _module(distribution: str) -> str:
     """The import name of a distribution we depend on (pyenergyplus-lbnl installs `pyenergyplus`)."""
-    return distribution.lower().replace("-", "_").removesuffix("_lbnl")
+    name = distribution.lower().replace("-", "_").removesuffix("_lbnl")
+    return IMPORT_NAMES.get(name, name)
 
 
 def _requirements() -> list[tuple[str, list[str], str]]:

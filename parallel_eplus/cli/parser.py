@@ -30,6 +30,18 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     sim.add_argument("--seed", type=int, default=0)
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
+    bn = sim.add_argument_group("as a BACnet/IP device (docs/deploy.md#bacnet; needs the [bacnet] extra)")
+    bn.add_argument("--bacnet", metavar="ADDRESS", help="serve the episode as a BACnet/IP device on host[/mask][:port]"
+                    ": sensors as analog inputs, setpoints as commandable analog values")  # fmt: skip
+    bn.add_argument("--step-seconds", type=float, help="a control step every this many seconds (default: lockstep, "
+                    "a step each time a client writes the `advance` point)")  # fmt: skip
+    bn.add_argument("--point-map", type=Path, default=Path("points.toml"), help="where to write the device's points")
+    bn.add_argument("--device-id", type=int, default=599, help="the device's BACnet instance (default 599)")
+    bn.add_argument("--warmup", choices=["initial", "builtin"], default="initial",
+                    help="EnergyPlus warms up holding the initial action (as training does) or under its own controls",
+                    )  # fmt: skip
+    bn.add_argument("--watchdog", type=int, default=1, metavar="STEPS",
+                    help="relinquish a supervisor that missed this many steps (default 1)")  # fmt: skip
     sim.set_defaults(func=c.cmd_simulate)
 
     tr = sub.add_parser("train", help="train TRPO (or PPO) on parallel EnergyPlus workers (paper settings by default)")

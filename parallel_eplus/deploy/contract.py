@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import datetime as dt
 import difflib
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -153,3 +154,27 @@ class Contract:
 
     def setpoints(self, row: np.ndarray) -> dict[str, dict]:
         return {o["name"]: {"value": float(v), "unit": o["unit"]} for o, v in zip(self.outputs, row, strict=True)}
+
+
+def verified_file(directory: Path, entry: dict, what: str) -> Path:
+    """A file the contract names (`entry`: its `file` and `sha256`), checked against its hash: a file edited or
+    swapped after export is refused."""
+    path = Path(directory) / entry["file"]
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found beside {Path(directory) / CONTRACT_FILE}")
+    expected = entry.get("sha256")
+    if expected and hashlib.sha256(path.read_bytes()).hexdigest() != expected:
+        raise ValueError(f"{path} is not the {what} its contract was written for (sha256 differs): export again")
+    return path
+
+
+def load_session(directory: Path, contract: Contract):
+    """The controller's onnxruntime session and its (input, output) names; an ONNX file that is not the one its
+    contract was exported with (sha256) is refused."""
+    import onnxruntime as ort
+
+    onnx_path = verified_file(directory, {"file": ONNX_FILE, **contract.data["onnx"]}, "file")
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1  # one row per call: threads cost more than they give
+    session = ort.InferenceSession(str(onnx_path), options, providers=["CPUExecutionProvider"])
+    return session, (contract.data["onnx"]["input"], contract.data["onnx"]["output"])

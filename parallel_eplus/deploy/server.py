@@ -8,7 +8,6 @@ crash; every request is logged with its status and time, never with its token (`
 
 from __future__ import annotations
 
-import hashlib
 import hmac
 import json
 import logging
@@ -17,11 +16,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
+import onnxruntime  # noqa: F401 - loaded here, not on the first request
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 
-from parallel_eplus.deploy.contract import ONNX_FILE, Contract, InputError
+from parallel_eplus.deploy.contract import ONNX_FILE, Contract, InputError, load_session, verified_file
 
 log = logging.getLogger("parallel_eplus.deploy.server")
 
@@ -74,11 +73,7 @@ class PolicyRuntime:
 
     def __init__(self, directory: Path, contract: Contract):
         self.contract = contract
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = 1  # one row per request: threads cost more than they give
-        path = directory / contract.data["onnx"].get("file", ONNX_FILE)
-        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-        self.io_names = contract.data["onnx"]["input"], contract.data["onnx"]["output"]
+        self.session, self.io_names = load_session(directory, contract)
 
     def act(self, body: dict) -> dict:
         obs = self.contract.observation(body)
@@ -88,26 +83,15 @@ class PolicyRuntime:
         return {"setpoints": self.contract.setpoints(row), "time": body.get("time")}
 
 
-def _verified(directory: Path, entry: dict, what: str) -> Path:
-    """A file the contract names, checked against its hash (a file edited or swapped after export is refused)."""
-    path = directory / entry["file"]
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} not found beside {directory / 'controller.json'}")
-    expected = entry.get("sha256")
-    if expected and hashlib.sha256(path.read_bytes()).hexdigest() != expected:
-        raise ValueError(f"{path} is not the {what} its contract was written for (sha256 differs): export again")
-    return path
-
-
 def load_runtime(directory: Path):
     """The runtime an exported folder holds: a policy network or a planner (`kind`), its files verified."""
     directory = Path(directory)
     contract = Contract.read(directory)
-    _verified(directory, {"file": ONNX_FILE, **contract.data["onnx"]}, "graph")
     if contract.data.get("kind") == "planner":
         from parallel_eplus.deploy.planner_runtime import PlannerRuntime
 
-        _verified(directory, contract.data["arrays"], "arrays")
+        verified_file(directory, {"file": ONNX_FILE, **contract.data["onnx"]}, "graph")
+        verified_file(directory, contract.data["arrays"], "arrays")
         return PlannerRuntime(directory, contract)
     return PolicyRuntime(directory, contract)
 

@@ -36,6 +36,14 @@ def scale_action(action, low: Sequence[float], high: Sequence[float], names: tup
     return [lo + (v + 1.0) * 0.5 * (hi - lo) for v, lo, hi in zip(a, low, high, strict=True)]
 
 
+def released(action, low: Sequence[float], high: Sequence[float], names: tuple[str, ...]) -> list[float]:
+    """`scale_action` where NaN is kept: that element is released to the building's own control (relinquish)."""
+    a = np.asarray(action, dtype=np.float64).reshape(-1)
+    free = np.isnan(a)
+    scaled = scale_action(np.where(free, 0.0, a), low, high, names)
+    return [math.nan if f else v for f, v in zip(free.tolist(), scaled, strict=True)]
+
+
 class ActionMap:
     """What a policy's action means on its way to EnergyPlus, per `SimulationConfig.residual_space`: the action
     itself, scaled to [low, high]; with a residual scale, a correction of the rule-based controller's action
@@ -50,6 +58,7 @@ class ActionMap:
         self._own = tuple(own[0] for own in setup.building.own) if setup.builtin_residual else None
         self._own_step = tuple(self.scale * (e.high - e.low) / 2 for e in elements)  # a unit of correction
         self._setup = setup
+        self._release = setup.config.relinquish  # NaN: that element released to the building's own control
         self.base = None  # the rule-based controller a residual action corrects (`start`)
 
     def start(self) -> None:
@@ -60,6 +69,8 @@ class ActionMap:
         """The values sent to EnergyPlus for `action` given the last observation's `info`."""
         if self._own is not None:
             return [v * k for v, k in zip(check_action(action, self.policy_names), self._own_step, strict=True)]
+        if self._release:
+            return released(action, self.low, self.high, self.names)
         if self.base is None:
             return scale_action(action, self.low, self.high, self.names)
         correction = self.scale * np.array(check_action(action, self.policy_names))

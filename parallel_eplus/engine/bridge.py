@@ -53,13 +53,18 @@ class Bridge:
         replay: np.ndarray | None = None,
         building: str | None = None,
         builtin_residual: bool = False,
+        relinquish: bool = False,
     ):
         """With no pipes (`--raw`): EnergyPlus alone, for benchmarks. It holds the initial action all run,
         or with `replay` (steps x actions, physical units) takes each step's action from it instead.
 
         `builtin_residual`: each action is a correction (physical units) to what the building's own controls set
         each actuator to, its setpoint schedule (`Building.own`), read here at the step it applies to: read on
-        the env's side, with the observation, it would be the step before's, a step late at every change."""
+        the env's side, with the observation, it would be the step before's, a step late at every change.
+
+        `relinquish`: an action value that is NaN releases its actuators (EnergyPlus's own control for them: the
+        model's setpoint managers and fan controls), and every value is written at every apply-point call, each HVAC
+        system timestep, since the model's setpoint managers write those nodes at each (the BACnet device)."""
         self.api = api
         self.x = api.exchange
         self.act_fd = act_fd
@@ -68,7 +73,8 @@ class Bridge:
         self.sensors = spec.sensors
         # Meters and scaled values are read here, in Python: the C bridge reads output variables as they are.
         # With `builtin_residual`, each actuator's own schedule is added here too.
-        self.python_only = builtin_residual or any(s.meter or s.scale != 1.0 for s in self.sensors)
+        self.relinquish = relinquish
+        self.python_only = builtin_residual or relinquish or any(s.meter or s.scale != 1.0 for s in self.sensors)
         self.own = spec.own if builtin_residual else None
         self.own_sensors: list[int] = []  # per actuator handle: the sensor index of its own schedule
         self.step_s = 900.0  # seconds per zone timestep, to turn a meter's joules into watts
@@ -204,7 +210,9 @@ class Bridge:
             self._exchange(self._time(state, at_start=True) + self.last_obs)
         if self.awaiting:
             self._take_action()
-        if self.pending:
+        if self.relinquish:
+            self._apply_or_release(state)
+        elif self.pending:
             self.pending = False
             set_value = self.x.api.setActuatorValue
             action = self.action
@@ -217,6 +225,18 @@ class Bridge:
             self._arm()
         elif not self.started:
             self._hold()
+
+    def _apply_or_release(self, state) -> None:
+        """Each actuator set to its action's value, or released to the model's own control where that is NaN."""
+        set_value, reset = self.x.api.setActuatorValue, self.x.api.resetActuator
+        action = self.action
+        for h, i in self.actuator_handles:
+            v = action[i]
+            if v == v:  # not NaN: commanded
+                set_value(state, h, v)
+            else:  # a node setpoint's own setpoint manager writes it again before each apply point; a fan's flow and
+                reset(state, h)  # a thermostat's schedule return to the model's control
+        self.pending = False
 
     def _apply_residual(self, state, set_value) -> None:
         """Each actuator: its own schedule's value now plus the action's correction (none before the run period:

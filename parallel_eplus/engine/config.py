@@ -73,6 +73,10 @@ class SimulationConfig:
     fixed_seed: bool = False  # every episode's seed is `seed` itself (evaluate's noisy year N: the same for all)
     forecast_hours: int = 0  # > 0: the outdoor dry bulb's next N hours end the observation (buildings/forecast.py)
     forecast_error: str | None = None  # BOPTEST's "low", "medium" or "high" error on that forecast; None: exact
+    # The model's own controls under the actions (the BACnet device, deploy/bacnet_device.py): the building's
+    # `baseline_idf` runs with the actions' actuators, and an action element that is NaN releases them to its own
+    # setpoint managers and fan controls for that step. `initial_action` NaN: warm-up under its own controls too.
+    relinquish: bool = False
 
 
 RESIDUAL_SPACES = ("action", "demand", "builtin")

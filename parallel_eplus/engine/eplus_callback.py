@@ -38,6 +38,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--initial-action", type=float, nargs="*", default=[])
     p.add_argument("--builtin-residual", action="store_true",
                    help="actions correct the building's own setpoint schedules (bridge.py)")  # fmt: skip
+    p.add_argument("--relinquish", action="store_true",
+                   help="a NaN action value releases its actuators to the model's own control")  # fmt: skip
     p.add_argument("--spin-us", type=float, default=0.0, help="poll this long for an action before blocking")
     p.add_argument("--native", help="the compiled C bridge (native.py) to run each step in; default: Python")
     p.add_argument("--replay", help="without pipes: a .npy of one action row per step (physical units) to apply")
@@ -83,7 +85,7 @@ def _run(args: argparse.Namespace, opened: list[int]) -> int:
         replay = np.load(args.replay) if args.replay else None
         bridge = Bridge(
             api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay,
-            args.building, args.builtin_residual,
+            args.building, args.builtin_residual, args.relinquish,
         )  # fmt: skip
         for s in bridge.sensors:  # EnergyPlus gathers only requested variables: a model need not report them
             if not s.meter:

@@ -69,8 +69,9 @@ def serve_template(argv: list[str], side: Any) -> int:
     state = api.state_manager.new_state()
     api.runtime.set_console_output_status(state, False)
     bridge = ParkingBridge(
-        api, None, None, args.model, args.steps, args.initial_action, 0.0, None, args.building, args.builtin_residual
-    )
+        api, None, None, args.model, args.steps, args.initial_action, 0.0, None, args.building, args.builtin_residual,
+        args.relinquish,
+    )  # fmt: skip
     child: dict = {}
     bridge.park = lambda b: _park(b, reply, Path.cwd(), child)
     for s in bridge.sensors:

@@ -60,6 +60,7 @@ class WorkerSetup:
         """The EnergyPlus-side program's arguments that every episode of this worker shares."""
         building = ["--building", str(self.building.spec.path)] if self.config.building else []
         own = ["--builtin-residual"] if self.builtin_residual else []
+        own += ["--relinquish"] if self.config.relinquish else []
         return ["--model", self.model.name, *building, "--steps", str(self.steps_per_episode),
                 "--initial-action", *map(str, self.initial_action), *own]  # fmt: skip
 
@@ -105,6 +106,10 @@ class WorkerSetup:
                 raise ValueError(f"objective {config.objective!r} needs the building's HVAC signals ([kpis] hvac)")
             comfort = dataclasses.replace(comfort, objective=config.objective)
         idf = Path(config.idf) if config.idf else model.idf
+        if config.relinquish and not config.idf:  # the model with its own controls, under the actions' actuators
+            if config.residual_scale or config.model == "baseline":
+                raise ValueError("relinquish runs the building's own controls under plain actions: no residual")
+            idf = (building.control("baseline") if config.building else control_model("baseline")).idf
         if not idf.is_file():
             raise FileNotFoundError(f"model file not found: {idf}")
         weathers = weathers or [config.weather]

@@ -200,6 +200,15 @@ class PlannerOptions:
         return mpc
 
 
+def planner_source(path: Path) -> Path | None:
+    """The planner.pt a path names: a planner file or folder, or a model-based run (its `best/planner`, the one
+    `--eval-every` chose, else its final `planner`); None for anything else."""
+    path = Path(path)
+    if path.is_dir() and (path / "best" / "planner" / PLANNER_FILE).is_file():
+        return path / "best" / "planner" / PLANNER_FILE
+    return planner_file(path)
+
+
 class PlannerActor:
     """A saved planner as an evaluation controller: (observation, info) -> normalized action, one episode."""
 

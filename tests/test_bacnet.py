@@ -1,0 +1,376 @@
+"""BACnet in closed loop over loopback: `simulate --bacnet` (a real EnergyPlus episode as a BACnet/IP device) and
+`serve --bacnet` (the exported controller as its supervisor), each its own process, talking BACnet/IP over UDP on
+127.0.0.1 with a port each; the test's own BAC0 client stands in for an operator, a rogue client or a clock."""
+
+from __future__ import annotations
+
+import asyncio
+import glob
+import math
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from parallel_eplus.deploy.export import export
+from parallel_eplus.deploy.point_map import PointMap
+
+pytest.importorskip("BAC0")
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = ROOT / "results" / "paper" / "models" / "paper-ca-co-fl-time"  # TRPO with time features, committed
+HOST = "127.0.0.1"
+
+
+def udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind((HOST, 0))
+        return s.getsockname()[1]
+
+
+def udp_bound(ports: list[int]) -> list[int]:
+    """Which of `ports` a UDP socket on this machine still holds (/proc/net/udp, hex ports)."""
+    held = set()
+    for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
+        held.add(int(line.split()[1].split(":")[1], 16))
+    return [p for p in ports if p in held]
+
+
+@pytest.fixture(scope="module")
+def controller(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("controller")
+    export(MODEL, out)
+    return out
+
+
+class Loop:
+    """A device and a supervisor, each a `parallel-eplus` process with its log in a file, and the test's client;
+    every one of them ended, and its UDP port checked free, at the end."""
+
+    def __init__(self, tmp: Path):
+        self.tmp, self.procs, self.ports = tmp, {}, {k: udp_port() for k in ("device", "supervisor", "client")}
+        self.map = tmp / "points.toml"
+        self.address = f"{HOST}:{self.ports['device']}"
+
+    def start(self, name: str, *args: str) -> subprocess.Popen:
+        log = (self.tmp / f"{name}.log").open("w")
+        self.procs[name] = subprocess.Popen([sys.executable, "-m", "parallel_eplus.cli", *args], stdout=log,
+                                            stderr=subprocess.STDOUT, text=True)  # fmt: skip
+        return self.procs[name]
+
+    def device(self, *extra: str) -> None:
+        self.start("device", "simulate", "--bacnet", self.address, "--days", "1", "--weather", "CA",
+                   "--point-map", str(self.map), "--output-dir", str(self.tmp / "episodes"), *extra)  # fmt: skip
+        deadline = time.monotonic() + 120
+        while not self.map.is_file():  # written once its objects are up
+            assert self.procs["device"].poll() is None, self.log("device")
+            assert time.monotonic() < deadline, self.log("device")
+            time.sleep(0.1)
+
+    def supervisor(self, controller: Path, *extra: str) -> None:
+        self.start("supervisor", "serve", str(controller), "--bacnet", self.address, "--point-map", str(self.map),
+                   "--local", f"{HOST}:{self.ports['supervisor']}", *extra)  # fmt: skip
+
+    def log(self, name: str) -> str:
+        return (self.tmp / f"{name}.log").read_text()
+
+    def wait(self, name: str, timeout: float = 120) -> int:
+        return self.procs[name].wait(timeout=timeout)
+
+    def steps(self) -> pd.DataFrame:
+        return pd.read_parquet(glob.glob(str(self.tmp / "episodes" / "*" / "steps.parquet"))[0])
+
+    def close(self) -> None:
+        for p in self.procs.values():
+            if p.poll() is None:
+                p.terminate()
+                p.wait(timeout=60)
+        assert udp_bound(list(self.ports.values())) == []  # no UDP socket left behind
+
+
+@pytest.fixture
+def loop(tmp_path, no_leaks):
+    lp = Loop(tmp_path)
+    try:
+        yield lp
+    finally:
+        lp.close()
+
+
+class Client:
+    """The test's BACnet client (BAC0): reads a point, writes at a priority, drives the lockstep clock."""
+
+    def __init__(self, lp: Loop):
+        self.lp, self.map = lp, PointMap.read(lp.map)
+
+    async def __aenter__(self):
+        from parallel_eplus.deploy import bacnet
+
+        self.app = await bacnet.start(f"{HOST}:{self.lp.ports['client']}", 597, "test client")
+        return self
+
+    async def __aexit__(self, *exc):
+        from parallel_eplus.deploy import bacnet
+
+        await bacnet.stop(self.app)
+
+    def _point(self, name: str):
+        return next(p for p in self.map.points if p.name == name)
+
+    async def read(self, name: str) -> float:
+        from bacpypes3.pdu import Address
+        from bacpypes3.primitivedata import ObjectIdentifier
+
+        app = self.app.this_application.app
+        value = await app.read_property(Address(self.lp.address), ObjectIdentifier(self._point(name).object_id),
+                                        "present-value")  # fmt: skip
+        return float(value)
+
+    async def write(self, name: str, value: float | None, priority: int | None = None) -> None:
+        from bacpypes3.pdu import Address
+        from bacpypes3.primitivedata import Null, ObjectIdentifier, Real
+
+        app = self.app.this_application.app
+        v = Null(()) if value is None else Real(value)
+        where = Address(self.lp.address), ObjectIdentifier(self._point(name).object_id)
+        await app.write_property(*where, "present-value", v, priority=priority)
+
+    async def until(self, name: str, at_least: float, timeout: float = 60) -> None:
+        deadline = time.monotonic() + timeout
+        while await self.read(name) < at_least:
+            assert time.monotonic() < deadline, f"{name} never reached {at_least}"
+            await asyncio.sleep(0.005)
+
+    async def clock(self, start: int, stop: int, supervised: bool = True) -> None:
+        """Advance steps start..stop-1 once the supervisor has acted on each (its heartbeat), or at once."""
+        for k in range(start, stop):
+            await self.until("step", k)
+            if supervised:
+                await self.until("heartbeat", k)
+            await self.write("advance", float(k + 1))
+
+
+def in_process(controller: Path, tmp: Path) -> pd.DataFrame:
+    """The exported controller acting in process on the device's simulation (the building's own controls under
+    the actuators), its setpoints as a BACnet REAL carries them (float32), normalized as the device does."""
+    from parallel_eplus.deploy.contract import Contract, load_session
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
+
+    contract = Contract.read(controller)
+    session, (inp, out) = load_session(controller, contract)
+    low, high = (np.array([o[k] for o in contract.outputs]) for k in ("low", "high"))
+    names = [s["name"] for s in contract.sensors]
+    sim = Simulation(SimulationConfig(weather="CA", run_days=1, output_dir=str(tmp), relinquish=True,
+                                      native_bridge=False))  # fmt: skip
+    try:
+        sim.launch()
+        obs, info = sim.first_observation()
+        while True:
+            sensors = dict(zip(names, obs[: len(names)].tolist(), strict=True))
+            body = {"time": info["time"].isoformat(), "sensors": sensors}
+            row = session.run([out], {inp: contract.observation(body)})[0][0]
+            sim.send(2 * (row.astype(np.float32).astype(np.float64) - low) / (high - low) - 1)
+            obs, _, terminated, info = sim.receive()
+            if terminated:
+                return pd.read_parquet(Path(info["episode_dir"]) / "steps.parquet")
+    finally:
+        sim.close()
+
+
+@pytest.mark.slow
+def test_a_day_through_bacnet_equals_the_in_process_controller_step_by_step(loop, controller, tmp_path):
+    """Lockstep, the supervisor advancing the clock: every reading and setpoint of the day equal."""
+    loop.device()
+    loop.supervisor(controller)
+    assert loop.wait("supervisor") == 0, loop.log("supervisor")
+    assert loop.wait("device") == 0, loop.log("device")
+    over_bacnet = loop.steps()
+    assert len(over_bacnet) == 96
+    reference = in_process(controller, tmp_path / "reference")
+    pd.testing.assert_frame_equal(reference, over_bacnet, check_exact=True)
+    assert "acted on 96 steps (0 fallbacks)" in loop.log("supervisor")
+    assert "relinquished priority 8" in loop.log("supervisor")
+    assert loop.log("device").count("priority 8") == 4  # one log line, step 0: every setpoint at 8 from there on
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGKILL"])
+def test_a_killed_supervisor_leaves_the_building_to_its_own_controls_within_one_step(loop, controller, how):
+    """SIGTERM: it relinquishes as it goes. SIGKILL: it cannot; the device's watchdog relinquishes its priority at
+    the first step it did not act on. Either way the setpoints are the building's own from that step on."""
+    loop.device()
+    loop.supervisor(controller, "--no-advance")
+
+    async def drive():
+        async with Client(loop) as c:
+            await c.clock(0, 10)
+            await c.until("heartbeat", 10)  # it has acted on step 10: killed before step 10 is run
+            loop.procs["supervisor"].send_signal(getattr(signal, how))
+            loop.wait("supervisor", 30)
+            await c.clock(10, 96, supervised=False)
+
+    asyncio.run(drive())
+    assert loop.wait("device") == 0, loop.log("device")
+    steps = loop.steps()
+    first_own = 10 if how == "SIGTERM" else 11  # SIGKILL: step 10 runs what it wrote for it
+    commanded = steps[["west_setpoint_c", "east_setpoint_c", "west_fan_kg_s", "east_fan_kg_s"]].notna().all(axis=1)
+    assert commanded[:first_own].all() and not commanded[first_own:].any()
+    if how == "SIGTERM":
+        assert "relinquished priority 8" in loop.log("supervisor")
+    else:
+        assert "the supervisor at priority 8 did not act on step 11" in loop.log("device")
+    assert loop.procs["supervisor"].returncode == (0 if how == "SIGTERM" else -9)
+
+
+@pytest.mark.slow
+def test_a_lower_priority_write_loses_and_an_operator_override_wins_unfought(loop, controller):
+    """A rogue client at 16 never acts; an operator at 5 and one at 8 (the supervisor's own) win from the step
+    they wrote; the supervisor logs each once and leaves their slots alone, and takes over again when they go."""
+    loop.device()
+
+    async def drive():
+        async with Client(loop) as c:
+            await c.write("west_setpoint_c", 35.0, priority=16)  # before the supervisor starts
+            loop.supervisor(controller, "--no-advance")
+            await c.clock(0, 10)
+            await c.until("heartbeat", 10)
+            await c.write("west_fan_kg_s", 6.5, priority=5)
+            await c.write("east_fan_kg_s", 2.5, priority=8)
+            await c.clock(10, 20)
+            await c.until("heartbeat", 20)
+            await c.write("west_fan_kg_s", None, priority=5)
+            await c.write("east_fan_kg_s", None, priority=8)
+            await c.clock(20, 30)
+            loop.procs["supervisor"].send_signal(signal.SIGTERM)
+            loop.wait("supervisor", 30)
+            await c.write("west_setpoint_c", None, priority=16)
+            await c.clock(30, 96, supervised=False)
+
+    asyncio.run(drive())
+    assert loop.wait("device") == 0, loop.log("device")
+    steps, log = loop.steps(), loop.log("supervisor")
+    assert steps.west_setpoint_c[:30].notna().all() and (steps.west_setpoint_c[:30] != 35.0).all()
+    assert (steps.west_fan_kg_s[10:20] == 6.5).all() and (steps.east_fan_kg_s[10:20] == 2.5).all()
+    assert log.count("west_fan_kg_s is overridden at priority 5") == 1
+    assert log.count("east_fan_kg_s is overridden at priority 8") == 1
+    assert log.count("the override is gone") == 2
+    assert steps.west_fan_kg_s[20:30].notna().all() and (steps.west_fan_kg_s[20:30] != 6.5).all()
+    assert math.isnan(steps.east_fan_kg_s[20]) and steps.east_fan_kg_s[21:30].notna().all()  # free for a step
+    assert steps[["west_setpoint_c", "east_fan_kg_s"]][30:].isna().all().all()  # the rogue gone, the supervisor too
+
+
+@pytest.mark.slow
+def test_in_accelerated_real_time_the_supervisor_follows_the_device_s_clock(loop, controller):
+    """A step every 0.5 s: the supervisor acts on each step from when it connects; SIGTERM gives the building back
+    within a step (no watchdog warning: it said it left); the stopped device keeps the records so far."""
+    loop.device("--step-seconds", "0.5")
+    loop.supervisor(controller)
+
+    async def drive():
+        async with Client(loop) as c:
+            start = await c.read("heartbeat")
+            await c.until("heartbeat", 0)
+            first = int(await c.read("heartbeat"))
+            await c.until("heartbeat", first + 6)
+            loop.procs["supervisor"].send_signal(signal.SIGTERM)
+            assert loop.wait("supervisor", 30) == 0
+            last = int(await c.read("heartbeat"))
+            await c.until("step", last + 3)
+            return start, first, last
+
+    start, first, last = asyncio.run(drive())
+    loop.procs["device"].send_signal(signal.SIGTERM)
+    assert loop.wait("device") == 130, loop.log("device")
+    steps = loop.steps()
+    commanded = steps["west_setpoint_c"].notna()
+    # its first answer and its relinquish can each land after the step they were meant for (a loaded machine: the
+    # first answer loads onnxruntime's session), so the steps `first` and `last` may be either
+    assert start == -1 and not commanded[:first].any() and commanded[first + 1 : last].all()
+    assert not commanded[last + 1 :].any()
+    assert len(steps) >= last + 2 and "did not act" not in loop.log("device")
+
+
+@pytest.mark.slow
+def test_a_device_with_only_its_points_is_supervised_on_the_supervisor_s_own_clock(loop, controller):
+    """A real device's points list: sensors and setpoints, no step, time or heartbeat. The supervisor acts every
+    --step-seconds on its own clock (its local time for the clock features) and relinquishes on SIGTERM."""
+    loop.device("--step-seconds", "0.3")
+    full = PointMap.read(loop.map)
+    real = PointMap([p for p in full.points if p.role in ("sensor", "setpoint")], full.device, full.device_instance)
+    real.write(loop.tmp / "real.toml")
+
+    async def drive():
+        async with Client(loop) as c:
+            loop.start("supervisor", "serve", str(controller), "--bacnet", loop.address, "--point-map",
+                       str(loop.tmp / "real.toml"), "--local", f"{HOST}:{loop.ports['supervisor']}",
+                       "--step-seconds", "0.3")  # fmt: skip
+            await c.until("step", 20)
+            loop.procs["supervisor"].send_signal(signal.SIGTERM)
+            assert loop.wait("supervisor", 30) == 0
+            await c.until("step", await c.read("step") + 3)
+
+    asyncio.run(drive())
+    loop.procs["device"].send_signal(signal.SIGTERM)
+    assert loop.wait("device") == 130, loop.log("device")
+    commanded = loop.steps()["west_setpoint_c"].notna()
+    assert commanded.sum() >= 5 and not commanded.iloc[-2:].any()
+    log = loop.log("supervisor")
+    assert "no `time` point" in log and "relinquished priority 8" in log
+
+
+@pytest.mark.slow
+def test_with_no_command_at_any_priority_the_device_runs_the_building_s_own_controls_exactly(loop, tmp_path):
+    """Warmed up under its own controls and never commanded, the device's day is `evaluate --baseline`'s."""
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
+
+    loop.device("--warmup", "builtin")
+
+    async def drive():
+        async with Client(loop) as c:
+            await c.clock(0, 96, supervised=False)
+
+    asyncio.run(drive())
+    assert loop.wait("device") == 0, loop.log("device")
+    device = loop.steps()
+    sim = Simulation(SimulationConfig(weather="CA", run_days=1, model="baseline", output_dir=str(tmp_path / "b")))
+    try:
+        sim.launch()
+        sim.first_observation()
+        terminated = False
+        while not terminated:
+            sim.send(np.zeros(0))  # the built-in controller: no action
+            terminated = sim.receive()[2]
+    finally:
+        sim.close()
+    builtin = pd.read_parquet(glob.glob(str(tmp_path / "b" / "*" / "steps.parquet"))[0])
+    assert device[["west_setpoint_c", "east_setpoint_c", "west_fan_kg_s", "east_fan_kg_s"]].isna().all().all()
+    pd.testing.assert_frame_equal(device[builtin.columns], builtin, check_exact=True)
+
+
+def test_the_point_map_is_checked_against_the_contract(tmp_path):
+    m = PointMap.generate([("a_c", "C")], [("s_c", "C", 10.0, 40.0)], lockstep=True, device=f"{HOST}:47808")
+    path = m.write(tmp_path / "points.toml")
+    back = PointMap.read(path)
+    assert back == m
+    back.check(["a_c"], ["s_c"])
+    with pytest.raises(ValueError, match="no sensor point for b_c"):
+        back.check(["a_c", "b_c"], ["s_c"])
+    back.points[0].role = "thermostat"
+    with pytest.raises(ValueError, match="role 'thermostat'"):
+        back.check(["a_c"], ["s_c"])
+
+
+@pytest.mark.parametrize("priority", [1, 7, 17])
+def test_a_supervisor_priority_outside_8_to_16_is_refused(priority, tmp_path):
+    from parallel_eplus.deploy.bacnet_supervisor import SupervisorConfig
+
+    with pytest.raises(ValueError, match="8-16"):
+        SupervisorConfig(tmp_path, f"{HOST}:47808", tmp_path / "points.toml", priority=priority)
