@@ -189,11 +189,14 @@ def test_ray_backend_starts_its_own_ray_despite_a_stale_cluster(tmp_path, no_lea
     monkeypatch.setenv("RAY_TMPDIR", root)
     monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:1")
     assert not ray.is_initialized()
+    monkeypatch.delenv("RAY_worker_niceness", raising=False)
     venv = RayVectorEnv(SimulationConfig(run_days=1, output_dir=str(tmp_path)), [["CA"]], workers_per_actor=1)
     try:
         assert ray.is_initialized()
         venv.start_all(range(1))
         assert venv.observations().shape == (1, 6)
+        # our workers run at the driver's priority, not Ray's default nice 15 (they starved on a busy machine)
+        assert ray.get(ray.remote(lambda: os.nice(0)).remote()) == os.nice(0)
     finally:
         venv.close()
     assert not ray.is_initialized()

@@ -17,6 +17,7 @@ COMMIT=${COMMIT:-$(git rev-parse --short HEAD)}
 CODE=$WORK/code-$COMMIT
 [ -d "$CODE" ] || { mkdir -p "$CODE" && git archive "$COMMIT" parallel_eplus idf | tar -x -C "$CODE"; }
 export PYTHONPATH=$CODE
+export RAY_worker_niceness=0  # Ray runs its workers at nice 15: on a machine doing other work they starved
 WORKERS=${WORKERS:-2}
 PY=$REPO/.venv/bin/python
 RUNS=$REPO/results/model-based
