@@ -196,7 +196,7 @@ def test_ray_backend_starts_its_own_ray_despite_a_stale_cluster(tmp_path, no_lea
         venv.start_all(range(1))
         assert venv.observations().shape == (1, 6)
         # our workers run at the driver's priority, not Ray's default nice 15 (they starved on a busy machine)
-        assert ray.get(ray.remote(lambda: os.nice(0)).remote()) == os.nice(0)
+        assert ray.get(ray.remote(num_cpus=0)(lambda: os.nice(0)).remote()) == os.nice(0)
     finally:
         venv.close()
     assert not ray.is_initialized()
