@@ -78,3 +78,12 @@ def test_markdown_outside_docs_links_to_files_that_exist():
             if not (page.parent / target.split("#")[0]).exists():
                 broken.append(f"{page.relative_to(ROOT)}: {target}")
     assert not broken, broken
+
+
+def test_the_readme_stays_the_short_guide():
+    """The README is the short guide (under 10 KB); each section links its page in docs/."""
+    readme = (ROOT / "README.md").read_text()
+    assert len(readme.encode()) < 10 * 1024
+    sections = re.split(r"^## ", readme, flags=re.M)[1:]
+    unlinked = [section.splitlines()[0] for section in sections if "](docs/" not in section]
+    assert not unlinked, unlinked
