@@ -150,3 +150,4 @@ def test_the_wheel_installed_outside_the_checkout_trains_evaluates_exports_and_s
     for name, setpoint in answer["setpoints"].items():
         assert outputs[name]["low"] <= setpoint["value"] <= outputs[name]["high"], (name, setpoint)
     assert sorted(p.name for p in user.iterdir()) == ["controller", "results", "runs", "tensorboard_logs"]
+    shutil.rmtree(venv)  # ~1.5 GB; pytest keeps a failed test's for a look
