@@ -32,6 +32,10 @@ _LAZY = {
 
 
 def __getattr__(name: str):
+    if name == "__version__":  # pyproject.toml's, as installed (importlib.metadata costs the EnergyPlus side nothing)
+        from importlib.metadata import version
+
+        return version("parallel-eplus")
     if name in _LAZY:
         import importlib
 

@@ -16,7 +16,7 @@ SOURCE = ROOT.parent / "shared" / "reference" / "2ZoneDataCenterHVAC_wEconomizer
 @pytest.mark.skipif(not SOURCE.exists(), reason="the authors' reference model is not beside this checkout")
 def test_idf_dir_is_up_to_date_with_make_models():
     result = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "make_models.py"), "--check"], capture_output=True, text=True
+        [sys.executable, str(ROOT / "tools" / "make_models.py"), "--check"], capture_output=True, text=True
     )
     assert result.returncode == 0, result.stderr
 

@@ -1,5 +1,5 @@
 """Short episodes (issue 39): consecutive episodes in one env against EnergyPlus alone, reset latency, and TRPO's
-rate by episode length. `parallel-eplus bench --short` and scripts/short_episodes.py run these.
+rate by episode length. `parallel-eplus bench --short` and studies/short-episodes/short_episodes.py run these.
 
 1. `consecutive`: N episodes through one `EnergyPlusEnv` (a constant action, resets included, from constructing the
    env to closing it), prepared ahead (the default: forked from a template parked at the first step, engine/fork.py),

@@ -4,11 +4,21 @@ from __future__ import annotations
 
 import argparse
 import os
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from parallel_eplus.cli import commands as c
 from parallel_eplus.cli import deploy, many_runs
 from parallel_eplus.cli.evaluate import cmd_evaluate
+
+
+def installed_version() -> str:
+    """The installed distribution's version (pyproject.toml's, through the package metadata: one source of truth)."""
+    try:
+        return version("parallel-eplus")
+    except PackageNotFoundError:  # imported from a source tree that was never installed
+        return "unknown (not installed)"
+
 
 DESCRIPTION = "Train and evaluate RL controllers for buildings against parallel EnergyPlus simulations."
 
@@ -17,6 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     """Every subcommand with its options and defaults."""
     parser = argparse.ArgumentParser(prog="parallel-eplus", description=DESCRIPTION)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     sim = sub.add_parser("simulate", help="run one episode and print the paper's episode statistics")

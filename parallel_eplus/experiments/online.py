@@ -49,6 +49,7 @@ def run_online_episode(
     import torch as th
 
     from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.learning.saved_models import load_model
     from parallel_eplus.runs.norm_stats import read_stats
     from parallel_eplus.runs.policy_files import normalization_file, run_dir_of
     from parallel_eplus.training.config import TrainConfig
@@ -71,7 +72,7 @@ def run_online_episode(
     try:
         env = read_stats(normalization_file(controller.path)).wrap(venv, training=True)  # keeps updating
         # n_steps is the rollout buffer's size: set before SB3 builds it.
-        model = ALGORITHMS[saved.algorithm].load(controller.path, env=env, device="cpu", n_steps=cfg.n_steps)
+        model = load_model(ALGORITHMS[saved.algorithm], controller.path, env=env, device="cpu", n_steps=cfg.n_steps)
         model.lockstep = True
         model.set_logger(Logger(None, []))  # SB3's default logger would leave an empty SB3-<time> folder in /tmp
         stop = _FirstEpisode()

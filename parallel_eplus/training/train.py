@@ -117,6 +117,7 @@ def _learn(
     callbacks: Sequence[BaseCallback] = (),
 ) -> Path:  # fmt: skip
     from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.learning.saved_models import load_model
 
     run_dir = cfg.run_dir
     th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
@@ -125,7 +126,7 @@ def _learn(
     try:
         if checkpoint is not None:
             env = read_stats(normalization_file(checkpoint)).wrap(venv)
-            model = ALGORITHMS[cfg.algorithm].load(checkpoint, env=env, device="cpu", **load_kwargs(cfg))
+            model = load_model(ALGORITHMS[cfg.algorithm], checkpoint, env=env, device="cpu", **load_kwargs(cfg))
             _load_replay_buffer(model, checkpoint)
             log.info("resuming %s from %s at step %d", cfg.run_name, checkpoint, model.num_timesteps)
         else:

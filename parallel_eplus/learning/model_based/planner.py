@@ -7,7 +7,7 @@ distribution, `iterations` times; the best sequence's first action is applied an
 warm-starts the next step's search.
 
 The cost of a step is the spec's energy term (every fuel, times the reward's `power_weight`: about 1 per step),
-plus `comfort_weight` times the comfort surrogate of the constraint (training/lagrangian.py: 0 inside each zone's
+plus `comfort_weight` times the comfort surrogate of the constraint (learning/lagrangian.py: 0 inside each zone's
 bounds shrunk by the margin, rising by 1 per margin beyond, here unbounded so the search is pushed back in), where
 the band applies (the bounds: the spec's band, or each zone's thermostat schedules, calendar.py),
 plus `disagreement_weight` times the members' spread of each zone temperature (K): the planner stays where the
