@@ -4,7 +4,7 @@ One building, one core: each controller acts in closed loop on a real episode of
 (the observations EnergyPlus gives under its own actions), and each decision is timed alone, in wall and in the
 thread's CPU seconds (a busy machine inflates the first; the second is what the decision itself costs). The
 policy is the run's distilled network as training's rollouts run it (numpy); the served planner adds one HTTP
-round trip on top of the planner's own time (scripts/deploy_latency.py measures that).
+round trip on top of the planner's own time (studies/deploy/deploy_latency.py measures that).
 """
 
 from __future__ import annotations

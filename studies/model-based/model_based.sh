@@ -3,14 +3,14 @@
 # building's own controls, explore around them, plan on a learned ensemble, refit: Dyna), then the planner
 # distilled into a policy; trained on CA, CO and FL, evaluated frozen on all five weathers (IL and VA held out).
 #
-#   bash scripts/model_based.sh run [BUILDING...]      # work through the (building, seed) runs for CHUNK_MIN minutes
-#   bash scripts/model_based.sh status                 # each run's steps and state
-#   bash scripts/model_based.sh evaluate BUILDING PERIOD  # frozen, on the five weathers, against built-in and rule:
+#   bash studies/model-based/model_based.sh run [BUILDING...]      # work through the (building, seed) runs for CHUNK_MIN minutes
+#   bash studies/model-based/model_based.sh status                 # each run's steps and state
+#   bash studies/model-based/model_based.sh evaluate BUILDING PERIOD  # frozen, on the five weathers, against built-in and rule:
 #        PERIOD jan: January 1-14, the planner and the distilled policy; peak_cool: BOPTEST's two weeks around each
 #        weather's peak cooling day (after a week of warm-up), both; year: the distilled policy alone (a year of
 #        planning is ~17 min per weather on a quiet core). The planner is the run's best/planner/ where
 #        --eval-every kept one (the target met on the training weathers' January, then the least energy).
-#   bash scripts/model_based.sh save                   # small results (configs, episodes, planners, policies)
+#   bash studies/model-based/model_based.sh save                   # small results (configs, episodes, planners, policies)
 #
 # `run` works in chunks: each trainer gets the time left of the chunk (default 110 min, under the sessions' 2 h)
 # and is then stopped with SIGINT, which checkpoints it (checkpoints/mpc_<steps>_steps.pt); the next `run`
@@ -22,7 +22,7 @@
 # EVAL_EVERY (17500: the planner frozen on the training weathers' January 1-14 for steps-to-goal; 0: off),
 # CHUNK_MIN (110; CHUNK_S in seconds), MPC (extra --mpc settings), NICE (0).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 REPO=$PWD
 COMMIT=${COMMIT:-$(git rev-parse --short HEAD)}
 WORK=${WORK:-$REPO/../model-based}

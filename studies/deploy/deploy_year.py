@@ -8,7 +8,7 @@ the server. It writes:
 - results/deploy/closed_loop.md: the two runs' tables and step tables compared, and what a year costs over HTTP
   against in process (the two episodes' wall times, run side by side).
 
-    .venv/bin/python scripts/deploy_year.py [--days 365] [--cases 0,1,2,3,4] [--weather CA]
+    .venv/bin/python studies/deploy/deploy_year.py [--days 365] [--cases 0,1,2,3,4] [--weather CA]
 
 Each case's figures are kept in results/deploy/year.json; a run replaces the cases it ran and the tables show all.
 """
@@ -35,7 +35,7 @@ from parallel_eplus.deploy.parity import replay
 from parallel_eplus.evaluation.controllers import http_controller, policy_controller
 from parallel_eplus.evaluation.sweep import run_sweep
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CASES = [  # (name, committed policy, building: None for the data center); --cases picks by index
     ("TRPO, data center (time features)", "results/paper/models/paper-ca-co-fl-time", None),
     ("PPO, data center (time features)", "results/paper/models/ppo-ca-co-fl-time", None),
@@ -126,7 +126,7 @@ def write(args, store: dict) -> None:
     cases = sorted(store.values(), key=lambda r: r["index"])
     when = "; ".join(f"{CASES[r['index']][0]}: {r['when']}" for r in cases)
     head = (
-        f"`python scripts/deploy_year.py --weather {args.weather}` on {os.cpu_count()} cores shared with other "
+        f"`python studies/deploy/deploy_year.py --weather {args.weather}` on {os.cpu_count()} cores shared with other "
         f"sessions (when: {when})."
     )
     rows = []

@@ -7,7 +7,7 @@ over one kept-alive connection (as `evaluate --controller-url` does: a planner's
 weather file's coming steps as the forecast and the last plan) and times each; then the controller alone in this
 process, for its share. `--load N` keeps N other processes busy meanwhile (a machine doing other work).
 
-    .venv/bin/python scripts/deploy_latency.py [--planner] [--load 2] [--requests 5000] [--out results/deploy/...]
+    .venv/bin/python studies/deploy/deploy_latency.py [--planner] [--load 2] [--requests 5000] [--out results/deploy/...]
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "results" / "paper" / "models" / "paper-ca-co-fl-time"
 PLANNER = ROOT / "results" / "model-based" / "datacenter-2zone" / "runs" / "datacenter-2zone-mpc-seed0"
 LAST = {"west_setpoint_c": 12.0, "east_setpoint_c": 12.0, "west_fan_kg_s": 4.0, "east_fan_kg_s": 4.0}
@@ -145,7 +145,7 @@ def main() -> None:
         [
             "# Controller latency",
             "",
-            f"`python scripts/deploy_latency.py{' --planner' if args.planner else ''} --load {args.load} --requests "
+            f"`python studies/deploy/deploy_latency.py{' --planner' if args.planner else ''} --load {args.load} --requests "
             f"{args.requests}` on {dt.date.today()}: {args.requests} requests after {args.warmup} of warm-up; "
             f"{os.cpu_count()} cores, {args.load} other processes kept busy, load average {load[0]:.1f} at the end.",
             "",
