@@ -1,10 +1,11 @@
 """Model predictive control as the service runs it: observations and infos in, every worker's action out.
 
 `MPC` binds the ensemble and the planner to a building: it reads the state from the observations, the future
-exogenous inputs from each worker's weather file and the clock (exogenous.py: a perfect weather forecast), and
-when the band applies from `ComfortTimes`. Training steps every worker through it in one batched plan; `evaluate`
-runs a saved planner (`planner.pt`: the ensemble's weights and normalizers, the planner's settings, the comfort
-weight and the comfort calendar) one episode at a time (`PlannerActor`).
+exogenous inputs from each worker's weather forecast and the clock (exogenous.py: the weather file, or it with
+BOPTEST's forecast errors), and when the band applies from `ComfortTimes`. Training steps every worker through it
+in one batched plan; `evaluate` runs a saved planner (`planner.pt`: the ensemble's weights and normalizers, the
+planner's settings, the comfort weight and the comfort calendar) one episode at a time (`PlannerActor`, with
+`PlannerOptions`); deploy/planner_export.py writes one for `serve`.
 """
 
 from __future__ import annotations
