@@ -215,6 +215,7 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         lines.append(f"hvac = {{ {', '.join(hvac)} }}")
     lines += [
         "# tariff = { Electricity = { day = 0.20, night = 0.08, day_hours = [7, 22] }, NaturalGas = 0.04 }  # per kWh",
+        '# tariff = { Electricity = { file = "commercial-tou-demand.toml" } }  # time of use, demand charges (kpis.md)',
         "# emissions = { Electricity = 0.37, NaturalGas = 0.18 }  # kg CO2e per kWh",
         "# floor_area_m2 = 500.0  # default: the model's own",
         "",
