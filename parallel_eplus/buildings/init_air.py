@@ -20,16 +20,29 @@ from parallel_eplus.buildings.init_text import candidate, clamp, seen_text, snak
 from parallel_eplus.buildings.loops import Topology
 from parallel_eplus.buildings.survey import NO_SETPOINT, Survey
 
-SUPPLY_AIR_SPAN = (12.0, 18.0)  # C: Guideline 36's supply-air temperature reset range, rounded (12.8-18.3 C)
-WATER_MARGIN_K = 3.0
+SPANS = {  # C: the least range offered, widened to what the short run saw
+    "air": (12.0, 18.0),  # Guideline 36's supply-air temperature reset, rounded (12.8-18.3 C)
+    "chilled": (5.0, 10.0),  # a chilled-water reset (a 6.7 C design, as the DOE prototypes')
+    "hot": (60.0, 82.0),  # a hot-water reset down from an 82 C design
+    "condenser": (20.0, 32.0),  # a cooling tower's leaving water, above the chillers' least entering water: not
+}  # widened below (a January day's tower water, following the wet bulb, is no lower bound for July)
+WATER_MARGIN_K = 3.0  # other water loops: the range seen, this much each way
 SETPOINT = "System Node Setpoint Temperature"
 AIR_DENSITY = 1.2  # kg/m3, sea level: sized flows (m3/s) as mass flows
 
 
-def _bounds(medium: str, v: tuple[float, float]) -> tuple[float, float]:
-    if medium == "air":
-        return min(math.floor(v[0]), SUPPLY_AIR_SPAN[0]), max(math.ceil(v[1]), SUPPLY_AIR_SPAN[1])
-    return math.floor(v[0] - WATER_MARGIN_K), math.ceil(v[1] + WATER_MARGIN_K)
+def _bounds(loop, v: tuple[float, float]) -> tuple[float, float]:
+    """A loop supply temperature's range: its kind's usual reset span, widened to what the short run saw."""
+    if loop.medium == "air":
+        kind = "air"
+    elif loop.kind.lower() == "condenserloop":
+        kind = "condenser"
+    else:
+        kind = "chilled" if v[1] <= 15 else "hot" if v[0] >= 40 else ""
+    if not kind:
+        return math.floor(v[0] - WATER_MARGIN_K), math.ceil(v[1] + WATER_MARGIN_K)
+    low = SPANS[kind][0] if kind == "condenser" else min(math.floor(v[0]), SPANS[kind][0])
+    return low, max(math.ceil(v[1]), SPANS[kind][1])
 
 
 def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str]:
@@ -42,21 +55,31 @@ def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str
              ""]  # fmt: skip
     air = [k for k in supplies if t.supplies[k].medium == "air"]
     if len(air) > 1:  # one knob for the building's supply air, as for its thermostats
-        low, high = min(_bounds("air", seen[k])[0] for k in air), max(_bounds("air", seen[k])[1] for k in air)
+        low = min(_bounds(t.supplies[k], seen[k])[0] for k in air)
+        high = max(_bounds(t.supplies[k], seen[k])[1] for k in air)
         middle = sum(seen[k][0] + seen[k][1] for k in air) / (2 * len(air))
         note = f"all {len(air)} air loops' supply air together (their managers replaced as below)"
         lines += candidate("supply_air_c", "System Node Setpoint", "Temperature Setpoint", [o(k) for k in air], low,
                            high, clamp(middle, low, high), "C", note)  # fmt: skip
+    taken = set(supplies)
     for k in supplies:
         loop, v = t.supplies[k], seen[k]
-        low, high = _bounds(loop.medium, v)
+        low, high = _bounds(loop, v)
+        # a plant loop's chillers and boilers control to their own outlets' setpoints where a manager sets them:
+        # those nodes go with the loop's (the large office's chillers held 6.7 C whatever its supply node asked)
+        equipment = [n for n in loop.outlets if n.upper() in t.managers and n.upper() != k]
+        taken.update(n.upper() for n in equipment)
         followers = t.followers.get(k, [])
+        managers = [m for n in [k, *(e.upper() for e in equipment)] for m in t.managers[n]]
         note = [f"node {o(k)}: supply {loop.medium} of {loop.kind} {loop.name}{seen_text(v)}",
-                f"replaced in each run's copy: {', '.join(t.managers[k])}"
+                f"replaced in each run's copy: {', '.join(managers)}"
                 + (f"; following it: {len(followers)} ({followers[0]}, ...)" if followers else "")]  # fmt: skip
-        lines += candidate(f"{snake(o(k))}_setpoint_c", "System Node Setpoint", "Temperature Setpoint", o(k), low, high,
+        if equipment:
+            note.append(f"with its equipment's outlets, which it controls to: {', '.join(equipment)}")
+        keys = [o(k), *equipment] if equipment else o(k)
+        lines += candidate(f"{snake(o(k))}_setpoint_c", "System Node Setpoint", "Temperature Setpoint", keys, low, high,
                            clamp((v[0] + v[1]) / 2, low, high), "C", note)  # fmt: skip
-    others = [k for k in seen if k not in supplies]
+    others = [k for k in seen if k not in taken]
     if others:
         lines += ["# ---- other nodes with a setpoint: most follow a supply node above (own that instead) ----", ""]
     for k in others:

@@ -22,6 +22,7 @@ class Loop:
     kind: str
     name: str
     service: bool = False
+    outlets: tuple[str, ...] = ()  # a plant loop's supply-side components' outlet nodes (its chillers', boilers')
 
     @property
     def medium(self) -> str:
@@ -53,12 +54,19 @@ def _components(branch: IdfObject) -> list[tuple[str, str]]:
     return [(f[i], f[i + 1]) for i in range(0, len(f) - 1, 4)]
 
 
+def _outlets(branch: IdfObject) -> list[str]:
+    """A Branch's components' outlet nodes (the fourth field of each component's four)."""
+    f = branch.fields[2:]
+    return [f[i + 3] for i in range(0, len(f) - 3, 4)]
+
+
 def topology(text: str) -> Topology:
     """The loops, setpoint managers and outdoor-air controllers of an IDF text."""
     kinds = _by_kind(idf_objects(text))
     lists = {o.fields[0].upper(): o.fields[1:] for o in kinds.get("nodelist", []) if o.fields}
     branch_lists = {o.fields[0].upper(): [b.upper() for b in o.fields[1:]] for o in kinds.get("branchlist", [])}
     branches = {o.fields[0].upper(): _components(o) for o in kinds.get("branch", []) if o.fields}
+    outlets = {o.fields[0].upper(): _outlets(o) for o in kinds.get("branch", []) if o.fields}
     t = Topology()
     for o in kinds.get("airloophvac", []):
         for node in lists.get(o.fields[9].upper(), [o.fields[9]]) if len(o.fields) > 9 else []:
@@ -67,9 +75,11 @@ def topology(text: str) -> Topology:
         for o in kinds.get(kind, []):
             demand = branch_lists.get(o.fields[16].upper(), []) if len(o.fields) > 16 else []
             service = any(c.lower() == "wateruse:connections" for b in demand for c, _ in branches.get(b, []))
+            supply = branch_lists.get(o.fields[12].upper(), []) if len(o.fields) > 12 else []
+            equipment = tuple(dict.fromkeys(n for b in supply for n in outlets.get(b, [])))
             for i in (4, 11):
                 if len(o.fields) > i and o.fields[i]:
-                    t.supplies[o.fields[i].upper()] = Loop(o.kind, o.fields[0], service)
+                    t.supplies[o.fields[i].upper()] = Loop(o.kind, o.fields[0], service, equipment)
     for kind, (index, variable) in MANAGERS.items():
         for o in kinds.get(kind, []):
             if len(o.fields) <= index or "temperature" not in manager_sets(o, variable):
