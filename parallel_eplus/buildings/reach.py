@@ -32,8 +32,8 @@ REACH_DAYS = 3  # a run's days: prototypes make January 1 a holiday (systems off
 REACH_PERIODS = ((1, REACH_DAYS), (182, REACH_DAYS))
 TOLERANCE_K = 0.5  # a node within this of its setpoint follows it
 SHARE = 0.5  # of the samples with flow that must be within the tolerance: the equipment may not hold an end of the
-# range at every hour (the data center, cooling only, sits below 40 C supply while its mixed air is colder), but
-# a node the action does not set stays off it nearly always (0-2 % within on the medium office)
+# range at every hour (the data center, cooling only, sits below 40 C supply while its mixed air is colder: 94-95 %
+# within), but a node the action does not set stays off it nearly always (0-1 % within on the medium office)
 SETPOINT_SHARE = 0.9  # of them whose setpoint must read back as the action's
 FLOW_SHARE = 0.01  # a sample counts when the node's flow is above this share of its largest in the run
 TIMEOUT_S = 600.0  # a large model sizes for minutes on a busy machine
