@@ -80,6 +80,33 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
         assert (a.actuators[0].component, a.actuators[0].control, a.actuators[0].key.upper()) in listed
 
 
+@pytest.mark.slow
+def test_init_offers_the_air_loops_supply_air_ready_to_uncomment_and_check_proves_it(tmp_path, monkeypatch, no_leaks):
+    """The DOE medium office as it ships: its three air loops' supply air, each set by a SetpointManager:Scheduled
+    that each run's copy replaces, offered with the loop, the manager and the range; uncommented, `check` passes and
+    proves each loop's supply air follows; outdoor air and fan flows are offered too, ventilation named."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    out = tmp_path / "office.toml"
+    init_spec(Path(dataset.ref_models["medium_office"]), "CO", out)
+    text = out.read_text()
+    assert "# node VAV_1 Supply Equipment Outlet Node: supply air of AirLoopHVAC VAV_1 (seen 12.8..12.8 C)" in text
+    assert '# # replaced in each run\'s copy: SetpointManager:Scheduled "VAV_1 SAT setpoint"' in text
+    assert "disable the manager" not in text  # no hand edit of the model any more
+    assert 'component = "Outdoor Air Controller", control = "Air Mass Flow Rate", key = "VAV_1_OA_Controller"' in text
+    assert 'readback = { variable = "System Node Mass Flow Rate", key = "VAV_1_OAInlet Node" }' in text
+    assert "Fan Pressure Rise (duct static pressure) is listed for 3 fan(s), not offered" in text
+    out.write_text(uncomment_actions(text, r"^# (all 3 air loops' supply air|outdoor air of VAV_1 )"))
+    supply, oa = load_spec(out).actions
+    assert (supply.name, supply.low, supply.high, len(supply.actuators)) == ("supply_air_c", 12.0, 18.0, 3)
+    assert oa.readback == ("System Node Mass Flow Rate", "VAV_1_OAInlet Node") and 0 <= oa.low < oa.high
+    from parallel_eplus.buildings.check import check_spec
+
+    result = check_spec(out, use_cache=False)
+    assert result.ok, result.problems
+    assert sum("supply_air_c reaches VAV_" in n for n in result.notes) == 6  # three loops, both ends
+    assert sum('prepared copy: SetpointManager:Scheduled "VAV_' in n for n in result.notes) == 3
+
+
 def test_init_bad_model_fails_with_a_message(tmp_path):
     with pytest.raises(FileNotFoundError, match="model file not found"):
         init_spec(tmp_path / "missing.idf")

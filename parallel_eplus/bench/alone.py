@@ -18,6 +18,7 @@ from pathlib import Path
 
 from parallel_eplus.buildings.building import Building
 from parallel_eplus.buildings.idf_prep import prepare_idf
+from parallel_eplus.buildings.takeover import taken_setpoints
 
 
 def _name(i: int, j: int) -> str:
@@ -49,7 +50,8 @@ def alone_model(
 ) -> Path:
     """The episode's model (EnergyPlus's CSV off, as training runs it) with the EMS program appended."""
     target.parent.mkdir(parents=True, exist_ok=True)
-    prepare_idf(building.control().idf, target, run_days, energyplus_csv=False)
+    control = building.control()
+    prepare_idf(control.idf, target, run_days, energyplus_csv=False, takeover=taken_setpoints(control.actions))
     with target.open("a", encoding="latin-1") as f:
         f.write("\n\n" + ems_objects(building, action, calling_point))
     return target

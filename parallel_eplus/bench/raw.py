@@ -16,6 +16,7 @@ from parallel_eplus.bench.config import BenchConfig, bench_building
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.idf_prep import prepare_idf
 from parallel_eplus.buildings.model import control_model
+from parallel_eplus.buildings.takeover import taken_setpoints
 from parallel_eplus.buildings.weather import resolve_weather
 from parallel_eplus.engine import native
 from parallel_eplus.engine.actions import scale_action
@@ -91,7 +92,9 @@ def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray, energyplus
     workdir.mkdir(parents=True, exist_ok=True)
     building = bench_building(cfg)
     idf = workdir / MODEL_FILE  # one model file for all: each run writes its outputs in its own directory
-    prepare_idf(building.control().idf, idf, -(-len(replays) // building.steps_per_day), energyplus_csv)
+    control = building.control()
+    days = -(-len(replays) // building.steps_per_day)
+    prepare_idf(control.idf, idf, days, energyplus_csv, takeover=taken_setpoints(control.actions))
     epw = building.spec.weathers.get(cfg.weather) or resolve_weather(cfg.weather)
     model = building.spec.name if cfg.building else "temp_fan"
     return [

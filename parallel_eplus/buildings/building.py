@@ -64,12 +64,9 @@ class Building:
 
     @functools.cached_property
     def before_predictor(self) -> bool:
-        """Whether every actuator is one the zone predictor reads (a thermostat's setpoints): the EnergyPlus side
-        then sets the action at BeginTimestepBeforePredictor, where EnergyPlus's EMS guide sets them; set after
-        the predictor, as node setpoints and fan flows are (after the HVAC managers, whose setpoint managers
-        would overwrite them), a thermostat setpoint acts a zone timestep late (bridge.py)."""
-        kinds = {a.component_type.lower() for e in self.actions for a in e.actuators}
-        return bool(kinds) and kinds <= PREDICTOR_ACTUATORS
+        """Whether the EnergyPlus side sets the action at BeginTimestepBeforePredictor (`applies_before_predictor`)
+        rather than after the HVAC managers (bridge.py)."""
+        return applies_before_predictor(self.spec)
 
     @functools.cached_property
     def comfort(self) -> Comfort:
@@ -97,6 +94,25 @@ class Building:
         if model == "baseline":
             return ControlModel("baseline", self.spec.baseline_idf or self.spec.idf, ())
         return ControlModel(self.spec.name, self.spec.idf, self.actions)
+
+
+def applies_before_predictor(spec: BuildingSpec) -> bool:
+    """Whether every actuator is one the zone predictor reads (a thermostat's setpoints) or a node setpoint taken
+    over from the model's managers (buildings/takeover.py). EnergyPlus's EMS guide sets thermostats before the
+    predictor; set after it, as node setpoints and fan flows otherwise are (after the HVAC managers, whose setpoint
+    managers would overwrite them), a thermostat setpoint acts a zone timestep late. A node no manager sets any more
+    is set before them too, so the managers that follow it (MixedAir: the coils' setpoints) see it in the same
+    timestep; after them, the medium office's supply air followed the action one zone timestep late."""
+    from parallel_eplus.buildings.idf_prep import takeover_report
+    from parallel_eplus.buildings.takeover import NODE_SETPOINT
+
+    kinds = {a.component.lower() for action in spec.actions for a in action.actuators}
+    if not kinds or not kinds <= PREDICTOR_ACTUATORS | {NODE_SETPOINT}:
+        return False
+    nodes = {a.key.upper() for action in spec.actions for a in action.actuators if a.component.lower() == NODE_SETPOINT}
+    if not nodes:
+        return True
+    return nodes <= {n.upper() for r in takeover_report(spec.idf, spec.actions).replaced for n in r.nodes}
 
 
 def timesteps_per_hour(idf: Path) -> int:

@@ -48,7 +48,8 @@ def cache_dir() -> Path:
     return Path(base) / "parallel-eplus" / "checks"
 
 
-CHECK_VERSION = b"2"  # what a check resolves (2: read-backs, on the prepared copy): older passes do not count
+CHECK_VERSION = b"3"  # what a check proves (2: read-backs, on the prepared copy; 3: node setpoints reach their
+# nodes): older passes do not count
 
 
 def _digest(spec: BuildingSpec, weather: Path) -> str:
@@ -84,7 +85,9 @@ def _requests(spec: BuildingSpec) -> dict:
             items.append([f"actions[{i}].actuators[{j}]", "actuator", [act.component, act.control, act.key], True])
         if a.readback:  # what --init-from-baseline reads; an inferred one that fails is a note
             items.append([f"actions[{i}].readback", "variable", list(a.readback), a.readback_named is not None])
-    return {"idf": str(spec.idf), "items": items}
+    from parallel_eplus.buildings.takeover import taken_setpoints
+
+    return {"idf": str(spec.idf), "items": items, "takeover": [list(t) for t in taken_setpoints(spec.actions)]}
 
 
 def _unknown_readbacks(spec: BuildingSpec) -> list[str]:
@@ -97,18 +100,39 @@ def _unknown_readbacks(spec: BuildingSpec) -> list[str]:
     ]
 
 
-def _late_thermostats(spec: BuildingSpec) -> list[str]:
-    """A note where thermostat setpoints share the action with other actuators (building.py `before_predictor`)."""
-    from parallel_eplus.buildings.building import PREDICTOR_ACTUATORS
+def _late_actions(spec: BuildingSpec) -> list[str]:
+    """Notes where actions act a zone timestep late: set after the HVAC managers (building.py
+    `applies_before_predictor`), thermostats after the zone predictor read them, and taken-over node setpoints after
+    the managers that follow them (MixedAir: the coils' setpoints) computed theirs."""
+    from parallel_eplus.buildings.building import PREDICTOR_ACTUATORS, applies_before_predictor
+    from parallel_eplus.buildings.idf_prep import takeover_report
 
-    kinds = {x.component.lower() for a in spec.actions for x in a.actuators}
-    if not (kinds & PREDICTOR_ACTUATORS) or kinds <= PREDICTOR_ACTUATORS:
+    if applies_before_predictor(spec):
         return []
-    return [
-        "actions: thermostat setpoints beside other actuators are all set after the HVAC managers (where node "
-        "setpoints and fan flows must be), after the zone predictor has read the thermostats: their setpoints act a "
-        "zone timestep late. A spec whose actions are all thermostat setpoints sets them before the predictor."
-    ]
+    kinds = {x.component.lower() for a in spec.actions for x in a.actuators}
+    where = ("are all set after the HVAC managers (where fan flows and the nodes a manager still sets must be), so "
+             "{} a zone timestep late. A spec whose actions are all thermostat setpoints and node setpoints taken "
+             "over from the model's managers sets them before the predictor.")  # fmt: skip
+    notes = []
+    if kinds & PREDICTOR_ACTUATORS:
+        notes.append("actions: thermostat setpoints beside other actuators " + where.format(
+            "the zone predictor has read the thermostats: their setpoints act"))  # fmt: skip
+    followers = takeover_report(spec.idf, spec.actions).followers
+    if followers:
+        notes.append("actions: node setpoints beside other actuators " + where.format(
+            f"the managers that follow them ({followers[0].kind} \"{followers[0].name}\", ...) see them"))  # fmt: skip
+    return notes
+
+
+def _reach(spec: BuildingSpec, epw: Path) -> tuple[list[str], tuple[str, ...]]:
+    """The prepared copy's report (which managers it replaced) and the proof that each node action reaches its node."""
+    from parallel_eplus.buildings.idf_prep import takeover_report
+    from parallel_eplus.buildings.reach import prove_reach
+
+    problems, notes, reaches = prove_reach(spec, epw)
+    done = [r.text() for r in reaches if r.ok]
+    report = [f"prepared copy: {line}" for line in takeover_report(spec.idf, spec.actions).lines()]
+    return problems, tuple(report + notes + done)
 
 
 def check_spec(
@@ -140,7 +164,11 @@ def check_spec(
     tph = int(data["timesteps_per_hour"])
     if spec.timesteps_per_hour is not None and tph and spec.timesteps_per_hour != tph:
         problems.append(f"timesteps_per_hour: {spec.timesteps_per_hour}, but the model's Timestep gives {tph}")
-    notes = tuple(data.get("notes", [])) + tuple(_unknown_readbacks(spec)) + tuple(_late_thermostats(spec))
+    notes = tuple(data.get("notes", [])) + tuple(_unknown_readbacks(spec)) + tuple(_late_actions(spec))
+    if not problems:  # every name resolves: do the node-setpoint actions move their nodes? (buildings/reach.py)
+        reach_problems, reach_notes = _reach(spec, epw)
+        problems += reach_problems
+        notes += reach_notes
     result = CheckResult(tuple(problems), tph, time.monotonic() - t0, notes=notes)
     if result.ok and use_cache:
         cached.parent.mkdir(parents=True, exist_ok=True)
@@ -249,7 +277,7 @@ def _probe(request_file: Path, weather: Path) -> None:
 
     api.runtime.callback_begin_zone_timestep_after_init_heat_balance(state, on_step)
     model = request_file.parent / "model.idf"  # the copy every run prepares (buildings/idf_prep.py)
-    prepare_idf(Path(request["idf"]), model, run_days=1)
+    prepare_idf(Path(request["idf"]), model, run_days=1, takeover=tuple(map(tuple, request.get("takeover", ()))))
     api.runtime.run_energyplus(state, ["-d", str(request_file.parent / "out"), "-w", str(weather), str(model)])
     if report:
         Path(request_file.parent, "report.json").write_text(json.dumps(report))

@@ -103,6 +103,20 @@ class Comfort:
             return values[self.energy[0]]
         return math.fsum(values[e] for e in self.energy)
 
+    def demand_tracker(self):
+        """Under the cost objective with demand charges, the episode's per-step surrogate of them (bill.py); else
+        None."""
+        if self.objective != "cost" or self.kpis is None:
+            return None
+        return self.kpis.demand_tracker(self.step_minutes)
+
+    def demand_w(self, tracker, values: Mapping[str, float]) -> tuple[float, float]:
+        """The demand charges ($) the step whose observations are `values` adds, and as the reward's W-equivalents
+        (added to `energy_w`): the surrogate's share of the month's demand charges."""
+        start = values["time"] - dt.timedelta(minutes=self.step_minutes)
+        dollars = tracker.step(start, values[self.power])
+        return dollars, self.kpis.demand_w(dollars, self.step_minutes)
+
     def out_of_band(self, temps: tuple[float, ...], bounds=None) -> tuple[int, float]:
         """(zones outside their bounds, their summed distance outside them in K)."""
         n, dist = 0, 0.0
@@ -137,7 +151,7 @@ class Comfort:
         out["energy_kwh"] = float(np.sum(energy) * hours / 1000)
         out["peak_power_kw"] = float(steps[self.power].max() / 1000)
         if self.kpis is not None and all(c in steps for _, c in self.kpis.hvac):
-            out.update(self.kpis.summarize(steps, self.step_minutes))
+            out.update(self.kpis.summarize(steps, self.step_minutes, self.power))
         in_band, discomfort, occupied = [], [], []
         for k, col in enumerate(self.temperatures):
             zone = col.removesuffix("_temp_c")

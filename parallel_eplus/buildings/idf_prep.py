@@ -8,7 +8,8 @@ Each episode runs `model.idf` written here from the spec's model, never the user
   environments). Prototype models ship running only their design days (the DOE reference buildings);
 - EnergyPlus's own CSV off on request (`energyplus_csv=False`): it holds every reported value in memory until
   the run ends (for the data center a year costs 55 MB and 1.4 s) and our step table already has what
-  training needs.
+  training needs;
+- the node setpoints the agent's actions own taken from the model's setpoint managers (buildings/takeover.py).
 Objects are found by a small IDF tokenizer that skips comments, so a commented-out object is never touched.
 """
 
@@ -18,6 +19,8 @@ import datetime as dt
 import re
 from dataclasses import dataclass
 from pathlib import Path
+
+from parallel_eplus.buildings.takeover import Takeover, plan_takeover, rewrite, taken_setpoints
 
 _TOKEN = re.compile(r"!.*|[,;]")
 
@@ -119,11 +122,14 @@ def prepare_idf(
     outputs: tuple[tuple[str, str], ...] = (),
     start_day: int = 1,
     weekday: str | None = None,
-) -> None:
-    """Write the episode's copy of `source` to `target` (see the module's docstring for what changes).
+    takeover: tuple[tuple[str, str], ...] = (),
+) -> Takeover:
+    """Write the episode's copy of `source` to `target` (see the module's docstring for what changes); returns what
+    it took from the model's setpoint managers.
 
     `outputs`: (key, variable) pairs reported every timestep in EnergyPlus's CSV (which they turn on).
-    `start_day`, `weekday`: the run period's first day of the year and its weekday (test scenarios)."""
+    `start_day`, `weekday`: the run period's first day of the year and its weekday (test scenarios).
+    `takeover`: (NODE, control variable) setpoints the agent's actions own (takeover.taken_setpoints)."""
     text = source.read_text(encoding="latin-1")
     objects = idf_objects(text)
     kinds = {o.kind.lower() for o in objects}
@@ -144,6 +150,13 @@ def prepare_idf(
     csv = energyplus_csv or bool(outputs)  # read-backs are read from EnergyPlus's CSV
     if files and files[0].fields and (files[0].fields[0].lower() == "yes") != csv:
         replace[files[0].start] = (files[0].end, _set_fields(text, files[0], {0: "Yes" if csv else "No"}))
+    managers, report = plan_takeover(objects, takeover)
+    by_start = {o.start: o for o in objects}
+    lists = []
+    for start, (end, keep) in managers.items():
+        new, nodelist = rewrite(text, by_start[start], keep, _set_fields)
+        replace[start] = (end, new)
+        lists += [nodelist] if nodelist else []
     out, pos = [], 0
     for start in sorted(replace):
         end, new = replace[start]
@@ -157,4 +170,11 @@ def prepare_idf(
               for key, variable in outputs]  # fmt: skip
     if outputs and not files:
         added.append(_object("OutputControl:Files", ["Yes"], "EnergyPlus's CSV for the read-backs"))
+    added += lists
     target.write_text("".join(out) + "".join(f"\n\n{a}\n" for a in added), encoding="latin-1")
+    return report
+
+
+def takeover_report(idf: Path, actions) -> Takeover:
+    """What the prepared copy of `idf` takes from its setpoint managers for `actions`, without writing the copy."""
+    return plan_takeover(idf_objects(idf.read_text(encoding="latin-1")), taken_setpoints(actions))[1]

@@ -9,12 +9,18 @@ what the agent owns is the user's decision.
 
 from __future__ import annotations
 
-import json
-import math
 import re
 from pathlib import Path
 
-from parallel_eplus.buildings.survey import NO_SETPOINT, Survey, summary, survey
+from parallel_eplus.buildings.init_air import economizer_candidates, fan_candidates, node_candidates
+from parallel_eplus.buildings.init_text import candidate as _candidate
+from parallel_eplus.buildings.init_text import clamp as _clamp
+from parallel_eplus.buildings.init_text import num as _num
+from parallel_eplus.buildings.init_text import seen_text
+from parallel_eplus.buildings.init_text import snake as _snake
+from parallel_eplus.buildings.init_text import toml_str as _str
+from parallel_eplus.buildings.loops import topology
+from parallel_eplus.buildings.survey import Survey, summary, survey
 
 # Fuels besides electricity that a facility meter may count (EnergyPlus's resource types), for the energy figure.
 FUELS = ("NaturalGas", "Propane", "FuelOilNo1", "FuelOilNo2", "Diesel", "Gasoline", "Coal", "OtherFuel1",
@@ -29,14 +35,6 @@ def _idf_names(idf: Path) -> dict[str, str]:
         value = value.strip()
         names.setdefault(value.upper(), value)
     return names
-
-
-def _snake(text: str) -> str:
-    return re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")
-
-
-def _str(text: str | Path) -> str:
-    return json.dumps(str(text))  # a TOML basic string
 
 
 def _path(target: Path, spec_dir: Path, weather: bool = False) -> str:
@@ -54,11 +52,6 @@ def _path(target: Path, spec_dir: Path, weather: bool = False) -> str:
     return str(target)
 
 
-def _num(x: float) -> str:
-    text = f"{x:.6g}"
-    return text + ".0" if text.lstrip("-").isdigit() else text
-
-
 def weather_key(weather: Path) -> str:
     """USA_CA_San.Francisco...epw -> CA (the paper's short names); otherwise the file's stem."""
     parts = weather.stem.split("_")
@@ -69,20 +62,6 @@ def _observation(name: str, variable: str, key: str, low: float, high: float, no
     lines = ["[[observations]]" + (f"  # {note}" if note else "")]
     lines += [f"name = {_str(name)}", f"variable = {_str(variable)}", f"key = {_str(key)}", f"low = {_num(low)}"]
     return [*lines, f"high = {_num(high)}", ""]
-
-
-def _candidate(name, component, control, key, low, high, initial, unit, note) -> list[str]:
-    """One commented [[actions]] block; `key` may be a list (one action moving several actuators together)."""
-    lines = [f"# {note}", "# [[actions]]", f"# name = {_str(name)}", f'# unit = "{unit}"']
-    lines += [f"# low = {_num(low)}", f"# high = {_num(high)}", f"# initial = {_num(initial)}"]
-    one = "{{ component = {}, control = {}, key = {} }}"
-    if isinstance(key, list):
-        lines.append("# actuators = [")
-        lines += [f"#   {one.format(_str(component), _str(control), _str(k))}," for k in key]
-        lines.append("# ]")
-    else:
-        lines.append(f"# actuators = [{one.format(_str(component), _str(control), _str(key))}]")
-    return [*lines, ""]
 
 
 def _zone_air_nodes(idf: Path) -> set[str]:
@@ -99,14 +78,6 @@ def occupancy_schedule(idf: Path) -> str | None:
     names = [o.fields[2] for o in idf_objects(idf.read_text(encoding="latin-1"))
              if o.kind.lower() == "people" and len(o.fields) > 2 and o.fields[2]]  # fmt: skip
     return max(dict.fromkeys(names), key=names.count) if names else None
-
-
-def seen_text(v: tuple[float, float] | None) -> str:
-    return f" (seen {v[0]:.1f}..{v[1]:.1f} C)" if v else ""
-
-
-def _clamp(x: float, low: float, high: float) -> float:
-    return round(min(max(x, low), high), 2)
 
 
 def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | None = None) -> str:
@@ -205,29 +176,9 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
             f"{base}_heating_setpoint_c", "Zone Temperature Control", "Heating Setpoint", z, 15.0, 23.0,
             _clamp(h[1], 15.0, 23.0) if h else 21.0, "C", f"zone {z} heating (below cooling)" + seen_text(h),
         )  # fmt: skip
-    lines += [
-        "# Node setpoints below are set by the model now (its SetpointManagers): disable the manager of a node",
-        "# the agent takes over in the copy you train on, or it may overwrite the agent's value.",
-        "",
-    ]
-    zone_nodes = _zone_air_nodes(idf)
-    for key in s.keys("OutputVariable", "System Node Setpoint Temperature"):
-        v = seen("System Node Setpoint Temperature", key)
-        if not v or v[0] < NO_SETPOINT or v == (0.0, 0.0) or key in zone_nodes:
-            continue
-        low, high = min(10.0, math.floor(v[0])), max(30.0, math.ceil(v[1]))
-        lines += _candidate(
-            _snake(o(key)) + "_setpoint_c", "System Node Setpoint", "Temperature Setpoint", o(key), low, high,
-            _clamp((v[0] + v[1]) / 2, low, high), "C", f"node {o(key)}" + seen_text(v),
-        )  # fmt: skip
-    for key in s.keys("Actuator", "Fan", "Fan Air Mass Flow Rate"):
-        v = seen("Fan Air Mass Flow Rate", key)
-        top = round(v[1], 2) if v and v[1] > 0 else 1.0
-        note = f"fan {o(key)}: at most {top} kg/s in the short run; check its maximum flow in the IDF"
-        lines += _candidate(
-            _snake(o(key)) + "_kg_s", "Fan", "Fan Air Mass Flow Rate", o(key), round(0.25 * top, 2), top, top, "kg/s",
-            note,
-        )  # fmt: skip
+    t = topology(idf.read_text(encoding="latin-1"))
+    lines += node_candidates(t, s, o, _zone_air_nodes(idf))
+    lines += fan_candidates(s, o) + economizer_candidates(t, s, o)
     lines += [
         "[reward]  # the paper's form: a bonus near `center`, a penalty outside [lower, upper], minus power",
         f"temperatures = [{', '.join(map(_str, temps))}]",
@@ -264,6 +215,7 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         lines.append(f"hvac = {{ {', '.join(hvac)} }}")
     lines += [
         "# tariff = { Electricity = { day = 0.20, night = 0.08, day_hours = [7, 22] }, NaturalGas = 0.04 }  # per kWh",
+        '# tariff = { Electricity = { file = "commercial-tou-demand.toml" } }  # time of use, demand charges (kpis.md)',
         "# emissions = { Electricity = 0.37, NaturalGas = 0.18 }  # kg CO2e per kWh",
         "# floor_area_m2 = 500.0  # default: the model's own",
         "",

@@ -2,8 +2,9 @@
 
 - HVAC energy (`ener_tot`): every fuel's HVAC signal (`[kpis] hvac`, by default the facility's HVAC electricity
   demand: fans, cooling, heating, pumps, heat rejection; never lights or plug loads), kWh, and per m² of floor.
-- cost (`cost_tot`): each fuel's HVAC energy times its price when it was used: constant, day/night, or a price
-  series (CSV of `time,price`, held until the next row), per m² beside the total.
+- cost (`cost_tot`): each fuel's HVAC energy times its price when it was used (buildings/tariff.py: constant,
+  day/night, time-of-use periods, or a price series), per m² beside the total;
+- the electricity bill (buildings/bill.py): the facility's energy and demand charges, month by month.
 - emissions (`emis_tot`): each fuel's HVAC energy times its factor, kg CO2e, per m² beside the total.
 - peak per fuel (`pele_tot`, `pgas_tot`): the highest control-step mean HVAC power, kW (and per m²).
 The floor area is the model's own: the conditioned zones EnergyPlus counts in the building's area (eplusout.eio),
@@ -15,78 +16,21 @@ where a step table is summarized.
 
 from __future__ import annotations
 
-import bisect
-import csv
 import datetime as dt
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from parallel_eplus.buildings.bill import DemandTracker, bill_summary
+from parallel_eplus.buildings.tariff import DAY_HOURS, DEFAULT_PRICES, Tariff  # noqa: F401 (their old home)
 
 if TYPE_CHECKING:
     import pandas as pd
 
-# Placeholders where a spec names none (US averages, 2023; say yours in `[kpis]`): $ per kWh, kg CO2e per kWh.
-DEFAULT_PRICES = {"Electricity": 0.12, "NaturalGas": 0.04}
+# Placeholders where a spec names none (US averages, 2023; say yours in `[kpis]`): kg CO2e per kWh (prices: tariff.py).
 DEFAULT_EMISSIONS = {"Electricity": 0.37, "NaturalGas": 0.18}
-DAY_HOURS = (7.0, 22.0)
-
-
-@dataclass(frozen=True)
-class Tariff:
-    """One fuel's price per kWh over time: constant, day/night (`day` within `day_hours`, else `night`), or a series
-    (times sorted, each price held until the next)."""
-
-    constant: float | None = None
-    day: float = 0.0
-    night: float = 0.0
-    day_hours: tuple[float, float] = DAY_HOURS
-    times: tuple[dt.datetime, ...] = ()
-    prices: tuple[float, ...] = ()
-
-    @classmethod
-    def of(cls, value: Any, base: Path) -> Tariff:
-        if isinstance(value, (int, float)):
-            return cls(constant=float(value))
-        if "csv" in value:
-            return cls.read_csv((base / value["csv"]).expanduser())
-        hours = value.get("day_hours", DAY_HOURS)
-        return cls(day=float(value["day"]), night=float(value["night"]), day_hours=(float(hours[0]), float(hours[1])))
-
-    @classmethod
-    def read_csv(cls, path: Path) -> Tariff:
-        """`time,price` rows (ISO times; the year is ignored, so one year's series prices any weather year)."""
-        rows = []
-        with path.open(newline="") as f:
-            for r in csv.DictReader(f):
-                t = dt.datetime.fromisoformat(r["time"]).replace(year=2001)
-                rows.append((t, float(r["price"])))
-        if not rows:
-            raise ValueError(f"{path}: no `time,price` rows")
-        rows.sort()
-        return cls(times=tuple(t for t, _ in rows), prices=tuple(p for _, p in rows))
-
-    def at(self, start: dt.datetime) -> float:
-        """The price of a step that began at `start`."""
-        if self.constant is not None:
-            return self.constant
-        if self.times:
-            i = bisect.bisect_right(self.times, start.replace(year=2001)) - 1
-            return self.prices[max(i, 0)]
-        hour = start.hour + start.minute / 60
-        return self.day if self.day_hours[0] <= hour < self.day_hours[1] else self.night
-
-    def series(self, starts: pd.DatetimeIndex) -> np.ndarray:
-        """The price of each step (vectorized `at`)."""
-        if self.constant is not None:
-            return np.full(len(starts), self.constant)
-        if self.times:
-            keys = np.array([t.replace(year=2001) for t in starts.to_pydatetime()], dtype="datetime64[us]")
-            i = np.searchsorted(np.array(self.times, dtype="datetime64[us]"), keys, side="right") - 1
-            return np.asarray(self.prices)[np.maximum(i, 0)]
-        hour = starts.hour.to_numpy() + starts.minute.to_numpy() / 60
-        return np.where((hour >= self.day_hours[0]) & (hour < self.day_hours[1]), self.day, self.night)
 
 
 @dataclass(frozen=True)
@@ -103,37 +47,46 @@ class Kpis:
         base = spec.path.parent
         named = dict(spec.kpis.tariff)
         fuels = [f for f, _ in hvac]
+        fuels += ["Electricity"] if "Electricity" not in fuels else []  # the bill's, even with no HVAC electricity
         tariffs = {f: Tariff.of(named[f], base) if f in named else Tariff(constant=DEFAULT_PRICES.get(f, 0.0))
                    for f in fuels}  # fmt: skip
         factors = {f: DEFAULT_EMISSIONS.get(f, 0.0) for f in fuels} | dict(spec.kpis.emissions)
         return cls(hvac, tariffs, factors, spec.kpis.floor_area_m2)
 
+    @property
+    def reference_price(self) -> float:
+        """Electricity's mean price (per kWh): the cost objective's W-equivalents divide by it."""
+        ref = self.tariffs.get("Electricity")
+        return (ref.mean_price() if ref is not None else 1.0) or 1.0
+
     def weighted_w(self, values, start: dt.datetime, objective: str) -> float:
         """The reward's energy signal under `objective` (hvac, cost, emissions), in W-equivalents: each fuel's HVAC
-        watts weighted by its price (or factor) relative to electricity's, so `power_weight` keeps its scale."""
+        watts weighted by its price (or factor) relative to electricity's mean price, so `power_weight` keeps its
+        scale."""
         if objective == "hvac":
             return sum(values[c] for _, c in self.hvac)
         if objective == "cost":
-            ref = self.tariffs.get("Electricity")
-            ref_price = (ref.at(start) if ref and ref.constant is not None else self._mean_price(ref)) or 1.0
-            return sum(values[c] * self.tariffs[f].at(start) for f, c in self.hvac) / ref_price
+            return sum(values[c] * self.tariffs[f].at(start) for f, c in self.hvac) / self.reference_price
         ref_factor = self.factors.get("Electricity") or 1.0
         return sum(values[c] * self.factors.get(f, 0.0) for f, c in self.hvac) / ref_factor
 
-    @staticmethod
-    def _mean_price(t: Tariff | None) -> float:
-        if t is None:
-            return 1.0
-        if t.times:
-            return float(np.mean(t.prices))
-        day = (t.day_hours[1] - t.day_hours[0]) / 24
-        return day * t.day + (1 - day) * t.night
+    def demand_tracker(self, step_minutes: float) -> DemandTracker | None:
+        """The demand charges' per-step surrogate (bill.py) for the cost objective; None without demand charges."""
+        ref = self.tariffs.get("Electricity")
+        return DemandTracker(ref, step_minutes) if ref is not None and ref.demand else None
 
-    def summarize(self, steps: pd.DataFrame, step_minutes: float) -> dict[str, float]:
-        """HVAC energy, cost, emissions and peak per fuel over the step table."""
+    def demand_w(self, dollars: float, step_minutes: float) -> float:
+        """Demand charges ($) in the reward's W-equivalents: the watts over one step whose energy at electricity's
+        mean price costs as much."""
+        return dollars / (self.reference_price * step_minutes / 60 / 1000)
+
+    def summarize(self, steps: pd.DataFrame, step_minutes: float, power: str | None = None) -> dict[str, float]:
+        """HVAC energy, cost, emissions and peak per fuel over the step table; with `power` (the facility's electric
+        demand, W) the electricity bill's parts (bill.py)."""
         hours = step_minutes / 60
         starts = None  # each step's start, for prices that vary in time (~1 ms an episode: only then)
-        if any(self.tariffs[fuel].constant is None for fuel, _ in self.hvac):
+        billed = power is not None and power in steps and "Electricity" in self.tariffs
+        if billed or any(self.tariffs[fuel].fixed is None for fuel, _ in self.hvac):
             starts = _index(steps["time"].dt.round("min") - np.timedelta64(int(round(step_minutes)), "m"))
         out: dict[str, float] = {}
         total = cost = emissions = 0.0
@@ -145,9 +98,12 @@ class Kpis:
             out[f"hvac_{key}_peak_kw"] = float(w.max() / 1000) if len(w) else 0.0
             total += float(kwh.sum())
             tariff = self.tariffs[fuel]
-            cost += float(np.sum(kwh * (tariff.constant if starts is None else tariff.series(starts))))
+            cost += float(np.sum(kwh * (tariff.fixed if tariff.fixed is not None else tariff.series(starts))))
             emissions += float(np.sum(kwh) * self.factors.get(fuel, 0.0))
         out.update(hvac_energy_kwh=total, cost=cost, emissions_kg=emissions)
+        if billed:
+            out |= bill_summary(self.tariffs["Electricity"], steps[power].to_numpy(float), list(starts.to_pydatetime()),
+                                step_minutes)  # fmt: skip
         return out
 
 

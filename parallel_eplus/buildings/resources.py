@@ -64,6 +64,12 @@ def weather_file(name: str) -> Path:
     return _find(name, weather_dirs(), "weather file")
 
 
+def tariff_file(name: str) -> Path:
+    """A built-in tariff (`buildings/tariffs/*.toml`) by file name, with or without `.toml`."""
+    name = name if name.endswith(".toml") else f"{name}.toml"
+    return _find(name, [_package_dir("tariffs")], "tariff file")
+
+
 def builtin_specs() -> dict[str, Path]:
     """The package's own building specs by name (the file's stem): `--building datacenter-crac`."""
     return {p.stem: p for p in sorted(spec_dir().glob("*.toml"))}

@@ -208,7 +208,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
             objective,
             float(tolerance),
         )
-    kpis = parse_kpis(data.get("kpis", {}), [o.name for o in observations], errors)
+    kpis = parse_kpis(data.get("kpis", {}), [o.name for o in observations], errors, path.parent)
 
     if errors:
         raise SpecError(f"{path}: {len(errors)} problem(s):\n  " + "\n  ".join(errors))

@@ -7,6 +7,7 @@ could read.
 from __future__ import annotations
 
 import difflib
+from pathlib import Path
 from typing import Any
 
 from parallel_eplus.buildings.forecast import ForecastSpec
@@ -18,6 +19,7 @@ from parallel_eplus.buildings.spec_types import (
     Observation,
     Occupancy,
 )
+from parallel_eplus.buildings.tariff import check_tariff, load_tariff_file
 
 
 def did_you_mean(value: str, names) -> str:
@@ -135,8 +137,9 @@ def parse_band(value: Any, temps: list[str], errors: list[str]):
     return pair(value, where), None, False
 
 
-def parse_kpis(table: Any, obs_names: list[str], errors: list[str]) -> KpiSpec:
-    """`[kpis]` (all optional): hvac, tariff, emissions per fuel; floor_area_m2."""
+def parse_kpis(table: Any, obs_names: list[str], errors: list[str], base: Path | None = None) -> KpiSpec:
+    """`[kpis]` (all optional): hvac, tariff, emissions per fuel; floor_area_m2. A tariff's `file` is read here
+    (relative to `base`, the spec's folder, or a built-in tariff), so its problems are the spec's."""
     if not isinstance(table, dict):
         errors.append(f"kpis: {table!r} is not a table")
         return KpiSpec()
@@ -156,17 +159,15 @@ def parse_kpis(table: Any, obs_names: list[str], errors: list[str]) -> KpiSpec:
     for fuel, factor in tables["emissions"].items():
         if not isinstance(factor, (int, float)) or isinstance(factor, bool) or factor < 0:
             errors.append(f"kpis.emissions.{fuel}: {factor!r} is not kg CO2e per kWh (a number >= 0)")
-    for fuel, price in tables["tariff"].items():
-        ok = isinstance(price, (int, float)) and not isinstance(price, bool)
-        if isinstance(price, dict):
-            keys = set(price)
-            ok = keys <= {"day", "night", "day_hours", "weekdays_only"} and {"day", "night"} <= keys
-            ok = ok or keys == {"csv"} and isinstance(price["csv"], str)
-        if not ok:
-            errors.append(
-                f"kpis.tariff.{fuel}: {price!r} is not a price per kWh, {{ day = .., night = .., day_hours = [7, 22] }}"
-                ' or { csv = "prices.csv" }'
-            )
+    for fuel, price in list(tables["tariff"].items()):
+        where = f"kpis.tariff.{fuel}"
+        if isinstance(price, dict) and "file" in price:
+            loaded = load_tariff_file(price, base or Path.cwd(), where, errors)
+            if loaded is None:
+                continue
+            tables["tariff"][fuel] = price = loaded
+            where += f" ({price.get('name') or 'file'})"
+        check_tariff(price, where, errors, fuel == "Electricity")
     area = table.get("floor_area_m2")
     if area is not None and not (isinstance(area, (int, float)) and area > 0):
         errors.append(f"kpis.floor_area_m2: {area!r} is not a positive number")

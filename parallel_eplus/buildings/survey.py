@@ -29,7 +29,9 @@ REQUESTS = (
     ("Zone Thermostat Cooling Setpoint Temperature", "*"),
     ("Zone Thermostat Heating Setpoint Temperature", "*"),
     ("Fan Air Mass Flow Rate", "*"),
+    ("System Node Mass Flow Rate", "*"),  # outdoor-air controllers' flows (their actuator node)
 )
+SERIES = ("System Node Mass Flow Rate", "Fan Air Mass Flow Rate")  # kept step by step: flows read together
 RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim
 NO_SETPOINT = -900.0  # EnergyPlus marks a node without a setpoint with -999
 
@@ -40,6 +42,10 @@ class Survey:
 
     rows: list[list[str]]  # list_available_api_data_csv, section markers dropped
     seen: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)  # (variable, KEY) -> (min, max)
+    # EnergyPlus's sizing results (eplusout.eio): (object type, NAME upper case, field) -> value, e.g.
+    # ("Controller:OutdoorAir", "VAV_1_OA_CONTROLLER", "Minimum Outdoor Air Flow Rate [m3/s]") -> 0.34
+    sizing: dict[tuple[str, str, str], float] = field(default_factory=dict)
+    series: dict[tuple[str, str], list[float]] = field(default_factory=dict)  # SERIES' values, step by step
     timesteps_per_hour: int = 0
     days: float = 0.0
 
@@ -85,6 +91,8 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
             value = api.exchange.get_variable_value(s, h)
             low, high = result.seen.get(k, (math.inf, -math.inf))
             result.seen[k] = (min(low, value), max(high, value))
+            if k[0] in SERIES:
+                result.series.setdefault(k, []).append(value)
         steps[0] += 1
         if steps[0] >= days * 24 * result.timesteps_per_hour:
             api.runtime.stop_simulation(s)
@@ -94,6 +102,7 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
         model = Path(out, "model.idf")
         prepare_idf(idf, model, max(2, math.ceil(days) + 1))
         code = api.runtime.run_energyplus(state, ["-d", out, "-w", str(weather), str(model)])
+        result.sizing = component_sizing(Path(out, "eplusout.eio"))
         err = Path(out, "eplusout.err")
         tail = err.read_text(errors="replace")[-1500:] if err.is_file() else ""
     api.state_manager.delete_state(state)
@@ -101,6 +110,19 @@ def survey(idf: Path, weather: Path, days: float = 1.0) -> Survey:
         raise ValueError(f"{idf}: EnergyPlus stopped before its first timestep (exit code {code}):\n{tail}")
     result.days = steps[0] / (24 * result.timesteps_per_hour)
     return result
+
+
+def component_sizing(eio: Path) -> dict[tuple[str, str, str], float]:
+    """eplusout.eio's `Component Sizing Information` rows: (type, NAME, field with its unit) -> the sized value."""
+    out: dict[tuple[str, str, str], float] = {}
+    if eio.is_file():
+        for row in csv.reader(io.StringIO(eio.read_text(errors="replace"))):
+            if len(row) >= 5 and row[0].strip() == "Component Sizing Information":
+                try:
+                    out[(row[1].strip(), row[2].strip().upper(), row[3].strip())] = float(row[4])
+                except ValueError:
+                    continue
+    return out
 
 
 def summary(s: Survey) -> list[str]:
@@ -113,7 +135,7 @@ def summary(s: Survey) -> list[str]:
     lines = [f"{sum(counts.values())} actuators in {len(counts)} kinds; most common:"]
     lines += [f"  {n:5d}  {kind}" for kind, n in top[:8]]
     for kind in ("Zone Temperature Control / Cooling Setpoint", "System Node Setpoint / Temperature Setpoint",
-                 "Fan / Fan Air Mass Flow Rate"):  # fmt: skip
+                 "Fan / Fan Air Mass Flow Rate", "Outdoor Air Controller / Air Mass Flow Rate"):  # fmt: skip
         lines.append(f"  {counts.get(kind, 0):5d}  {kind}  (candidates)")
     variables = [r for r in s.rows if r[0] == "OutputVariable"]
     lines.append(f"{len(variables)} output variables (the model's own Output:Variable requests and ours), "

@@ -54,9 +54,13 @@ class EpisodeStarter:
     """Writes an episode's directory (its model, its weather) and starts its EnergyPlus: one code path for a cold
     start and a prepared one, which is why they are the same episode."""
 
-    def __init__(self, output_dir: Path, idf: Path, config: SimulationConfig, args: list[str]):
-        """`args`: the EnergyPlus side's arguments every episode shares (model, steps, initial action)."""
+    def __init__(
+        self, output_dir: Path, idf: Path, config: SimulationConfig, args: list[str], takeover: tuple = ()
+    ) -> None:
+        """`args`: the EnergyPlus side's arguments every episode shares (model, steps, initial action); `takeover`:
+        the node setpoints the actions own, taken from the model's managers (buildings/takeover.py)."""
         self.output_dir, self.idf, self.config, self.args = output_dir, idf, config, args
+        self.takeover = takeover
         self._model: bytes | None = None  # the episode's model (idf_prep.py), the same for every episode
 
     def model(self, path: Path | None = None) -> bytes:
@@ -65,9 +69,11 @@ class EpisodeStarter:
             cfg = self.config
             with tempfile.TemporaryDirectory(prefix="parallel-eplus-model-") as tmp:
                 made = Path(tmp) / MODEL_FILE
-                prepare_idf(self.idf, made, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs, cfg.start_day,
-                            cfg.start_weekday)  # fmt: skip
+                report = prepare_idf(self.idf, made, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
+                                     cfg.start_day, cfg.start_weekday, self.takeover)  # fmt: skip
                 self._model = made.read_bytes()
+            for line in report.lines():
+                log.info("prepared model %s: %s", self.idf.name, line)
         if path is not None:
             path.write_bytes(self._model)
         return self._model

@@ -86,6 +86,7 @@ class Simulation:
         self.last_summary: dict | None = None
         self._area: float | None = None  # the model's floor area (m²), for the per-m² figures
         self._action = self.initial_action.tolist()
+        self._demand = None  # the demand charges' surrogate of the running episode (cost objective)
         self._closed = False
         _LIVE.add(self)
 
@@ -161,6 +162,7 @@ class Simulation:
         self._action = self.initial_action.tolist()
         self.last_summary = None
         self.actions.start()  # a fresh rule-based controller (integral state) per episode, where one is corrected
+        self._demand = self.comfort.demand_tracker()  # the month's running peaks start at 0 each episode
         if self._from_prepared and not self.process.has_frame():
             self.prepare()  # it is still warming up and the spare is idle: the next starts now (back-to-back short
             # episodes); else at this episode's first action, so a reset that finds it parked returns at once, and a
@@ -213,7 +215,11 @@ class Simulation:
         applies = comfort.always or comfort.applies(info["time"], info)
         temps = tuple(map(info.__getitem__, self._temps))
         margin = self.config.comfort_margin_c
-        r, parts = reward(temps, comfort.energy_w(info), self.config.reward, applies and margin is None)
+        energy = comfort.energy_w(info)
+        if self._demand is not None:  # --objective cost with demand charges: their per-step share (buildings/bill.py)
+            info["demand_charge"], demand_w = comfort.demand_w(self._demand, info)
+            energy += demand_w
+        r, parts = reward(temps, energy, self.config.reward, applies and margin is None)
         info.update(parts)
         info["comfort_applies"] = applies
         if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward

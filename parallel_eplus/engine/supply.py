@@ -14,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from parallel_eplus.buildings.takeover import taken_setpoints
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import MODEL_FILE, prune_episodes
 from parallel_eplus.engine.fork import Template, Templates
@@ -46,7 +47,9 @@ class EpisodeSupply:
         self.ended: tuple[EnergyPlusProcess, Path | None] | None = None  # an episode past its last step (`settle`)
         self._whole: list[Path] = []  # this worker's own episode directories still whole, oldest first
         self._weather = weather
-        self._starter = EpisodeStarter(output_dir, setup.idf, config, setup.process_args())
+        # the model's own managers keep their nodes where a released setpoint must fall back to them (relinquish)
+        taken = () if config.relinquish else taken_setpoints(setup.elements)
+        self._starter = EpisodeStarter(output_dir, setup.idf, config, setup.process_args(), taken)
         # Episodes forked from a template parked at their first control step (fork.py): not with weather noise (a
         # new weather file each episode), nor for one episode (an evaluation's)
         forks = prepare and config.fork_episodes and setup.noise is None

@@ -83,6 +83,10 @@ def table_markdown(df: pd.DataFrame, baseline: str) -> str:
                   "energy and power count every step."]  # fmt: skip
     if "hvac_energy_kwh" in df.columns:
         lines += ["", boptest_markdown(df, baseline)]
+    if "bill" in df.columns:
+        from parallel_eplus.evaluation.bill_table import bill_markdown
+
+        lines += ["", bill_markdown(df, baseline, *comparable(df))]
     return "\n".join(lines) + "\n"
 
 
@@ -97,7 +101,7 @@ BOPTEST = (
 )
 
 
-RATIOS = ("hvac_energy_kwh", "energy_kwh", "cost", "emissions_kg", "discomfort_kh")
+RATIOS = ("hvac_energy_kwh", "energy_kwh", "cost", "emissions_kg", "discomfort_kh", "bill", "peak_15min_kw")
 
 
 def with_ratios(df: pd.DataFrame, baseline: str) -> pd.DataFrame:

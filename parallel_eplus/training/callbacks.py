@@ -112,6 +112,7 @@ class EpisodeMetrics(BaseCallback):
         self.restarts = 0
         self.per_weather = episodes_per_weather(episodes_csv)  # a resumed run counts on from its earlier episodes
         self.builtin = builtin_figures(episodes_csv.parent / BUILTIN_FILE)
+        self._columns: list[str] | None = None  # episodes.csv's header: every row is written in its columns
         self._t0 = time.monotonic()
         self._steps0 = 0
 
@@ -141,7 +142,12 @@ class EpisodeMetrics(BaseCallback):
         if episode_return is not None:
             self.logger.record_mean(f"episode/{weather}/return", episode_return)
         row = {"timesteps": self.num_timesteps, **summary}
-        io.append_text(self.episodes_csv, io.csv_rows(row, header=not self.episodes_csv.is_file()))
+        new = not self.episodes_csv.is_file()
+        if self._columns is None:  # a resumed run's file keeps its header: a summary with more figures (the bill's,
+            # since 2026-11-28) must not write rows wider than it
+            self._columns = list(row) if new else self.episodes_csv.open().readline().rstrip("\n").split(",")
+        row = {k: row.get(k) for k in self._columns}
+        io.append_text(self.episodes_csv, io.csv_rows(row, header=new))
         if self.progress is not None:
             self.progress.set_postfix(episodes=self.episodes, last=f"{weather} {summary.get('power_kw', 0):.0f} kW")
 
