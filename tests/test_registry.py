@@ -161,3 +161,17 @@ def test_a_trainer_killed_with_sigkill_is_listed_as_failed_not_running(tmp_path,
         while our_processes() and time.monotonic() < deadline:
             time.sleep(0.2)
         pipe_sweep.sweep()
+
+
+def test_a_scratch_folder_whose_owner_is_gone_is_swept_and_a_live_ones_kept(tmp_path):
+    """A Ray evaluation task's folder (evaluation/ray_sweep.py) names its owner; Ray's shutdown kills its worker
+    outright, so `clean` and the next run's first pipe remove it once that process is gone."""
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    gone, alive = tmp_path / "parallel-eplus-eval-gone", tmp_path / "parallel-eplus-eval-alive"
+    for folder in (gone, alive):
+        (folder / "episodes").mkdir(parents=True)
+    pipe_sweep.write_owner(alive)
+    (gone / pipe_sweep.OWNER_FILE).write_text(f"{dead.pid} 1\n")  # a process that ended
+    assert pipe_sweep.sweep(tmp_path) == [gone]
+    assert alive.is_dir() and not gone.exists()

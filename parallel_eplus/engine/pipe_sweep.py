@@ -51,13 +51,14 @@ def owner_alive(pipe_dir: Path) -> bool | None:
 
 
 def pipe_dirs(tmp: str | os.PathLike | None = None) -> list[Path]:
-    """Our pipe directories under the temp folder: `parallel-eplus-*` holding an `act` FIFO."""
+    """Our pipe directories under the temp folder: `parallel-eplus-*` holding an `act` FIFO, or naming an owner (a
+    scratch folder of ours, as a Ray evaluation task's: a worker killed by Ray's shutdown runs no cleanup)."""
     root = Path(tmp or tempfile.gettempdir())
     try:
         names = [n for n in os.listdir(root) if n.startswith(PREFIX)]
     except OSError:
         return []
-    return sorted(d for n in names if (d := root / n).is_dir() and (d / "act").exists())
+    return sorted(d for n in names if (d := root / n).is_dir() and ((d / "act").exists() or (d / OWNER_FILE).exists()))
 
 
 def _held_open(pipe_dir: Path) -> bool:

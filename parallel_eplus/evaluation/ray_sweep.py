@@ -37,9 +37,11 @@ def _policy_files(model_zip: Path) -> dict[str, bytes]:
 
 def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None) -> tuple[dict, dict[str, bytes]]:
     """One whole episode on a node; returns (its results row, the files the figures read)."""
+    from parallel_eplus.engine.pipe_sweep import write_owner
     from parallel_eplus.engine.simulation import Simulation
 
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-eval-") as tmp:
+        write_owner(Path(tmp))  # a worker killed outright leaves it: `clean` and the next run's sweep remove it
         if files is not None:  # the policy, written where this node can read it
             for name, data in files.items():
                 (Path(tmp) / name).write_bytes(data)
