@@ -30,9 +30,10 @@ one() {  # building forecast seed
     [ -d "$run/best/planner" ] && planner=$run/best/planner  # the one --eval-every chose on CA-CO-FL's January
     [ -f "$out/results.csv" ] && { echo "$b $f seed $s: done"; return; }
     echo "$(date -Is) $b $f seed $s (code $COMMIT)"
-    "$PY" -m parallel_eplus.cli evaluate --building "$b" --baseline --policy "$planner=Planner" \
+    # from $WORK: `python -m` puts the working directory first on the path, before PYTHONPATH's copy
+    (cd "$WORK" && "$PY" -m parallel_eplus.cli evaluate --building "$b" --baseline --policy "$planner=Planner" \
         --planner "forecast=$f${SETTINGS:+,$SETTINGS}" --weathers CA,CO,FL,IL,VA --run-days "$(days "$b")" \
-        --workers "$WORKERS" --backend ray --out "$out" --quiet > "$out.log" 2>&1 || echo "failed: $out.log"
+        --workers "$WORKERS" --backend ray --out "$out" --quiet) > "$out.log" 2>&1 || echo "failed: $out.log"
 }
 
 if [ "${1:-}" = merge ]; then
