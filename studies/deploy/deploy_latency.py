@@ -71,19 +71,22 @@ class Requests:
             from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
 
             self.names, self.file = WEATHER, PerfectForecast(weather_path("datacenter-2zone", "CA"))
-        self.plan = None
+        self.plan, self.fallbacks = None, 0
 
     def body(self, i: int) -> dict:
         when = self.start + dt.timedelta(minutes=15 * i)
         body = {"time": when.isoformat(), "sensors": READINGS}
         if self.planner:
-            values = self.file.truth([when + dt.timedelta(minutes=15 * (k + 1)) for k in range(8)])
-            forecast = {n: values[:, j].tolist() for j, n in enumerate(self.names)}
+            values = self.file.truth([when + dt.timedelta(minutes=15 * k) for k in range(9)])
+            forecast = {n: values[1:, j].tolist() for j, n in enumerate(self.names)}
+            # the outdoor sensor agrees with the weather file, so every answer is a plan, never the fallback's rule
+            body["sensors"] = READINGS | {"outdoor_temp_c": float(values[0, 0])}
             body |= {"last_setpoints": LAST, "forecast": forecast, "plan": self.plan}
         return body
 
     def answered(self, answer: dict) -> None:
         self.plan = answer.get("plan")
+        self.fallbacks += bool(answer.get("fallback"))
 
 
 def busy(n: int) -> list[subprocess.Popen]:
@@ -154,7 +157,8 @@ def main() -> None:
             *(f"| {name} | {r['p50']:.3f} | {r['p90']:.3f} | {r['p99']:.3f} | {r['max']:.1f} |" for name, r in rows),
             "",
             f"Throughput over the connection: {args.requests / http_ms.sum() * 1000:.0f} requests/s. A control step is "
-            "900 s; the request is a vanishing share of it.",
+            "900 s; the request is a vanishing share of it."
+            + (f" Answers that fell back to the rule (not plans), both runs: {requests.fallbacks}." if args.planner else ""),
             "",
         ]
     )
