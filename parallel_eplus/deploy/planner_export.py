@@ -15,6 +15,7 @@ import datetime as dt
 import hashlib
 import json
 import logging
+import shutil
 import tempfile
 from dataclasses import asdict
 from pathlib import Path
@@ -124,6 +125,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
             "seed": mpc.seed, "step_minutes": mpc.step_minutes,
             "layout": asdict(mpc.layout), "calendar": mpc.comfort_times.settings(),
             "schedule": [list(p) for p in mpc.forecasts(weathers[0]).schedule or ()] or None,
+            "energy": mpc.energy_weights.entry(_tariff_values(mpc.energy_weights, spec, out_dir)),
         },  # fmt: skip
         "fallback": {"max_input_z": max_input_z, "max_forecast_gap_c": max_forecast_gap_c if outdoor else None,
                      "max_spread_k": max_spread_k, "exogenous": list(EXOGENOUS[: mpc.layout.n_exogenous]) +
@@ -147,6 +149,22 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
     log.info("exported the planner %s -> %s (%d sampled decisions equal in process; fallback beyond %.2f K spread)",
              source, out_dir, len(spreads), contract["fallback"]["max_spread_k"])  # fmt: skip
     return path
+
+
+def _tariff_values(weights, spec, out_dir: Path) -> dict[str, object]:
+    """Each priced fuel's tariff as the spec gives it (a fuel it does not name: the default price), a price series'
+    CSV copied beside the contract: what the served planner prices its horizon with."""
+    from parallel_eplus.buildings.tariff import DEFAULT_PRICES
+
+    named, values = dict(spec.kpis.tariff), {}
+    for fuel in weights.tariffs:
+        value = named.get(fuel, DEFAULT_PRICES.get(fuel, 0.0))
+        if isinstance(value, dict) and "csv" in value:
+            name = f"tariff-{fuel}.csv"
+            shutil.copyfile((spec.path.parent / value["csv"]).expanduser(), out_dir / name)
+            value = dict(value, csv=name)
+        values[fuel] = value
+    return values
 
 
 def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float]:

@@ -25,6 +25,7 @@ from parallel_eplus.buildings.weather_forecast import WEATHER
 from parallel_eplus.deploy.contract import Contract, InputError
 from parallel_eplus.learning.model_based.calendar import Calendar
 from parallel_eplus.learning.model_based.dataset import Layout
+from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble
 from parallel_eplus.learning.model_based.features import WEATHER_SCALE, exogenous, step_times
 from parallel_eplus.learning.model_based.planner import Planner, decision_seed
@@ -57,6 +58,8 @@ class PlannerRuntime:
         self.comfort_weight, self.seed, self.step_minutes = p["comfort_weight"], p["seed"], p["step_minutes"]
         self.schedule = tuple(tuple(x) for x in p["schedule"]) if p.get("schedule") else None
         self.support = (arrays["support_low"], arrays["support_high"])
+        parts = self.layout.n_state - len(self.layout.temperatures)
+        self.energy = EnergyWeights.from_entry(p.get("energy"), parts, Path(directory))  # the objective's prices
         self.calendar = Calendar.from_arrays(p["calendar"], {k: v for k, v in arrays.items() if k in _CALENDAR})
         self.own = arrays["own_controls"]  # [12, 24, A] physical: the building's own setpoints by month and hour
         self.x_mean, self.x_std = arrays["x_mean"], arrays["x_std"]
@@ -78,8 +81,9 @@ class PlannerRuntime:
         s = self.layout.state(obs[None, : len(self.layout.sensors)])
         exo = exogenous(weather, times, self.schedule)[None]
         seed = decision_seed(self.seed, when.isoformat(), s[0])
+        weights = None if self.energy.objective == "energy" else self.energy.at([when, *times[:-1]])[None]
         plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], self.calendar.bounds(times)[None],
-                                 self.comfort_weight, self.support, warm[None], [seed])  # fmt: skip
+                                 self.comfort_weight, self.support, warm[None], [seed], weights)  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),

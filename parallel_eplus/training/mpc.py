@@ -72,7 +72,8 @@ class _Loop:
         self.evaluator, self._t0 = evaluator, time.monotonic()
         self.cfg, self.venv, self.s, self.new_model = cfg, venv, cfg.mpc, new_model
         self.building = load_building(cfg.building)
-        self.mpc = MPC(cfg.building, self.s, cfg.comfort.margin_c, cfg.reward.power_weight, venv.num_envs, cfg.seed)
+        self.mpc = MPC(cfg.building, self.s, cfg.comfort.margin_c, cfg.reward.power_weight, venv.num_envs, cfg.seed,
+                       objective=cfg.objective)
         self.data = Transitions(self.mpc.layout)
         self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
         self.mpc.comfort_weight = self.s.comfort_weight or cfg.comfort.multiplier_init

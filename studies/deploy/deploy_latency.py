@@ -7,7 +7,7 @@ over one kept-alive connection (as `evaluate --controller-url` does: a planner's
 weather file's coming steps as the forecast and the last plan) and times each; then the controller alone in this
 process, for its share. `--load N` keeps N other processes busy meanwhile (a machine doing other work).
 
-    .venv/bin/python studies/deploy/deploy_latency.py [--planner] [--load 2] [--requests 5000] [--out results/deploy/...]
+    .venv/bin/python studies/deploy/deploy_latency.py [--planner] [--load 2] [--requests 5000] [--out FILE.md]
 """
 
 from __future__ import annotations
@@ -148,9 +148,10 @@ def main() -> None:
         [
             "# Controller latency",
             "",
-            f"`python studies/deploy/deploy_latency.py{' --planner' if args.planner else ''} --load {args.load} --requests "
-            f"{args.requests}` on {dt.date.today()}: {args.requests} requests after {args.warmup} of warm-up; "
-            f"{os.cpu_count()} cores, {args.load} other processes kept busy, load average {load[0]:.1f} at the end.",
+            f"`python studies/deploy/deploy_latency.py{' --planner' if args.planner else ''} --load {args.load} "
+            f"--requests {args.requests}` on {dt.date.today()}: {args.requests} requests after {args.warmup} of "
+            f"warm-up; {os.cpu_count()} cores, {args.load} other processes kept busy, load average {load[0]:.1f} at "
+            "the end.",
             "",
             "| what | p50 (ms) | p90 (ms) | p99 (ms) | max (ms) |",
             "| --- | --- | --- | --- | --- |",
@@ -158,7 +159,7 @@ def main() -> None:
             "",
             f"Throughput over the connection: {args.requests / http_ms.sum() * 1000:.0f} requests/s. A control step is "
             "900 s; the request is a vanishing share of it."
-            + (f" Answers that fell back to the rule (not plans), both runs: {requests.fallbacks}." if args.planner else ""),
+            + (f" Answers that fell back to the rule (not plans), both runs: {requests.fallbacks}." * args.planner),
             "",
         ]
     )

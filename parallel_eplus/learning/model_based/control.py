@@ -23,6 +23,7 @@ from parallel_eplus.buildings.weather_forecast import FORECASTS
 from parallel_eplus.learning.model_based.calendar import ComfortTimes
 from parallel_eplus.learning.model_based.dataset import Layout
 from parallel_eplus.learning.model_based.dynamics import Ensemble
+from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
 from parallel_eplus.learning.model_based.exogenous import Forecasts
 from parallel_eplus.learning.model_based.features import step_times
@@ -36,7 +37,7 @@ class MPC:
     """The model, the planner and what they need to know about a building; `act` plans for every worker at once."""
 
     def __init__(self, building: str | None, settings: MPCSettings, margin_c: float, power_weight: float,
-                 workers: int, seed: int = 0, model: Ensemble | None = None):  # fmt: skip
+                 workers: int, seed: int = 0, model: Ensemble | None = None, objective: str | None = None):  # fmt: skip
         self.building = building
         b = load_building(building)
         self.step_minutes = 60 * 24 / b.steps_per_day
@@ -46,6 +47,7 @@ class MPC:
         self.settings = settings
         self.model = model or Ensemble(self.layout, settings, seed)
         self.comfort_times = ComfortTimes(building, self.step_minutes)
+        self.energy_weights = EnergyWeights.of_building(self.layout, b, objective)  # the run's objective's
         self.margin_c, self.power_weight = margin_c, power_weight
         self.seed = seed
         self.planner = Planner(None, settings.members, len(self.layout.temperatures), settings, margin_c, power_weight)
@@ -73,25 +75,27 @@ class MPC:
         """A new episode for `worker`: forget its warm start."""
         self.warm[worker] = 0.0
 
-    def future(self, infos: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(exogenous inputs [W, H, X], whether the band applies [W, H], each zone's bounds [W, H, K, 2]) over each
-        worker's horizon."""
-        exo, applies, bounds = [], [], []
+    def future(self, infos: list[dict]) -> tuple[np.ndarray, ...]:
+        """(exogenous inputs [W, H, X], whether the band applies [W, H], each zone's bounds [W, H, K, 2], the
+        energy parts' weights [W, H, P]) over each worker's horizon."""
+        exo, applies, bounds, weights = [], [], [], []
         for info in infos:
             times = step_times(info["time"], self.step_minutes, self.settings.horizon)
             exo.append(self.forecasts.of(info).ahead(info["time"], times))
             applies.append(self.comfort_times(times))
             bounds.append(self.comfort_times.bounds(times))
-        return np.stack(exo), np.stack(applies), np.stack(bounds)
+            weights.append(self.energy_weights.at([info["time"], *times[:-1]]))  # priced when each step begins
+        return np.stack(exo), np.stack(applies), np.stack(bounds), np.stack(weights)
 
     def act(self, obs: np.ndarray, infos: list[dict], a_last: np.ndarray) -> np.ndarray:
         """Every worker's next normalized action from its observation (sensors first) and info (time, weather)."""
-        exo, applies, bounds = self.future(infos)
+        exo, applies, bounds, weights = self.future(infos)
         s = self.layout.state(np.asarray(obs)[:, : len(self.layout.sensors)])
         a_last = np.asarray(a_last, np.float32)
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
-                                      self.warm[: len(s)], seeds)  # fmt: skip
+                                      self.warm[: len(s)], seeds,
+                                      None if self.energy_weights.objective == "energy" else weights)  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         return self.last.action
 
@@ -100,6 +104,7 @@ class MPC:
         return {
             "building": self.building, "ensemble": self.model.state(), "settings": asdict(self.settings),
             "margin_c": self.margin_c, "power_weight": self.power_weight, "comfort_weight": self.comfort_weight,
+            "objective": self.energy_weights.objective,
             "support_low": th.as_tensor(self.support[0]), "support_high": th.as_tensor(self.support[1]),
             **{k: th.as_tensor(v) for k, v in self.comfort_times.state().items()},
         }  # fmt: skip
@@ -114,7 +119,8 @@ class MPC:
     def from_state(cls, state: dict, workers: int = 1, seed: int = 0) -> MPC:
         settings = MPCSettings(**state["settings"])
         model = Ensemble.from_state(state["ensemble"])
-        mpc = cls(state["building"], settings, state["margin_c"], state["power_weight"], workers, seed, model)
+        mpc = cls(state["building"], settings, state["margin_c"], state["power_weight"], workers, seed, model,
+                  state.get("objective", "energy"))  # planners saved before objectives: energy
         mpc.comfort_weight = float(state["comfort_weight"])
         mpc.support = tuple(np.asarray(state[k], np.float32) for k in ("support_low", "support_high"))
         mpc.comfort_times.load(state)

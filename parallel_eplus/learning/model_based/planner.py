@@ -6,7 +6,8 @@ ensemble in one call per horizon step (ensemble_graph.py), scored, and the best 
 distribution, `iterations` times; the best sequence's first action is applied and the rest (`Plan.increments`)
 warm-starts the next step's search.
 
-The cost of a step is the spec's energy term (every fuel, times the reward's `power_weight`: about 1 per step),
+The cost of a step is the spec's energy term (every fuel, times the reward's `power_weight`: about 1 per step;
+under another objective each predicted part weighed as the reward weighs it at that step, energy_weights.py),
 plus `comfort_weight` times the comfort surrogate of the constraint (learning/lagrangian.py: 0 inside each zone's
 bounds shrunk by the margin, rising by 1 per margin beyond, here unbounded so the search is pushed back in), where
 the band applies (the bounds: the spec's band, or each zone's thermostat schedules, calendar.py),
@@ -62,9 +63,10 @@ class Planner:
 
     def plan(self, s: np.ndarray, a_last: np.ndarray, exo: np.ndarray, applies: np.ndarray, bounds: np.ndarray,
              comfort_weight: float, support: tuple[np.ndarray, np.ndarray], warm: np.ndarray,
-             seeds: list[int]) -> Plan:  # fmt: skip
+             seeds: list[int], energy_weights: np.ndarray | None = None) -> Plan:  # fmt: skip
         """s [W, n_state], a_last [W, A], exo [W, H, X], applies [W, H], each zone's bounds [W, H, K, 2], the
-        actions' support (low [A], high [A]), the warm start [W, H, A] and one sampler seed per worker."""
+        actions' support (low [A], high [A]), the warm start [W, H, A], one sampler seed per worker, and the
+        weights of the predicted energy parts [W, H, P] (None: each counts once)."""
         t0 = time.perf_counter()
         c = self.settings
         w, h, a_n = len(s), c.horizon, a_last.shape[1]
@@ -81,7 +83,7 @@ class Planner:
             delta[:, 0] = mean  # the warm start itself is always a candidate
             np.clip(delta, -c.max_increment, c.max_increment, out=delta)
             actions = np.clip(a_last[:, None, None, :] + np.cumsum(delta, axis=2), low, high)
-            cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight)  # [W, N]
+            cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight, energy_weights)
             elite = np.argpartition(cost, elites - 1, axis=1)[:, :elites]
             chosen = np.take_along_axis(delta, elite[:, :, None, None], axis=1)
             mean, std = chosen.mean(1), np.maximum(chosen.std(1, ddof=1), 0.01)
@@ -93,7 +95,8 @@ class Planner:
         ms = 1000 * (time.perf_counter() - t0)
         return Plan(plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms)
 
-    def _cost(self, s, a_last, actions, exo, applies, bounds, comfort_weight: float) -> tuple[np.ndarray, ...]:
+    def _cost(self, s, a_last, actions, exo, applies, bounds, comfort_weight: float,
+              energy_weights: np.ndarray | None) -> tuple[np.ndarray, ...]:  # fmt: skip
         """Each candidate's cost over the horizon and its members' largest temperature spread: ([W, N], [W, N]),
         from actions [W, N, H, A]. (Sums, not means, over the members: numpy's mean costs more per call.)"""
         w, n, h, a_n = actions.shape
@@ -108,13 +111,17 @@ class Planner:
         applied = np.repeat(applies, n, axis=0) * (comfort_weight / self.margin / k)  # [W*N, H]
         total, worst = np.zeros(b, np.float32), np.zeros(b, np.float32)
         worst_case = self.settings.comfort_risk == "worst"
+        weights = None if energy_weights is None else np.repeat(np.asarray(energy_weights, np.float32), n, axis=0)
         energy_scale, spread_scale = self.power_weight / e, self.settings.disagreement_weight
         for step in range(h):
             inputs[..., ns + a_n : x0] = actions[:, :, step]
             inputs[..., x0:] = exo[None, :, None, step]
             out = self.forward(flat)  # [E, W*N, ns]
             temps = flat[:, :, :k] + out[:, :, :k]
-            total += out[:, :, k:].sum(axis=(0, 2)) * energy_scale
+            if weights is None:
+                total += out[:, :, k:].sum(axis=(0, 2)) * energy_scale
+            else:  # [W*N, P] this step's weights
+                total += (out[:, :, k:].sum(0) * weights[:, step]).sum(-1) * energy_scale
             over = np.maximum(lo[:, step] - temps, temps - hi[:, step])
             np.maximum(over, 0, out=over)
             over = over.sum(-1)  # [E, W*N]
