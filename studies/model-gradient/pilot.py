@@ -20,10 +20,8 @@ Each round's policy is saved as <out>/round<r>/model.zip (+ vecnormalize.npz); e
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import logging
-import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -32,13 +30,11 @@ import numpy as np
 import torch as th
 from tqdm import tqdm
 
-from parallel_eplus.buildings.weather_forecast import PerfectForecast
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_local
 from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.dataset import next_state
-from parallel_eplus.learning.model_based.features import step_times
+from parallel_eplus.learning.model_based.through_model import Rollouts, Starts, train, widen
 from parallel_eplus.learning.rollout import ALGORITHMS
 from parallel_eplus.learning.saved_models import load_model
 from parallel_eplus.runs.norm_stats import read_stats
@@ -47,123 +43,10 @@ from parallel_eplus.runs.policy_files import normalization_file, stats_target
 log = logging.getLogger("model-gradient")
 ROOT = Path(__file__).resolve().parents[2]
 RUN = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0"
-OUTDOOR = "site outdoor air drybulb temperature"
-
-
-class Starts:
-    """Real states the rollouts branch from: observation, the action before it (normalized), time and weather."""
-
-    def __init__(self):
-        self.obs, self.prev, self.times, self.weathers = [], [], [], []
-
-    def add(self, obs, prev, when, weather) -> None:
-        self.obs.append(np.asarray(obs, np.float32))
-        self.prev.append(np.asarray(prev, np.float32))
-        self.times.append(when)
-        self.weathers.append(weather)
-
-    def __len__(self) -> int:
-        return len(self.obs)
-
-
-class Rollouts:
-    """The policy's cost over the planner's horizon through the ensemble, differentiable in the policy's weights."""
-
-    def __init__(self, mpc: MPC, building, stats, policy):
-        self.mpc, self.layout, self.s = mpc, mpc.layout, mpc.settings
-        self.model, self.policy = mpc.model, policy
-        self.mean = th.as_tensor(stats.obs_mean, dtype=th.float32)
-        self.scale = th.as_tensor(np.sqrt(stats.obs_var + stats.epsilon), dtype=th.float32)
-        self.clip = float(stats.clip_obs)
-        self.low, self.high = (th.as_tensor(b) for b in mpc.support)
-        sensors = list(self.layout.sensors)
-        names = self.layout.state_names
-        self.temp_at = [sensors.index(n) for n in self.layout.temperatures]
-        self.hvac_at = [sensors.index(n) for n in self.layout.hvac]
-        self.total_at = [sensors.index(n) for n in self.layout.energy][:1]
-        self.outdoor_at = [i for i, o in enumerate(building.observed) if o.variable.lower() == OUTDOOR]
-        self.n_sensors = len(sensors)
-        self.k = len(self.layout.temperatures)
-        assert names[self.k :] == (("non_hvac_w", *self.layout.hvac) if self.layout.hvac else self.layout.energy)
-
-    def batch(self, starts: Starts, rows: np.ndarray) -> dict:
-        """The rows' inputs over the horizon: observation, previous action, exogenous inputs, outdoor dry bulb,
-        whether the band applies and the bounds at each step's end."""
-        h, mpc = self.s.horizon, self.mpc
-        exo, outdoor, applies, bounds = [], [], [], []
-        for r in rows:
-            times = step_times(starts.times[r], mpc.step_minutes, h)
-            forecast = mpc.forecasts(starts.weathers[r])
-            exo.append(forecast.at(times))
-            outdoor.append(forecast.file.truth(times)[:, 0])
-            applies.append(mpc.comfort_times(times))
-            bounds.append(mpc.comfort_times.bounds(times))
-        f32 = lambda a: th.as_tensor(np.asarray(a), dtype=th.float32)  # noqa: E731
-        obs = np.stack([starts.obs[r] for r in rows])
-        return {"obs": f32(obs), "prev": f32(np.stack([starts.prev[r] for r in rows])), "exo": f32(np.stack(exo)),
-                "outdoor": f32(np.stack(outdoor)), "applies": f32(np.stack(applies)), "bounds": f32(np.stack(bounds))}
-
-    def act(self, obs: th.Tensor) -> th.Tensor:
-        """The policy's mean action on raw observations [..., n_obs] (SB3's extractor flattens all but the first
-        axis, so the batch axes are flattened first)."""
-        z = th.clamp((obs - self.mean) / self.scale, -self.clip, self.clip).reshape(-1, obs.shape[-1])
-        latent = self.policy.mlp_extractor.forward_actor(self.policy.extract_features(z))
-        return self.policy.action_net(latent).reshape(*obs.shape[:-1], -1)
-
-    def rebuild(self, obs0: th.Tensor, s: th.Tensor, outdoor: th.Tensor) -> th.Tensor:
-        """Each member's observation from its predicted state: [E, B, n_obs]."""
-        e = s.shape[0]
-        obs = obs0.expand(e, -1, -1).clone()
-        obs[..., self.temp_at] = s[..., : self.k]
-        if self.layout.hvac:
-            obs[..., self.hvac_at] = s[..., self.k + 1 :]
-            obs[..., self.total_at] = s[..., self.k :].sum(-1, keepdim=True)
-        else:
-            obs[..., [self.layout.sensors.index(n) for n in self.layout.energy]] = s[..., self.k :]
-        if self.outdoor_at:
-            obs[..., self.outdoor_at] = outdoor[None, :, None].expand(e, -1, len(self.outdoor_at))
-        return obs
-
-    def cost(self, b: dict, comfort_weight: float, move_weight: float = 10.0) -> tuple[th.Tensor, dict]:
-        m, s_, k = self.model, self.s, self.k
-        e = s_.members
-        state = th.as_tensor(self.layout.state(b["obs"][:, : self.n_sensors].numpy()))
-        s = state.expand(e, -1, -1)
-        prev = b["prev"].expand(e, -1, -1)
-        obs = b["obs"].expand(e, -1, -1)
-        margin = self.mpc.margin_c
-        parts = {"energy": 0.0, "comfort": 0.0, "spread": 0.0, "moves": 0.0}
-        for h in range(s_.horizon):
-            raw = self.act(obs)
-            # outside the data's support or a jump beyond the planner's largest increment: penalized (the model
-            # was never shown either), and the support enforced as the planner's is
-            outside = th.relu(raw - self.high) + th.relu(self.low - raw)
-            a = th.maximum(th.minimum(raw, self.high), self.low)
-            jump = th.relu((a - prev).abs() - s_.max_increment)
-            parts["moves"] = parts["moves"] + move_weight * ((outside**2).sum(-1) + (jump**2).sum(-1)).mean()
-            x = b["exo"][:, h].expand(e, -1, -1)
-            inputs = (th.cat([s, prev, a, x], dim=-1) - m.x_mean) / m.x_std
-            out = m(inputs) * m.y_std + m.y_mean
-            s = next_state(self.layout, s, out)
-            temps = s[..., :k]
-            parts["energy"] = parts["energy"] + out[..., k:].sum(-1).mean() * self.mpc.power_weight
-            lo = b["bounds"][:, h, :, 0] + margin
-            hi = b["bounds"][:, h, :, 1] - margin
-            over = th.relu(th.maximum(lo - temps, temps - hi)).sum(-1)  # [E, B]
-            if s_.comfort_risk == "worst":
-                over = over.max(0).values
-            else:
-                over = over.mean(0)
-            parts["comfort"] = parts["comfort"] + (over * b["applies"][:, h]).mean() * comfort_weight / margin / k
-            parts["spread"] = parts["spread"] + temps.std(0).sum(-1).mean() * s_.disagreement_weight
-            prev = a
-            obs = self.rebuild(b["obs"], s, b["outdoor"][:, h])
-        total = sum(parts.values())
-        return total, {n: float(v) for n, v in parts.items()}
 
 
 def collect(policy_act, weathers: list[str], starts_days: list[int], days: int, workers: int, folder: Path,
-            starts: Starts | None, building) -> list[dict]:  # fmt: skip
+            starts: Starts | None, building, features: bool = False) -> list[dict]:  # fmt: skip
     """The policy (None: the building's own controls) in EnergyPlus on each (weather, start day): its episodes'
     summaries; its states into `starts`."""
     last: dict[str, np.ndarray] = {}
@@ -178,8 +61,10 @@ def collect(policy_act, weathers: list[str], starts_days: list[int], days: int, 
         return action
 
     controller = Controller("model-gradient", "policy", act=act) if policy_act else Controller("own", "baseline")
+    feat = features and policy_act is not None
     jobs = [(controller, SimulationConfig(weather=w, model=controller.model, run_days=days, start_day=d,
-                                          energyplus_csv=False, output_dir=str(folder / f"{w}-{d}")))
+                                          energyplus_csv=False, output_dir=str(folder / f"{w}-{d}"),
+                                          time_features=feat, schedule_features=feat))
             for w in weathers for d in starts_days]  # fmt: skip
     with tqdm(total=len(jobs) * days * building.steps_per_day, unit="step", desc="collect") as bar:
         rows, failures = run_local(jobs, workers, bar, keep_going=True)
@@ -199,6 +84,8 @@ def main() -> None:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--comfort-weight", type=float, help="the comfort term's weight (default: the planner's)")
+    p.add_argument("--margin", type=float, help="the band shrunk by this much, K (default: the planner's)")
+    p.add_argument("--features", action="store_true", help="the policy also sees the time and IT schedule")
     p.add_argument("--out", type=Path, default=ROOT.parent / "model-gradient")
     args = p.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
@@ -215,7 +102,16 @@ def main() -> None:
     stats = read_stats(normalization_file(source))
     model = load_model(ALGORITHMS["trpo"], source, device="cpu")
     policy = model.policy
-    rollouts = Rollouts(mpc, building, stats, policy)
+    if args.margin:
+        mpc.margin_c = args.margin
+    schedule = None
+    if args.features:
+        from parallel_eplus.learning.model_based.exogenous import model_schedule
+
+        schedule = model_schedule(mpc.building)
+        model, stats = widen(model, stats, schedule, building)
+        policy = model.policy
+    rollouts = Rollouts(mpc, building, stats, policy, schedule)
     params = list(policy.mlp_extractor.policy_net.parameters()) + list(policy.action_net.parameters())
     opt = th.optim.Adam(params, lr=args.lr)
     weathers = ["CA", "CO", "FL"]
@@ -230,10 +126,14 @@ def main() -> None:
     for r in range(args.rounds + 1):
         days = sorted(rng.choice(np.arange(1, 365 - args.days, 7), size=2, replace=False).tolist())
         with tempfile.TemporaryDirectory(prefix="model-gradient-") as tmp:
-            rows = collect(policy_act, weathers, [1, *days], args.days, args.workers, Path(tmp), starts, building)
+            rows = collect(policy_act, weathers, [1, *days], args.days, args.workers, Path(tmp), starts, building,
+                           args.features)
             own = collect(None, weathers, [1, *days], args.days, args.workers, Path(tmp) / "own", None, building)
         power = sum(rw["power_kw"] for rw in rows) / sum(rw["power_kw"] for rw in own) - 1
         band = float(np.mean([rw["in_band_pct"] for rw in rows]))
+        zones = {z: (round(min(rw[f"{z}_temp_min"] for rw in rows), 2),
+                     round(max(rw[f"{z}_temp_max"] for rw in rows), 2)) for z in ("west", "east")}  # fmt: skip
+        log.info("round %d: zone temperatures' range %s", r, zones)
         worst = min(rw["in_band_pct"] for rw in rows)
         log.info("round %d (days %s): power %+.1f %% vs own controls, in band %.2f %% (worst episode %.2f %%); "
                  "%d start states", r, [1, *days], 100 * power, band, worst, len(starts))  # fmt: skip
@@ -242,22 +142,20 @@ def main() -> None:
         out = args.out / f"round{r}"
         out.mkdir(parents=True, exist_ok=True)
         model.save(out / "model.zip")
-        shutil.copyfile(normalization_file(source), stats_target(out / "model.zip"))
-        (out / "config.json").write_text((args.run / "config.json").read_text())
+        stats.save(stats_target(out / "model.zip"))
+        config = json.loads((args.run / "config.json").read_text())
+        config.update(time_features=args.features, schedule_features=args.features)
+        (out / "config.json").write_text(json.dumps(config, indent=1))
         if r == args.rounds:
             break
         t0 = time.monotonic()
-        for u in range(args.updates):
-            rows_ = rng.integers(0, len(starts), args.batch)
-            b = rollouts.batch(starts, rows_)
-            loss, parts = rollouts.cost(b, args.comfort_weight or mpc.comfort_weight)
-            opt.zero_grad()
-            loss.backward()
-            th.nn.utils.clip_grad_norm_(params, 1.0)
-            opt.step()
+
+        def report(u, loss, parts, r=r, t0=t0):
             if u % 100 == 0 or u == args.updates - 1:
-                log.info("round %d update %d: loss %.3f %s (%.0f s)", r, u, float(loss),
+                log.info("round %d update %d: loss %.3f %s (%.0f s)", r, u, loss,
                          {k: round(v, 3) for k, v in parts.items()}, time.monotonic() - t0)  # fmt: skip
+
+        train(rollouts, starts, opt, args.updates, args.batch, args.comfort_weight or mpc.comfort_weight, rng, report)
     (args.out / "log.json").write_text(json.dumps(log_rows, indent=1, default=str))
 
 
