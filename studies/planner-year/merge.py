@@ -3,6 +3,7 @@ report code (results.csv, results.md with the seeds' intervals, seeds.csv, figur
 results/model-based/<building>/year-planner[-<forecast>]/.
 
     .venv/bin/python studies/planner-year/merge.py WORK RESULTS
+    .venv/bin/python studies/planner-year/merge.py --one FOLDER OUT    # FOLDER/seed*/results.csv into OUT
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ def merge(folder: Path, out: Path) -> None:
 
 def main() -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if sys.argv[1] == "--one":
+        merge(Path(sys.argv[2]), Path(sys.argv[3]))
+        return
     work, results = Path(sys.argv[1]), Path(sys.argv[2])
     for folder in sorted(p for p in work.glob("*/*") if p.is_dir() and p.parent.name != "code"):
         building, forecast = folder.parent.name, folder.name
