@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch as th
+from sb3_contrib import TRPO
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.resources import builtin_specs
@@ -221,3 +222,26 @@ def test_the_ray_backend_runs_the_planner_too(tmp_path, no_leaks):
     assert status["state"] == "finished" and status["steps"] >= 576, status
     data = Transitions.load(run / "transitions.npz", MPC.load(run / "planner" / "planner.pt").layout)
     assert (data.array("origin") == ORIGINS.index("planner")).sum() >= 576 - 96  # both of Ray's workers, planned
+
+
+@pytest.mark.slow
+def test_a_student_trained_through_the_model_sees_the_clock_and_resumes_with_its_starts(tmp_path, no_leaks):
+    settings = MPCSettings(explore_steps=96, refit_every=96, epochs=5, candidates=32, dagger_share=0.5,
+                           student="gradient", student_updates=20, student_batch=32)  # fmt: skip
+    cfg = mpc_config(tmp_path, "grad", run_days=1, timesteps=384, checkpoint_every=192, time_features=True,
+                     schedule_features=True, mpc=settings)  # fmt: skip
+    final = train(cfg, progress=False)
+    run = final.parent
+    report = json.loads((run / "distill.json").read_text())
+    assert report["student"] == "gradient" and report["starts"] == 384 - 96  # every planner step, both workers
+    assert set(report["cost"]) == {"energy", "comfort", "spread", "moves"}
+    model = TRPO.load(final, device="cpu")
+    assert model.observation_space.shape == (6 + 4 + 5,)  # the sensors, the time's and the IT schedule's features
+    saved = sorted((run / "checkpoints").glob("mpc_*_steps.npz"), key=lambda p: int(p.stem.split("_")[1]))[-1]
+    with np.load(saved) as z:
+        assert len(z["policy_prev"]) == len(z["policy_obs"]) == len(z["policy_time"]) == len(z["policy_weather"])
+        assert set(z["policy_weather"]) == {"CA", "FL"}
+    resumed = train(mpc_config(tmp_path, "grad", run_days=1, timesteps=480, checkpoint_every=192, time_features=True,
+                               schedule_features=True, mpc=settings), resume=run, progress=False)  # fmt: skip
+    assert resumed == final
+    assert json.loads((run / "distill.json").read_text())["starts"] == 480 - 96  # the saved starts, then the new

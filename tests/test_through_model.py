@@ -14,7 +14,7 @@ from parallel_eplus.buildings.building import load_building
 from parallel_eplus.envs.env import EnergyPlusEnv
 from parallel_eplus.learning.model_based.control import MPC
 from parallel_eplus.learning.model_based.exogenous import model_schedule
-from parallel_eplus.learning.model_based.through_model import Rollouts, Starts, train, widen
+from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts, train, widen
 from parallel_eplus.learning.saved_models import load_model
 from parallel_eplus.runs.norm_stats import read_stats
 from parallel_eplus.runs.policy_files import normalization_file
@@ -26,15 +26,13 @@ RUN = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-see
 def test_a_policy_learns_the_planners_cost_through_the_model_from_real_states(tmp_path, no_leaks):
     th.set_num_threads(1)  # as training sets it: the cores belong to EnergyPlus
     mpc = MPC.load(RUN / "best/planner/planner.pt")
-    for p in mpc.model.parameters():
-        p.requires_grad_(False)
     building = load_building(mpc.building)
     narrow = load_model(TRPO, RUN / "model.zip", device="cpu")
-    schedule = model_schedule(mpc.building)
+    clock = Clock(time=True, schedule=model_schedule(mpc.building))
     before_widening = read_stats(normalization_file(RUN / "model.zip"))
-    model, stats = widen(narrow, before_widening, schedule, building)
+    model, stats = widen(narrow, before_widening, clock, building)
     th.manual_seed(0)
-    rollouts = Rollouts(mpc, building, stats, model.policy, schedule)
+    rollouts = Rollouts(mpc, building, stats, model.policy, clock)
 
     # A day of the widened policy in EnergyPlus, the time and schedule features in its observation.
     env = EnergyPlusEnv(weather="CA", model="temp_fan", run_days=1, time_features=True, schedule_features=True,

@@ -6,7 +6,9 @@ The Dyna loop (Sutton 1991) over the service's workers and vector env (local or 
 1. record the building's own controls on the training weathers (sources.py) and fit the ensemble;
 2. explore around them for `explore_steps` env steps, then let the planner act (control.py: one batched plan for
    every worker per vector step), refitting the model every `refit_every` steps on everything seen so far;
-3. at the end, distil the planner into the usual policy network (distill.py): runs/<name>/model.zip.
+3. at the end, distil the planner into the usual policy network: runs/<name>/model.zip, fitted to the planner's
+   actions (distill.py) or, with `--mpc student=gradient`, trained on the planner's cost through the model
+   (through_model.py).
 
 The comfort weight of the planner is the run's Lagrange multiplier (`--comfort-target`, learning/lagrangian.py),
 updated at every refit from the share of zone samples in band the planner achieved since the last one. What a run
@@ -36,7 +38,8 @@ from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.distill import act, distill, fit
 from parallel_eplus.learning.model_based.dynamics import summary
 from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
-from parallel_eplus.runs.run_files import BEST_DIR
+from parallel_eplus.runs.checkpoints import save_checkpoint
+from parallel_eplus.runs.run_files import BEST_DIR, MODEL_FILE
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import CallbackHost, EpisodeMetrics, tensorboard_logger
 from parallel_eplus.training.config import TrainConfig
@@ -78,6 +81,10 @@ class _Loop:
         self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
         self.mpc.comfort_weight = self.s.comfort_weight or cfg.comfort.multiplier_init
         self.steps, self.policy_obs, self.policy_act, self.replay = 0, [], [], {}
+        self.policy_prev, self.policy_times, self.policy_weathers = [], [], []  # the planner's steps: starts
+        if self.s.student == "gradient" and cfg.forecast_hours:
+            raise ValueError("--mpc student=gradient: a policy observing --forecast cannot be rebuilt along the "
+                             "model's rollouts; leave --forecast out (the clock's features are rebuilt)")
         self.student, self.student_fitted = None, False  # DAgger's phase: the distilled policy acts
         self.logger = tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name))
         self.shim = CallbackHost(venv, self.logger)
@@ -119,6 +126,13 @@ class _Loop:
 
         model, env = self._student()
         model.num_timesteps = self.steps  # what the run took (a sweep reads it from model.zip)
+        if self.s.student == "gradient":
+            if not self.student_fitted:
+                self._refit_student()  # the clone it starts from
+            report = self._through_model(model, env)
+            io.write_text(self.cfg.run_dir / "distill.json", __import__("json").dumps(report, indent=2))
+            log.info("trained the student through the model from %d states: %s", report["starts"], report["cost"])
+            return save_checkpoint(model, env, self.cfg.run_dir / MODEL_FILE)
         obs, act = np.concatenate(self.policy_obs), np.concatenate(self.policy_act)
         return distill(model, env, self.cfg, obs, act)
 
@@ -133,10 +147,36 @@ class _Loop:
 
     def _refit_student(self) -> None:
         model, env = self._student()
+        if self.s.student == "gradient" and self.student_fitted:
+            for name, value in self._through_model(model, env)["cost"].items():
+                self.logger.record(f"distill/through_model/{name}", value)
+            return
         report = fit(model, env, self.cfg, np.concatenate(self.policy_obs), np.concatenate(self.policy_act))
         for name, value in report["rmse"].items():
             self.logger.record(f"distill/rmse/{name}", value)
         self.student_fitted = True
+
+    def _through_model(self, model, env) -> dict:
+        """The student trained on the planner's cost through the model, from the states of the planner's steps
+        (the student's own in DAgger's phase): `student_updates` steps; the last step's cost parts."""
+        from parallel_eplus.learning.model_based.exogenous import model_schedule
+        from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts
+        from parallel_eplus.learning.model_based.through_model import train as descend
+        from parallel_eplus.runs.norm_stats import NormStats
+
+        s = self.s
+        clock = Clock(self.cfg.time_features, model_schedule(self.cfg.building) if self.cfg.schedule_features else None)
+        prev = np.concatenate(self.policy_prev)
+        obs = np.concatenate(self.policy_obs)[len(np.concatenate(self.policy_obs)) - len(prev) :]  # rows with starts
+        starts = Starts.of(obs, prev, np.concatenate(self.policy_times), np.concatenate(self.policy_weathers))
+        policy = model.policy
+        rollouts = Rollouts(self.mpc, self.building, NormStats.of(env), policy, clock)
+        params = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
+        optimizer = th.optim.Adam(params, lr=s.student_learning_rate)
+        rng = np.random.default_rng(self.cfg.seed + self.steps)
+        cost = descend(rollouts, starts, optimizer, s.student_updates, s.student_batch, s.student_comfort_weight, rng)
+        return {"student": "gradient", "starts": len(starts), "updates": s.student_updates,
+                "cost": {k: round(v, 4) for k, v in cost.items()}}  # fmt: skip
 
     def _steps(self) -> None:
         venv, n = self.venv, self.venv.num_envs
@@ -159,6 +199,9 @@ class _Loop:
                 planned = self.mpc.act(obs, infos, a_last)
                 self.policy_obs.append(obs.copy())
                 self.policy_act.append(planned)
+                self.policy_prev.append(a_last.copy())
+                self.policy_times.append(np.array([info["time"] for info in infos], object))
+                self.policy_weathers.append(np.array([str(info["weather"]) for info in infos]))
                 actions = np.clip(planned + self.s.noise * rng.standard_normal(planned.shape), -1, 1).astype(np.float32)
                 if dagger and self.student_fitted:  # the student acts; the planner takes over a worker far out of band
                     temps = obs[:, [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures]]
@@ -281,7 +324,12 @@ class _Loop:
     def _save_checkpoint(self) -> Path:
         extra = {"steps": self.steps, "lagrangian": None if self.lagrangian is None else self.lagrangian.multiplier,
                  "replay": {w: th.as_tensor(a) for w, a in self.replay.items()}}  # fmt: skip
-        policy = (np.concatenate(self.policy_obs), np.concatenate(self.policy_act)) if self.policy_obs else None
+        policy = None
+        if self.policy_obs:
+            policy = (np.concatenate(self.policy_obs), np.concatenate(self.policy_act))
+            if self.policy_prev:  # where each planner step started from (a checkpoint before them has none)
+                times = np.concatenate(self.policy_times).astype("datetime64[s]")
+                policy += (np.concatenate(self.policy_prev), times, np.concatenate(self.policy_weathers))
         return self.checkpoints.save(self.steps, self.mpc, self.data, extra, policy)
 
     def _restore(self, checkpoint: Path) -> None:
@@ -294,6 +342,9 @@ class _Loop:
             self.lagrangian.multiplier = state["lagrangian"]
         if policy is not None:
             self.policy_obs, self.policy_act = [policy[0]], [policy[1]]
+            if len(policy) == 5:  # the starts of a student trained through the model (older checkpoints lack them)
+                self.policy_prev, self.policy_weathers = [policy[2]], [policy[4]]
+                self.policy_times = [policy[3].astype("datetime64[s]").astype(object)]
         log.info("resuming %s from %s at step %d (%d transitions)", self.cfg.run_name, checkpoint, self.steps,
                  len(self.data))  # fmt: skip
 

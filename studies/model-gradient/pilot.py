@@ -30,11 +30,12 @@ import numpy as np
 import torch as th
 from tqdm import tqdm
 
+from parallel_eplus.buildings.building import load_building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_local
 from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.through_model import Rollouts, Starts, train, widen
+from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts, train, widen
 from parallel_eplus.learning.rollout import ALGORITHMS
 from parallel_eplus.learning.saved_models import load_model
 from parallel_eplus.runs.norm_stats import read_stats
@@ -95,23 +96,19 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
 
     mpc = MPC.load(args.run / "best" / "planner" / "planner.pt")
-    for param in mpc.model.parameters():
-        param.requires_grad_(False)
-    building = __import__("parallel_eplus.buildings.building", fromlist=["load_building"]).load_building(mpc.building)
+    building = load_building(mpc.building)
     source = args.run / "model.zip"
     stats = read_stats(normalization_file(source))
     model = load_model(ALGORITHMS["trpo"], source, device="cpu")
     policy = model.policy
-    if args.margin:
-        mpc.margin_c = args.margin
-    schedule = None
+    clock = None
     if args.features:
         from parallel_eplus.learning.model_based.exogenous import model_schedule
 
-        schedule = model_schedule(mpc.building)
-        model, stats = widen(model, stats, schedule, building)
+        clock = Clock(True, model_schedule(mpc.building))
+        model, stats = widen(model, stats, clock, building)
         policy = model.policy
-    rollouts = Rollouts(mpc, building, stats, policy, schedule)
+    rollouts = Rollouts(mpc, building, stats, policy, clock, args.margin)
     params = list(policy.mlp_extractor.policy_net.parameters()) + list(policy.action_net.parameters())
     opt = th.optim.Adam(params, lr=args.lr)
     weathers = ["CA", "CO", "FL"]

@@ -36,6 +36,8 @@ def newest_checkpoint(path: Path) -> Path:
     raise FileNotFoundError(f"--resume: no model-based checkpoint (checkpoints/mpc_<steps>_steps.pt) in {path}")
 
 
+POLICY_ARRAYS = ("policy_obs", "policy_act", "policy_prev", "policy_time", "policy_weather")
+
 class Checkpoint:
     def __init__(self, folder: Path, keep: int = 2):
         self.folder, self.keep = folder, keep
@@ -44,8 +46,8 @@ class Checkpoint:
         self.folder.mkdir(parents=True, exist_ok=True)
         path = self.folder / f"mpc_{steps}_steps.pt"
         arrays = {f"data_{k}": data.array(k) for k in data.columns}
-        if policy is not None:
-            arrays |= {"policy_obs": policy[0], "policy_act": policy[1]}
+        if policy is not None:  # the planner's steps: observations, actions, and the action before, time, weather
+            arrays |= dict(zip(POLICY_ARRAYS, policy, strict=False))
         with io.atomic_path(path.with_suffix(".npz")) as tmp, open(tmp, "wb") as f:
             np.savez(f, **arrays)
         with io.atomic_path(path) as tmp:
@@ -63,5 +65,5 @@ class Checkpoint:
             columns = {k.removeprefix("data_"): z[k] for k in z.files if k.startswith("data_")}
             if columns and len(columns["s"]):
                 data.add(**columns)
-            policy = (z["policy_obs"], z["policy_act"]) if "policy_obs" in z.files else None
+            policy = tuple(z[k] for k in POLICY_ARRAYS if k in z.files) or None  # older: the first two
         return state, data, policy

@@ -55,10 +55,22 @@ class MPCSettings:
     # own states alone drifted to 30 C in closed loop (2 % in band on CA). A worker more than 2 K outside the band
     # is steered by the planner meanwhile.
     dagger_share: float = 0.25
+    # What the student learns from: "dagger" fits it to the planner's actions (distill.py); "gradient" clones it
+    # once, then trains it on the planner's own cost through the model, from the states of the planner's steps
+    # (through_model.py), at each refit of DAgger's phase and at the end. A six-sensor copy of the planner lost the
+    # band on the paper's data center (78 %); the gradient student with the clock's features held 99.5 % in the
+    # pilots (docs/model-based.md, "A network learned through the model").
+    student: str = "dagger"
+    student_updates: int = 1500  # gradient steps through the model at each refit and at the end
+    student_batch: int = 256  # start states per step
+    student_learning_rate: float = 3e-4
+    student_comfort_weight: float = 1.0  # the comfort term's weight in the student's cost (the energy term ~1 a step)
 
     def __post_init__(self):
         if self.comfort_risk not in ("mean", "worst"):
             raise ValueError(f"comfort_risk {self.comfort_risk!r}: 'mean' or 'worst'")
+        if self.student not in ("dagger", "gradient"):
+            raise ValueError(f"student {self.student!r}: 'dagger' or 'gradient'")
         if not 0 < self.shrink <= 1:
             raise ValueError(f"shrink {self.shrink}: within (0, 1]")
 

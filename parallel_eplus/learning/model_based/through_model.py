@@ -14,8 +14,10 @@ and `serve` take it as any policy.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime as dt
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
@@ -32,11 +34,35 @@ if TYPE_CHECKING:
 OUTDOOR = "site outdoor air drybulb temperature"
 
 
+@dataclass(frozen=True)
+class Clock:
+    """The features the env appends to the sensors from the clock (engine/observation.py): time of day and week,
+    and the IT-load schedule's, as the run observes them; a rollout computes them for each coming step."""
+
+    time: bool = False
+    schedule: tuple[tuple[float, float], ...] | None = None
+
+    def __call__(self, t: dt.datetime) -> list[float]:
+        schedule = schedule_features(t, self.schedule) if self.schedule else ()
+        return [*(time_features(t) if self.time else ()), *schedule]
+
+    @property
+    def width(self) -> int:
+        return len(self(dt.datetime(2013, 1, 7)))
+
+
 class Starts:
     """Real states the rollouts branch from: observation, the action before it (normalized), time and weather."""
 
     def __init__(self):
         self.obs, self.prev, self.times, self.weathers = [], [], [], []
+
+    @classmethod
+    def of(cls, obs, prev, times, weathers) -> Starts:
+        starts = cls()
+        starts.obs, starts.prev = list(np.asarray(obs, np.float32)), list(np.asarray(prev, np.float32))
+        starts.times, starts.weathers = list(times), list(weathers)
+        return starts
 
     def add(self, obs, prev, when, weather) -> None:
         self.obs.append(np.asarray(obs, np.float32))
@@ -51,8 +77,10 @@ class Starts:
 class Rollouts:
     """The policy's cost over the planner's horizon through the ensemble, differentiable in the policy's weights."""
 
-    def __init__(self, mpc: MPC, building, stats, policy, schedule=None):
-        self.mpc, self.layout, self.s, self.schedule = mpc, mpc.layout, mpc.settings, schedule
+    def __init__(self, mpc: MPC, building, stats, policy, clock: Clock | None = None, margin_c: float | None = None,
+                 move_weight: float = 10.0):  # fmt: skip
+        self.mpc, self.layout, self.s, self.clock = mpc, mpc.layout, mpc.settings, clock or Clock()
+        self.margin_c, self.move_weight = margin_c or mpc.margin_c, move_weight
         self.model, self.policy = mpc.model, policy
         self.mean = th.as_tensor(stats.obs_mean, dtype=th.float32)
         self.scale = th.as_tensor(np.sqrt(stats.obs_var + stats.epsilon), dtype=th.float32)
@@ -75,7 +103,7 @@ class Rollouts:
         exo, outdoor, applies, bounds, clock = [], [], [], [], []
         for r in rows:
             times = step_times(starts.times[r], mpc.step_minutes, h)
-            clock.append([clock_features(t, self.schedule) for t in times] if self.schedule else [[]] * h)
+            clock.append([self.clock(t) for t in times])
             forecast = mpc.forecasts(starts.weathers[r])
             exo.append(forecast.at(times))
             outdoor.append(forecast.file.truth(times)[:, 0])
@@ -110,14 +138,14 @@ class Rollouts:
             obs[..., self.n_sensors : self.n_sensors + clock.shape[-1]] = clock.expand(e, -1, -1)
         return obs
 
-    def cost(self, b: dict, comfort_weight: float, move_weight: float = 10.0) -> tuple[th.Tensor, dict]:
+    def cost(self, b: dict, comfort_weight: float) -> tuple[th.Tensor, dict]:
         m, s_, k = self.model, self.s, self.k
         e = s_.members
         state = th.as_tensor(self.layout.state(b["obs"][:, : self.n_sensors].numpy()))
         s = state.expand(e, -1, -1)
         prev = b["prev"].expand(e, -1, -1)
         obs = b["obs"].expand(e, -1, -1)
-        margin = self.mpc.margin_c
+        margin, move_weight = self.margin_c, self.move_weight
         parts = {"energy": 0.0, "comfort": 0.0, "spread": 0.0, "moves": 0.0}
         self.applied: list[th.Tensor] = []  # each step's actions [E, B, A], for inspection
         for h in range(s_.horizon):
@@ -147,16 +175,11 @@ class Rollouts:
         return total, {n: float(v.detach()) if th.is_tensor(v) else float(v) for n, v in parts.items()}
 
 
-def clock_features(t: dt.datetime, schedule) -> list[float]:
-    """What the env appends to the sensors with time and schedule features on (engine/observation.py)."""
-    return [*time_features(t), *schedule_features(t, schedule)]
-
-
-def widen(model, stats, schedule, building):
-    """The policy and its normalizer with the time and schedule features as inputs after the sensors: the new
-    inputs' weights start at zero (the widened policy acts as the narrow one did), their normalizer from a week."""
+def widen(model, stats, clock: Clock, building):
+    """The policy and its normalizer with the clock's features as inputs after the sensors: the new inputs' weights
+    start at zero (the widened policy acts as the narrow one did), their normalizer from a week of them."""
     week = [dt.datetime(2013, 1, 7) + dt.timedelta(minutes=15 * i) for i in range(7 * building.steps_per_day)]
-    values = np.array([clock_features(t, schedule) for t in week])
+    values = np.array([clock(t) for t in week])
     n = model.observation_space.shape[0] + values.shape[1]
 
     class Shell(gym.Env):
@@ -183,13 +206,28 @@ def train(rollouts: Rollouts, starts: Starts, optimizer, updates: int, batch: in
     parts)` sees every step."""
     params = [p for g in optimizer.param_groups for p in g["params"]]
     parts: dict = {}
-    for u in range(updates):
-        b = rollouts.batch(starts, rng.integers(0, len(starts), batch))
-        loss, parts = rollouts.cost(b, comfort_weight)
-        optimizer.zero_grad()
-        loss.backward()
-        th.nn.utils.clip_grad_norm_(params, 1.0)
-        optimizer.step()
-        if report is not None:
-            report(u, float(loss), parts)
+    with frozen(rollouts.model):
+        for u in range(updates):
+            b = rollouts.batch(starts, rng.integers(0, len(starts), batch))
+            loss, parts = rollouts.cost(b, comfort_weight)
+            optimizer.zero_grad()
+            loss.backward()
+            th.nn.utils.clip_grad_norm_(params, 1.0)
+            optimizer.step()
+            if report is not None:
+                report(u, float(loss), parts)
     return parts
+
+
+@contextlib.contextmanager
+def frozen(module: th.nn.Module):
+    """The ensemble's weights out of autograd meanwhile: the gradient passes through them to the policy, and the
+    ensemble's own fits (Dyna refits) find them as they were."""
+    flags = [p.requires_grad for p in module.parameters()]
+    for p in module.parameters():
+        p.requires_grad_(False)
+    try:
+        yield module
+    finally:
+        for p, flag in zip(module.parameters(), flags, strict=True):
+            p.requires_grad_(flag)
