@@ -54,6 +54,9 @@ def test_a_policy_learns_the_planners_cost_through_the_model_from_real_states(tm
     finally:
         env.close()
 
+    for o, t in zip(starts.obs, starts.times, strict=True):  # the clock rebuilds the env's own features
+        np.testing.assert_allclose(clock(t), o[6:], atol=1e-6)
+
     # The rollouts branch from the real states: the first step acts on the real observation; every member's every
     # action lies within the planner's support.
     b = rollouts.batch(starts, np.arange(len(starts)))

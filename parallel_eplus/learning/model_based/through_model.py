@@ -94,16 +94,18 @@ class Rollouts:
         self.outdoor_at = [i for i, o in enumerate(building.observed) if o.variable.lower() == OUTDOOR]
         self.n_sensors = len(sensors)
         self.k = len(self.layout.temperatures)
-        assert names[self.k :] == (("non_hvac_w", *self.layout.hvac) if self.layout.hvac else self.layout.energy)
+        if names[self.k :] != (("non_hvac_w", *self.layout.hvac) if self.layout.hvac else self.layout.energy):
+            raise ValueError(f"the model's state {names} is not the layout's temperatures and energy parts")
 
     def batch(self, starts: Starts, rows: np.ndarray) -> dict:
         """The rows' inputs over the horizon: observation, previous action, exogenous inputs, outdoor dry bulb,
         whether the band applies and the bounds at each step's end."""
         h, mpc = self.s.horizon, self.mpc
-        exo, outdoor, applies, bounds, clock = [], [], [], [], []
+        exo, outdoor, applies, bounds, clock, weights = [], [], [], [], [], []
         for r in rows:
             times = step_times(starts.times[r], mpc.step_minutes, h)
             clock.append([self.clock(t) for t in times])
+            weights.append(mpc.energy_weights.at([starts.times[r], *times[:-1]]))  # the objective's, as the planner
             forecast = mpc.forecasts(starts.weathers[r])
             exo.append(forecast.at(times))
             outdoor.append(forecast.file.truth(times)[:, 0])
@@ -113,7 +115,7 @@ class Rollouts:
         obs = np.stack([starts.obs[r] for r in rows])
         return {"obs": f32(obs), "prev": f32(np.stack([starts.prev[r] for r in rows])), "exo": f32(np.stack(exo)),
                 "outdoor": f32(np.stack(outdoor)), "applies": f32(np.stack(applies)), "bounds": f32(np.stack(bounds)),
-                "clock": f32(np.array(clock, np.float32))}
+                "clock": f32(np.array(clock, np.float32)), "weights": f32(np.stack(weights))}
 
     def act(self, obs: th.Tensor) -> th.Tensor:
         """The policy's mean action on raw observations [..., n_obs] (SB3's extractor flattens all but the first
@@ -162,7 +164,8 @@ class Rollouts:
             out = m(inputs) * m.y_std + m.y_mean
             s = next_state(self.layout, s, out)
             temps = s[..., :k]
-            parts["energy"] = parts["energy"] + out[..., k:].sum(-1).mean() * self.mpc.power_weight
+            energy = (out[..., k:] * b["weights"][:, h]).sum(-1)  # each part as the run's objective weighs it
+            parts["energy"] = parts["energy"] + energy.mean() * self.mpc.power_weight
             lo = b["bounds"][:, h, :, 0] + margin
             hi = b["bounds"][:, h, :, 1] - margin
             over = th.relu(th.maximum(lo - temps, temps - hi)).sum(-1)  # [E, B]
