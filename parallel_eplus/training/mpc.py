@@ -38,6 +38,7 @@ from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.distill import act, distill, fit
 from parallel_eplus.learning.model_based.dynamics import summary
 from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
+from parallel_eplus.learning.model_based.through_model import Starts, train_student
 from parallel_eplus.runs.checkpoints import save_checkpoint
 from parallel_eplus.runs.run_files import BEST_DIR, MODEL_FILE
 from parallel_eplus.runs.run_status import RunStatus
@@ -158,25 +159,12 @@ class _Loop:
 
     def _through_model(self, model, env) -> dict:
         """The student trained on the planner's cost through the model, from the states of the planner's steps
-        (the student's own in DAgger's phase): `student_updates` steps; the last step's cost parts."""
-        from parallel_eplus.learning.model_based.exogenous import model_schedule
-        from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts
-        from parallel_eplus.learning.model_based.through_model import train as descend
-        from parallel_eplus.runs.norm_stats import NormStats
-
-        s = self.s
-        clock = Clock(self.cfg.time_features, model_schedule(self.cfg.building) if self.cfg.schedule_features else None)
+        (the student's own in DAgger's phase)."""
         prev = np.concatenate(self.policy_prev)
-        obs = np.concatenate(self.policy_obs)[len(np.concatenate(self.policy_obs)) - len(prev) :]  # rows with starts
-        starts = Starts.of(obs, prev, np.concatenate(self.policy_times), np.concatenate(self.policy_weathers))
-        policy = model.policy
-        rollouts = Rollouts(self.mpc, self.building, NormStats.of(env), policy, clock)
-        params = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
-        optimizer = th.optim.Adam(params, lr=s.student_learning_rate)
-        rng = np.random.default_rng(self.cfg.seed + self.steps)
-        cost = descend(rollouts, starts, optimizer, s.student_updates, s.student_batch, s.student_comfort_weight, rng)
-        return {"student": "gradient", "starts": len(starts), "updates": s.student_updates,
-                "cost": {k: round(v, 4) for k, v in cost.items()}}  # fmt: skip
+        obs = np.concatenate(self.policy_obs)
+        starts = Starts.of(obs[len(obs) - len(prev) :], prev, np.concatenate(self.policy_times),
+                           np.concatenate(self.policy_weathers))  # rows with starts (older checkpoints: the newest)
+        return train_student(self.mpc, self.building, model, env, starts, self.cfg, self.cfg.seed + self.steps)
 
     def _steps(self) -> None:
         venv, n = self.venv, self.venv.num_envs

@@ -26,7 +26,9 @@ import torch as th
 
 from parallel_eplus.buildings.clock import schedule_features, time_features
 from parallel_eplus.learning.model_based.dataset import next_state
+from parallel_eplus.learning.model_based.exogenous import model_schedule
 from parallel_eplus.learning.model_based.features import step_times
+from parallel_eplus.runs.norm_stats import NormStats
 
 if TYPE_CHECKING:
     from parallel_eplus.learning.model_based.control import MPC
@@ -234,3 +236,19 @@ def frozen(module: th.nn.Module):
     finally:
         for p, flag in zip(module.parameters(), flags, strict=True):
             p.requires_grad_(flag)
+
+
+def train_student(mpc: MPC, building, model, env, starts: Starts, cfg, seed: int) -> dict:
+    """`train --algorithm mpc --mpc student=gradient`: the run's student (an SB3 actor-critic and its VecNormalize)
+    trained `student_updates` steps through the run's model (`cfg`: its TrainConfig: the settings and the clock's
+    features its observation carries); the report distill.json keeps."""
+    s = cfg.mpc
+    clock = Clock(cfg.time_features, model_schedule(cfg.building) if cfg.schedule_features else None)
+    policy = model.policy
+    rollouts = Rollouts(mpc, building, NormStats.of(env), policy, clock)
+    params = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
+    optimizer = th.optim.Adam(params, lr=s.student_learning_rate)
+    cost = train(rollouts, starts, optimizer, s.student_updates, s.student_batch, s.student_comfort_weight,
+                 np.random.default_rng(seed))  # fmt: skip
+    return {"student": "gradient", "starts": len(starts), "updates": s.student_updates,
+            "cost": {k: round(v, 4) for k, v in cost.items()}}  # fmt: skip
