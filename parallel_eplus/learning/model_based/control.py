@@ -77,15 +77,16 @@ class MPC:
 
     def future(self, infos: list[dict]) -> tuple[np.ndarray, ...]:
         """(exogenous inputs [W, H, X], whether the band applies [W, H], each zone's bounds [W, H, K, 2], the
-        energy parts' weights [W, H, P]) over each worker's horizon."""
+        energy parts' weights [W, H, P] or None where each counts once) over each worker's horizon."""
         exo, applies, bounds, weights = [], [], [], []
         for info in infos:
             times = step_times(info["time"], self.step_minutes, self.settings.horizon)
             exo.append(self.forecasts.of(info).ahead(info["time"], times))
             applies.append(self.comfort_times(times))
             bounds.append(self.comfort_times.bounds(times))
-            weights.append(self.energy_weights.at([info["time"], *times[:-1]]))  # priced when each step begins
-        return np.stack(exo), np.stack(applies), np.stack(bounds), np.stack(weights)
+            if self.energy_weights.objective != "energy":  # priced when each step begins; energy: each part once
+                weights.append(self.energy_weights.at([info["time"], *times[:-1]]))
+        return np.stack(exo), np.stack(applies), np.stack(bounds), np.stack(weights) if weights else None
 
     def act(self, obs: np.ndarray, infos: list[dict], a_last: np.ndarray) -> np.ndarray:
         """Every worker's next normalized action from its observation (sensors first) and info (time, weather)."""
@@ -94,8 +95,7 @@ class MPC:
         a_last = np.asarray(a_last, np.float32)
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
-                                      self.warm[: len(s)], seeds,
-                                      None if self.energy_weights.objective == "energy" else weights)  # fmt: skip
+                                      self.warm[: len(s)], seeds, weights)  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         return self.last.action
 
