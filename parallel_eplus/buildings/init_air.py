@@ -45,6 +45,10 @@ def _bounds(loop, v: tuple[float, float]) -> tuple[float, float]:
     return low, max(math.ceil(v[1]), SPANS[kind][1])
 
 
+def _single_zone(manager: str) -> bool:
+    return manager.lower().startswith("setpointmanager:singlezone")
+
+
 def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str]:
     """Loop supply temperatures (ready to uncomment), then the other nodes a setpoint manager sets."""
     seen = {k: s.seen.get((SETPOINT, k)) for k in s.keys("OutputVariable", SETPOINT)}
@@ -54,6 +58,14 @@ def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str
              "# manager replaced there, your file untouched); `building check` proves the node follows the action ----",
              ""]  # fmt: skip
     air = [k for k in supplies if t.supplies[k].medium == "air"]
+    # A single-zone unit's supply air is its zone thermostat's own loop (SetpointManager:SingleZone:*): one shared
+    # value in its place would end every zone's feedback. The knob gathers the loops whose supply air is reset for
+    # several zones (scheduled, outdoor-air or warmest resets: Guideline 36's lever).
+    single = [k for k in air if all(_single_zone(m) for m in t.managers[k])]
+    air = [k for k in air if k not in single]
+    if single:
+        lines += [f"# {len(single)} single-zone unit(s) left out of the together knob: each one's supply air follows",
+                  "# its own zone's thermostat (SetpointManager:SingleZone:*); own one alone below if you must", ""]
     if len(air) > 1:  # one knob for the building's supply air, as for its thermostats
         low = min(_bounds(t.supplies[k], seen[k])[0] for k in air)
         high = max(_bounds(t.supplies[k], seen[k])[1] for k in air)
