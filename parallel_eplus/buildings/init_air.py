@@ -64,8 +64,11 @@ def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str
     single = [k for k in air if all(_single_zone(m) for m in t.managers[k])]
     air = [k for k in air if k not in single]
     if single:
-        lines += [f"# {len(single)} single-zone unit(s) left out of the together knob: each one's supply air follows",
-                  "# its own zone's thermostat (SetpointManager:SingleZone:*); own one alone below if you must", ""]
+        lines += [
+            f"# {len(single)} single-zone unit(s) left out of the together knob: each one's supply air follows",
+            "# its own zone's thermostat (SetpointManager:SingleZone:*); own one alone below if you must",
+            "",
+        ]
     if len(air) > 1:  # one knob for the building's supply air, as for its thermostats
         low = min(_bounds(t.supplies[k], seen[k])[0] for k in air)
         high = max(_bounds(t.supplies[k], seen[k])[1] for k in air)
