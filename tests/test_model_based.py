@@ -245,3 +245,19 @@ def test_a_student_trained_through_the_model_sees_the_clock_and_resumes_with_its
                                schedule_features=True, mpc=settings), resume=run, progress=False)  # fmt: skip
     assert resumed == final
     assert json.loads((run / "distill.json").read_text())["starts"] == 480 - 96  # the saved starts, then the new
+
+
+@pytest.mark.slow
+def test_a_run_too_short_to_plan_ends_with_its_planner_named(tmp_path, monkeypatch, capsys, no_leaks):
+    """All its steps explore, so there is no planner step to distil: `train` names the planner, not a policy."""
+    from parallel_eplus.cli import main
+
+    args = ["train", "--algorithm", "mpc", "--workers", "1", "--weathers", "CA", "--run-days", "1", "--timesteps",
+            "96", "--mpc", "explore_steps=192,epochs=2", "--run-name", "short", "--quiet"]  # fmt: skip
+    monkeypatch.chdir(tmp_path)  # runs/ and tensorboard_logs/ land here
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    planner = tmp_path / "runs" / "short" / "planner"
+    assert f"planner: {planner}" in out and (planner / "planner.pt").is_file(), out
+    assert f"episode records: {tmp_path / 'runs' / 'short' / 'episodes.csv'}" in out
+    assert not (tmp_path / "runs" / "short" / "model.zip").exists()

@@ -177,8 +177,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         final = train(cfg, resume=args.resume, progress=not args.quiet, overwrite=args.overwrite)
     except KeyboardInterrupt:
         return 130
-    run_dir = final.parent
-    print(f"model: {final} (observation statistics: {normalization_file(final)})")
+    if final.suffix == ".zip":
+        run_dir = final.parent
+        print(f"model: {final} (observation statistics: {normalization_file(final)})")
+    else:  # runs/<name>/planner/planner.pt: no policy distilled (no planner steps to distil from, or switched off)
+        run_dir = final.parent.parent
+        print(f"planner: {final.parent} (evaluate --policy {final.parent})")
     print(f"episode records: {run_dir / 'episodes.csv'}")
     tensorboard = Path(sys.executable).parent / "tensorboard"
     print(f"TensorBoard: {tensorboard} --logdir {cfg.tensorboard_dir}   (then open http://localhost:6006)")
