@@ -61,6 +61,7 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
     text = out.read_text()
     spec = load_spec(out)
     assert spec.idf == PROTOTYPE and spec.weathers == {"CO": weather}
+    assert f'idf = "{PROTOTYPE.name}"' in text  # the wheel's model by name: the starter works on any install
     zones = [t.removesuffix("_temp_c") for t in spec.reward.temperatures]
     assert len(zones) == 5 and all(z.startswith(("core_zn", "perimeter_zn")) for z in zones)
     out.write_text(uncomment_actions(text, r"^# zone .* cooling( \(|$)"))

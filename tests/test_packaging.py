@@ -63,6 +63,10 @@ def test_spec_paths_relative_absolute_or_builtin(tmp_path):
     copied.write_text(text)
     with pytest.raises(ValueError, match=r'idf: "2ZoneDataCenterHVAC_wEconomizer_agent.idf" not found \(looked in '):
         load_spec(copied)
+    # ... and a model of the EnergyPlus wheel, used unmodified, by bare name in any spec (portable between installs)
+    office = tmp_path / "office.toml"
+    office.write_text((resources.spec_dir() / "office-small.toml").read_text())
+    assert load_spec(office).idf == resources.model_file("RefBldgSmallOfficeNew2004_Chicago.idf")
     spec = load_spec(absolute)
     assert spec.weathers["CA"] == resources.weather_file("USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw")
     missing = tmp_path / "missing.toml"

@@ -38,12 +38,16 @@ def _idf_names(idf: Path) -> dict[str, str]:
 
 
 def _path(target: Path, spec_dir: Path, weather: bool = False) -> str:
-    """Relative to the spec when beside or below it; a built-in weather by its bare name; else absolute."""
-    from parallel_eplus.buildings.resources import weather_file
+    """Relative to the spec when beside or below it; a built-in weather, or a model of the EnergyPlus wheel, by its
+    bare name (the spec then works on any install); else absolute."""
+    from parallel_eplus.buildings.resources import energyplus_model_dir, weather_file
 
     target = target.resolve()
     if target.is_relative_to(spec_dir.resolve()):
         return target.relative_to(spec_dir.resolve()).as_posix()
+    wheel = energyplus_model_dir()
+    if not weather and wheel is not None and target.parent == wheel.resolve():
+        return target.name
     try:
         if weather and weather_file(target.name) == target:
             return target.name

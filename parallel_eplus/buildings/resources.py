@@ -35,6 +35,11 @@ def model_dirs() -> list[Path]:
     return [d for d in dirs if d is not None and d.is_dir()]
 
 
+def energyplus_model_dir() -> Path | None:
+    """The EnergyPlus wheel's example models (the DOE and ASHRAE prototypes), which any spec may name bare."""
+    return _energyplus_data_dir("model")
+
+
 def weather_dirs() -> list[Path]:
     """Folders holding the built-in weathers: the checkout's `weather/`, then the EnergyPlus wheel's."""
     dirs = (SOURCE_ROOT / "weather", _energyplus_data_dir("weather"))

@@ -54,19 +54,24 @@ __all__ = [
 def _resolve(spec: Path, text: str, where: str, errors: list[str]) -> Path:
     """A file the spec names: relative to the spec, absolute, or a bare name among the built-in files.
 
-    Bare names find the package's own models for its own specs only; weathers also among the built-in ones
-    (the EnergyPlus wheel's), so `CA = "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw"` works in any spec.
+    Bare names find the package's own models (its agent copies) for its own specs only; in any spec they find the
+    EnergyPlus wheel's models, used unmodified (`idf = "RefBldgMediumOfficeNew2004_Chicago.idf"`), and its
+    weathers, so `CA = "USA_CA_San.Francisco.Intl.AP.724940_TMY3.epw"` works in any spec: a spec that names only
+    those is portable between installs.
     """
     path = (spec.parent / Path(text).expanduser()).resolve()
     if path.is_file():
         return path
     weather = text.lower().endswith(".epw")
-    if Path(text).name == text and (weather or resources.is_builtin_spec(spec)):
-        try:
-            return resources.weather_file(text) if weather else resources.model_file(text)
-        except FileNotFoundError:
-            pass
-        dirs = [spec.parent, *(resources.weather_dirs() if weather else resources.model_dirs())]
+    if Path(text).name == text:
+        builtin = resources.is_builtin_spec(spec)
+        dirs = resources.weather_dirs() if weather else resources.model_dirs()
+        if not (weather or builtin):
+            dirs = [d for d in dirs if d == resources.energyplus_model_dir()]
+        found = [d / text for d in dirs if (d / text).is_file()]
+        if found:
+            return found[0].resolve()
+        dirs = [spec.parent, *dirs]
         looked = ", ".join(dict.fromkeys(map(str, dirs)))
     else:
         looked = str(path.parent)
