@@ -1,0 +1,394 @@
+"""Every DOE reference prototype in the EnergyPlus wheel, taken the way a new user takes a building (issue 52, part 4).
+
+Per building, each stage a command a user runs, its output kept under WORK/<name>/ so the study resumes:
+
+1. `building init MODEL.idf` writes the starter; the starter's recommended actions are uncommented: every
+   thermostat together (cooling, heating) and, where the model has air loops reset for several zones, their supply
+   air together (single-zone units follow their own thermostats: `building init` leaves them out of that knob).
+   The starter's example time-of-use tariff with demand charges is uncommented too, so the bill is scored.
+2. `building check` on that spec (it proves each node action reaches its node).
+3. `train --algorithm mpc`, the recipe for a building nobody tuned (the planner: docs/model-based.md), on CA, CO
+   and FL, in chunks: a run is stopped with SIGINT at the chunk's end (it checkpoints) and resumed the next time.
+4. `evaluate` against the building's own controls on BOPTEST's four scenarios (peak and typical heating and
+   cooling fortnights, after a week of warm-up) on all five weathers (IL and VA held out).
+5. `table`: one row per building (every one, with the stage it failed at and why), ratios to its own controls,
+   and one figure (savings against discomfort), into results/prototypes/.
+
+    python studies/prototypes/prototypes.py prepare              # stages 1-2 for all 16 (minutes)
+    python studies/prototypes/prototypes.py run --minutes 110    # stages 3-4, resumed, until the chunk ends
+    python studies/prototypes/prototypes.py table                # stage 5
+    python studies/prototypes/prototypes.py status
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[2]
+LOG = logging.getLogger("prototypes")
+SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")
+TRAIN_WEATHERS = "CA,CO,FL"
+EVAL_WEATHERS = "CA,CO,FL,IL,VA"
+TARIFF_LINE = '# tariff = { Electricity = { file = "commercial-tou-demand.toml" } }'
+# The recipe for a building nobody tuned (the office's, docs/model-based.md): comfort held at its own controls'
+# level in its own bounds, HVAC energy the objective, the clock observed, the morning's setpoint jump in one step.
+# The planner is the controller scored: no policy distilled from it.
+RECIPE = ["--algorithm", "mpc", "--objective", "hvac", "--time-features", "--comfort-target", "99.8",
+          "--comfort-margin", "0.1", "--mpc", "max_increment=1.0,horizon=12,distill=false",
+          "--checkpoint-every", "5000"]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Study:
+    """Where the study works and what each run costs."""
+
+    work: Path
+    out: Path
+    steps: int = 35_000  # env steps per run: about four months of each training weather
+    workers: int = 2
+    seeds: tuple[int, ...] = (0,)
+
+    def folder(self, name: str) -> Path:
+        return self.work / name
+
+    def run_dir(self, name: str, seed: int) -> Path:
+        return self.work / name / "runs" / f"{name}-mpc-seed{seed}"
+
+
+def cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "parallel_eplus.cli", *args]
+
+
+def models() -> list[Path]:
+    from parallel_eplus.buildings.resources import model_file
+
+    return sorted(model_file("RefBldgSmallOfficeNew2004_Chicago.idf").parent.glob("RefBldg*.idf"))
+
+
+def short_name(model: Path) -> str:
+    """RefBldgStand-aloneRetailNew2004_Chicago -> stand-alone-retail."""
+    core = model.stem.removeprefix("RefBldg").split("New2004")[0]
+    return re.sub(r"(?<=[a-z])(?=[A-Z])", "-", core).lower()
+
+
+def recommended(starter: str) -> str:
+    """The starter with its recommended actions and the example tariff uncommented (what its notes ask a user)."""
+    out, on = [], False
+    for line in starter.splitlines():
+        if line.startswith("# all ") and ("thermostats'" in line or "air loops' supply air" in line):
+            on = True  # a block's heading: its lines follow, to a blank line
+        elif on and line.startswith("# "):
+            line = line[2:]
+        elif not line.strip():
+            on = False
+        if line.startswith(TARIFF_LINE):
+            line = line[2:]
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def status_file(study: Study, name: str) -> Path:
+    return study.folder(name) / "status.json"
+
+
+def read_status(study: Study, name: str) -> dict:
+    path = status_file(study, name)
+    return json.loads(path.read_text()) if path.is_file() else {"name": name}
+
+
+def write_status(study: Study, name: str, **fields) -> dict:
+    status = read_status(study, name) | fields
+    status_file(study, name).write_text(json.dumps(status, indent=1) + "\n")
+    return status
+
+
+def failure(result: subprocess.CompletedProcess) -> str:
+    """The lines of a failed command that say why (its ERROR lines, else its last line)."""
+    lines = [ln for ln in (result.stdout + result.stderr).splitlines() if ln.strip()]
+    errors = [ln.split(" parallel_eplus: ", 1)[-1] for ln in lines if " ERROR " in ln or ln.startswith("  ")]
+    return " ".join(errors[-4:] or lines[-1:])[:600]
+
+
+def prepare(study: Study, model: Path) -> dict:
+    """init, the recommended actions, check: once per building."""
+    name = short_name(model)
+    folder = study.folder(name)
+    folder.mkdir(parents=True, exist_ok=True)
+    status = read_status(study, name)
+    if "checked" in status:
+        return status
+    starter, spec = folder / "starter.toml", folder / "spec.toml"
+    if not starter.is_file():
+        r = subprocess.run(cli("building", "init", str(model), "-o", str(starter), "--name", name),
+                           capture_output=True, text=True, cwd=folder)  # fmt: skip
+        if r.returncode:
+            return write_status(study, name, model=model.name, checked=False, stage="init", error=failure(r))
+    text = recommended(starter.read_text())
+    spec.write_text(text)
+    actions = re.findall(r'^name = "(\w+)"', text.split("[[actions]]", 1)[-1], flags=re.M)
+    loops = sum('"System Node Setpoint"' in ln for ln in text.splitlines() if not ln.startswith("#"))
+    r = subprocess.run(cli("building", "check", str(spec)), capture_output=True, text=True, cwd=folder)
+    (folder / "check.log").write_text(r.stdout + r.stderr)
+    fields = {"model": model.name, "actions": actions, "supply_air_loops": loops, "checked": r.returncode == 0}
+    if r.returncode:
+        fields |= {"stage": "check", "error": failure(r)}
+    LOG.info("%s: %s", name, "checked" if r.returncode == 0 else f"check failed: {fields['error']}")
+    return write_status(study, name, **fields)
+
+
+def finished(run: Path) -> bool:
+    try:
+        return json.loads((run / "status.json").read_text()).get("state") == "finished"
+    except (OSError, ValueError):
+        return False
+
+
+def train(study: Study, name: str, seed: int, deadline: float) -> bool:
+    """One run of the recipe until it finishes or the chunk ends (SIGINT: it checkpoints); True when finished."""
+    run = study.run_dir(name, seed)
+    if finished(run):
+        return True
+    left = deadline - time.time()
+    if left < 120:
+        return False
+    if list((run / "checkpoints").glob("*.zip")) + list((run / "checkpoints").glob("*.pt")):
+        args = ["train", "--quiet", "--resume", str(run), "--timesteps", str(study.steps)]
+    else:
+        args = ["train", "--quiet", "--building", str(study.folder(name) / "spec.toml"), "--weathers", TRAIN_WEATHERS,
+                "--workers", str(study.workers), "--seed", str(seed), "--timesteps", str(study.steps),
+                "--run-days", "365", "--run-name", run.name, *RECIPE]  # fmt: skip
+        if run.exists():
+            args.append("--overwrite")
+    LOG.info("%s seed %d: training (%.0f min left in the chunk)", name, seed, left / 60)
+    with open(study.folder(name) / f"train-seed{seed}.log", "a") as log:
+        proc = subprocess.Popen(cli(*args), cwd=run.parent.parent, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            proc.wait(timeout=left)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGINT)  # the trainer checkpoints and stops its EnergyPlus workers
+            proc.wait(timeout=900)
+    if finished(run):
+        return True
+    if proc.returncode not in (0, -signal.SIGINT, 130):
+        write_status(study, name, stage="train", error=f"train exited {proc.returncode}: see train-seed{seed}.log")
+    return False
+
+
+def evaluate(study: Study, name: str, deadline: float) -> bool:
+    """The finished runs' planners against the building's own controls on BOPTEST's four scenarios."""
+    planners = []
+    for seed in study.seeds:
+        run = study.run_dir(name, seed)
+        planner = run / "best" / "planner" if (run / "best" / "planner").is_dir() else run / "planner"
+        planners += ["--policy", f"{planner}=Planner"]
+    for scenario in SCENARIOS:
+        out = study.folder(name) / "eval" / scenario
+        if (study.out / name / f"{scenario}.csv").is_file():
+            continue
+        if deadline - time.time() < 600:
+            return False
+        known = sorted(study.folder(name).glob("eval/*/scenarios.json"))
+        if known:  # each weather's BOPTEST days, found once from a year of the built-in controls: reused
+            out.mkdir(parents=True, exist_ok=True)
+            shutil.copy(known[0], out / "scenarios.json")
+        LOG.info("%s: evaluating %s", name, scenario)
+        r = subprocess.run(cli("evaluate", "--building", str(study.folder(name) / "spec.toml"), "--baseline",
+                               *planners, "--scenario", scenario, "--weathers", EVAL_WEATHERS, "--workers",
+                               str(study.workers), "--out", str(out), "--quiet"),
+                           capture_output=True, text=True, cwd=study.folder(name))  # fmt: skip
+        if r.returncode:
+            write_status(study, name, stage=f"evaluate {scenario}", error=failure(r))
+            return False
+        kept = study.out / name
+        kept.mkdir(parents=True, exist_ok=True)  # committed: the next session, maybe another machine, reads it
+        shutil.copy(out / "results.csv", kept / f"{scenario}.csv")
+    write_status(study, name, evaluated=True, stage="done", error=None)
+    return True
+
+
+def run(study: Study, names: list[str], minutes: float) -> None:
+    """Stages 3-4, building by building (the smallest models first), until the chunk ends."""
+    deadline = time.time() + 60 * minutes
+    todo = sorted(models(), key=lambda m: m.stat().st_size)
+    for model in todo:
+        name = short_name(model)
+        if names and name not in names:
+            continue
+        if scored(study, name):
+            continue
+        status = prepare(study, model)
+        if not status.get("checked"):
+            continue
+        if status.get("stage") == "train" and status.get("error"):
+            continue  # failed before: its row says why (delete status.json's error to retry)
+        if not all(train(study, name, seed, deadline) for seed in study.seeds):
+            if time.time() >= deadline - 120:
+                LOG.info("chunk over: run again to continue")
+                return
+            continue
+        if not evaluate(study, name, deadline) and time.time() >= deadline - 600:
+            LOG.info("chunk over: run again to continue")
+            return
+    LOG.info("every building done or failed: `table` next")
+
+
+def scored(study: Study, name: str) -> bool:
+    return all((study.out / name / f"{s}.csv").is_file() for s in SCENARIOS)
+
+
+def ratios(folder: Path) -> dict | None:
+    """The planner's figures over the four scenarios and five weathers, each as a ratio to the building's own."""
+    frames = [pd.read_csv(folder / f"{s}.csv").assign(scenario=s) for s in SCENARIOS if (folder / f"{s}.csv").is_file()]
+    if len(frames) < len(SCENARIOS):
+        return None
+    df = pd.concat(frames)
+    own, learned = df[df.controller == "Baseline"], df[df.controller != "Baseline"]
+    figures = {}
+    for column, how in (("hvac_energy_kwh", "sum"), ("bill", "sum"), ("peak_15min_kw", "max"),
+                        ("occupied_discomfort_kh", "sum")):  # fmt: skip
+        if column not in df:
+            continue
+        base = own[column].agg(how)
+        per_run = learned.groupby("run")[column].agg(how)  # each seed's planner; their mean
+        figures[column] = (per_run / base).mean() if base else float("nan")
+        figures[f"{column}_own"] = base
+        figures[f"{column}_learned"] = per_run.mean()
+    figures["in_band_pct"] = learned.in_band_pct.mean()
+    figures["in_band_pct_own"] = own.in_band_pct.mean()
+    return figures
+
+
+def table(study: Study) -> pd.DataFrame:
+    """One row per prototype: what was taken over, how far the path got, the ratios to its own controls."""
+    rows = []
+    for model in models():
+        name = short_name(model)
+        status = read_status(study, name)
+        row = {"building": name, "model": model.name, "actions": ", ".join(status.get("actions", [])),
+               "supply-air loops": status.get("supply_air_loops", ""), "stage": status.get("stage", "not started"),
+               "reason": status.get("error") or ""}  # fmt: skip
+        if status.get("checked") and not status.get("evaluated") and not status.get("error"):
+            row["stage"] = "checked, " + ("training" if study.run_dir(name, 0).exists() else "not trained yet")
+        if scored(study, name):
+            row["stage"], row["reason"] = "scored", ""
+        figures = ratios(study.out / name) if scored(study, name) else None
+        if figures:
+            row |= figures
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    study.out.mkdir(parents=True, exist_ok=True)
+    for name in df.building:  # each spec as the runs used it, its commented candidates left out
+        spec = study.folder(name) / "spec.toml"
+        if spec.is_file():
+            (study.out / "specs").mkdir(exist_ok=True)
+            kept = [ln for ln in spec.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+            (study.out / "specs" / f"{name}.toml").write_text("\n".join(kept) + "\n")
+    df.to_csv(study.out / "prototypes.csv", index=False)
+    if "hvac_energy_kwh" in df:
+        figure(df, study.out / "savings.png")
+    (study.out / "README.md").write_text(markdown(df, study))
+    return df
+
+
+def _x(value: float) -> str:
+    return "" if pd.isna(value) else f"{value:.3f}"
+
+
+def markdown(df: pd.DataFrame, study: Study) -> str:
+    """The table a reader wants: every building, its figures as ratios to its own controls, or why it has none."""
+    lines = ["# Every DOE reference prototype, scored", "",
+             "Made by `python studies/prototypes/prototypes.py table` (the study: studies/prototypes/README.md). Each",
+             "row is one model of the EnergyPlus wheel taken as a new user takes it: `building init`, the starter's",
+             "recommended actions, `building check`, the planner's recipe on CA, CO and FL "
+             f"({study.steps:,} steps, seeds {', '.join(map(str, study.seeds))}), then `evaluate` on BOPTEST's four",
+             "scenarios (peak and typical heating and cooling fortnights) on all five weathers (IL and VA held out).",
+             "Ratios are the planner's over its own controls' (× built-in, CityLearn's form), summed over the 20",
+             "fortnights (peak: the highest 15-minute mean); the bill under the example tariff with demand charges.",
+             "", "| building | actions | supply-air loops | HVAC energy × | bill × | peak × "
+             "| occupied K·h: own → planner | in own bounds: own → planner | stage |",
+             "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for _, r in df.iterrows():
+        kh = in_band = ""
+        if not pd.isna(r.get("hvac_energy_kwh", float("nan"))):
+            kh = f"{r.occupied_discomfort_kh_own:.0f} → {r.occupied_discomfort_kh_learned:.0f}"
+            in_band = f"{r.in_band_pct_own:.2f} % → {r.in_band_pct:.2f} %"
+        stage = r.stage + (f": {r.reason}" if r.reason else "")
+        lines.append(f"| {r.building} | {r.actions} | {r['supply-air loops']} | {_x(r.get('hvac_energy_kwh'))} | "
+                     f"{_x(r.get('bill'))} | {_x(r.get('peak_15min_kw'))} | {kh} | {in_band} | {stage} |")  # fmt: skip
+    done = df.dropna(subset=["hvac_energy_kwh"]) if "hvac_energy_kwh" in df else df.iloc[:0]
+    if len(done):
+        saves = ((done.hvac_energy_kwh < 1) | (done.get("bill", 1) < 1)).sum()
+        holds = (done.occupied_discomfort_kh_learned <= done.occupied_discomfort_kh_own).sum()
+        lines += ["", f"Scored: {len(done)} of {len(df)}. Lower HVAC energy or bill: {saves}; no more occupied",
+                  f"discomfort than its own controls: {holds} (goal: all, savings on 12 of 16)."]  # fmt: skip
+    if (study.out / "savings.png").is_file():
+        lines += ["", "![savings against discomfort](savings.png)"]
+    return "\n".join(lines) + "\n"
+
+
+def figure(df: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    done = df.dropna(subset=["hvac_energy_kwh"])
+    fig, ax = plt.subplots(figsize=(7, 5))
+    x = 100 * (done.hvac_energy_kwh - 1)
+    y = done.occupied_discomfort_kh_learned - done.occupied_discomfort_kh_own
+    ax.scatter(x, y)
+    for xi, yi, label in zip(x, y, done.building, strict=True):
+        ax.annotate(label, (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax.axvline(0, color="grey", lw=0.5)
+    ax.axhline(0, color="grey", lw=0.5)
+    ax.set_xlabel("HVAC energy vs its own controls (%)")
+    ax.set_ylabel("occupied discomfort vs its own controls (K·h, 4 scenarios × 5 weathers)")
+    ax.set_title("DOE prototypes: the planner against each building's own controls")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("command", choices=["prepare", "run", "table", "status"])
+    p.add_argument("names", nargs="*", help="short names (default: all 16), e.g. medium-office")
+    p.add_argument("--work", type=Path, default=Path(os.environ.get("WORK", REPO.parent / "prototypes")))
+    p.add_argument("--out", type=Path, default=REPO / "results" / "prototypes")
+    p.add_argument("--steps", type=int, default=Study.steps)
+    p.add_argument("--seeds", default="0", help="comma-separated")
+    p.add_argument("--minutes", type=float, default=110.0, help="the chunk: stop (checkpointed) after this long")
+    a = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    study = Study(a.work, a.out, a.steps, seeds=tuple(int(s) for s in a.seeds.split(",")))
+    if a.command == "prepare":
+        for model in models():
+            if not a.names or short_name(model) in a.names:
+                prepare(study, model)
+    elif a.command == "run":
+        run(study, a.names, a.minutes)
+    elif a.command == "table":
+        print(table(study).to_string())
+    else:
+        for model in models():
+            s = read_status(study, short_name(model))
+            print(short_name(model), s.get("stage", "checked" if s.get("checked") else "not prepared"),
+                  s.get("error") or "")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
