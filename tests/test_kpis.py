@@ -135,8 +135,8 @@ def test_cost_under_a_day_night_tariff_is_the_hand_computation(baseline_episode,
 def test_spec_errors_name_the_bad_band_and_kpis(tmp_path):
     text = spec_file("office-small").read_text().replace("RefBldgSmallOfficeNew2004_Chicago.idf", str(OFFICE_IDF))
     bad = text.replace('band = "thermostat"', "band = { core_temp_c = [21.0, 24.0], kitchen = [20.0, 19.0] }")
-    bad = bad.replace('hvac = { Electricity', 'tariff = { Electricity = "cheap" }\nemissions = { Coal = -1 }\n'
-                      'hvac = { Electricity')  # fmt: skip
+    bad = bad.replace('tariff = { Electricity = { file = "commercial-tou-demand.toml" } }',
+                      'tariff = { Electricity = "cheap" }\nemissions = { Coal = -1 }')  # fmt: skip
     path = tmp_path / "bad.toml"
     path.write_text(bad)
     with pytest.raises(SpecError) as e:
