@@ -67,9 +67,11 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
     out.write_text(uncomment_actions(text, r"^# zone .* cooling( \(|$)"))
     actions = load_spec(out).actions
     assert [a.actuators[0].control for a in actions] == ["Cooling Setpoint"] * 5
-    out.write_text(uncomment_actions(text, r"^# all 5 thermostats' cooling"))
-    (together,) = load_spec(out).actions
-    assert together.name == "cooling_setpoint_c" and len(together.actuators) == 5
+    # One knob per setpoint schedule: four zones follow CLGSETP_SCH_NO_OPTIMUM, one its "_w_SB" variant.
+    out.write_text(uncomment_actions(text, r"^# (all \d thermostats'|the one thermostat's) cooling"))
+    knobs = {a.name: len(a.actuators) for a in load_spec(out).actions}
+    knob = "cooling_setpoint_clgsetp_sch_no_optimum"
+    assert knobs == {f"{knob}_c": 4, f"{knob}_w_sb_c": 1}
     assert "Air Node" not in text  # zone air nodes' setpoints are the thermostat's, not candidates
     # Its five packaged units each follow their own zone (SetpointManager:SingleZone:Reheat): no shared supply-air
     # knob, which would end every zone's feedback; each node is still offered alone.

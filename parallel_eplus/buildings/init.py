@@ -21,6 +21,7 @@ from parallel_eplus.buildings.init_text import snake as _snake
 from parallel_eplus.buildings.init_text import toml_str as _str
 from parallel_eplus.buildings.loops import topology
 from parallel_eplus.buildings.survey import Survey, summary, survey
+from parallel_eplus.buildings.thermostat import zone_setpoints
 
 # Fuels besides electricity that a facility meter may count (EnergyPlus's resource types), for the energy figure.
 FUELS = ("NaturalGas", "Propane", "FuelOilNo1", "FuelOilNo2", "Diesel", "Gasoline", "Coal", "OtherFuel1",
@@ -159,15 +160,9 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
     lines += ["# ---- candidate actions (uncomment at least one) ----", ""]
     zones = s.keys("Actuator", "Zone Temperature Control", "Cooling Setpoint")
     if len(zones) > 1:  # what a user most often wants: one knob per setpoint for the whole building
-        every = [o(k) for k in zones]
-        lines += _candidate(
-            "cooling_setpoint_c", "Zone Temperature Control", "Cooling Setpoint", every, 22.0, 30.0, 24.0, "C",
-            f"all {len(zones)} thermostats' cooling setpoints together",
-        )  # fmt: skip
-        lines += _candidate(
-            "heating_setpoint_c", "Zone Temperature Control", "Heating Setpoint", every, 15.0, 21.5, 21.0, "C",
-            f"all {len(zones)} thermostats' heating setpoints together (keep below cooling)",
-        )  # fmt: skip
+        schedules = zone_setpoints(idf)
+        for side in ("cooling", "heating"):
+            lines += _together(side, zones, schedules, o, lambda key, v=side: seen(THERMOSTAT_SEEN[v], key))
     for key in zones:
         base, z = _snake(o(key)), o(key)
         c = seen("Zone Thermostat Cooling Setpoint Temperature", key)
@@ -225,6 +220,39 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         "",
     ]
     return "\n".join(lines)
+
+
+THERMOSTAT_SEEN = {side: f"Zone Thermostat {side.title()} Setpoint Temperature" for side in ("cooling", "heating")}
+KNOB = {"cooling": (22.0, 30.0, 24.0), "heating": (15.0, 21.5, 21.0)}  # C: low, high, initial of a shared knob
+
+
+def _together(side: str, zones: list[str], schedules: dict, o, seen) -> list[str]:
+    """One knob per thermostat schedule: the zones that follow the same schedule share it. A warehouse's storage
+    heated to 7 C and its office to 20 C on one knob would heat the storage to the office's setpoint; where every
+    zone follows one schedule (the offices) this is the one building-wide knob."""
+    groups: dict[str | None, list[str]] = {}
+    for key in zones:
+        zone = schedules.get(key.upper())
+        groups.setdefault(getattr(zone, side, None) if zone else None, []).append(key)
+    lines: list[str] = []
+    control = f"{side.title()} Setpoint"
+    low, high, initial = KNOB[side]
+    for schedule, keys in groups.items():
+        ranges = [r for r in (seen(k) for k in keys) if r]
+        lo, hi = min((r[0] for r in ranges), default=low), max((r[1] for r in ranges), default=high)
+        group_low, group_high = min(low, float(int(lo))), max(high, float(-int(-hi)))  # the knob holds what was seen
+        outside = ranges and (hi < low or lo > high)  # a schedule far from people's comfort (storage at 7 C)
+        start = _clamp((hi if side == "heating" else lo) if outside else initial, group_low, group_high)
+        what = f"all {len(keys)} thermostats' {side} setpoints"
+        what = what if len(keys) > 1 else f"the one thermostat's {side} setpoint"
+        note = f"{what} together" + (" (keep below cooling)" if side == "heating" else "")
+        name = f"{side}_setpoint_c"
+        if len(groups) > 1:
+            note = f"{what} on schedule {schedule} together" + seen_text((lo, hi))
+            name = f"{side}_setpoint_{_snake(schedule or 'unscheduled')}_c"
+        lines += _candidate(name, "Zone Temperature Control", control, [o(k) for k in keys], group_low, group_high,
+                            start, "C", note)  # fmt: skip
+    return lines
 
 
 def _thermostats_cover(idf: Path, temps: list[str], keys: dict[str, str]) -> bool:

@@ -2,10 +2,11 @@
 
 Per building, each stage a command a user runs, its output kept under WORK/<name>/ so the study resumes:
 
-1. `building init MODEL.idf` writes the starter; the starter's recommended actions are uncommented: every
-   thermostat together (cooling, heating) and, where the model has air loops reset for several zones, their supply
-   air together (single-zone units follow their own thermostats: `building init` leaves them out of that knob).
-   The starter's example time-of-use tariff with demand charges is uncommented too, so the bill is scored.
+1. `building init MODEL.idf` writes the starter; the starter's recommended actions are uncommented: the
+   thermostats together (cooling, heating; one knob per setpoint schedule its zones follow) and, where the model has
+   air loops reset for several zones, their supply air together (single-zone units follow their own thermostats:
+   `building init` leaves them out of that knob). The starter's example time-of-use tariff with demand charges is
+   uncommented too, so the bill is scored.
 2. `building check` on that spec (it proves each node action reaches its node).
 3. `train --algorithm mpc`, the recipe for a building nobody tuned (the planner: docs/model-based.md), on CA, CO
    and FL, in chunks: a run is stopped with SIGINT at the chunk's end (it checkpoints) and resumed the next time.
@@ -88,7 +89,8 @@ def recommended(starter: str) -> str:
     """The starter with its recommended actions and the example tariff uncommented (what its notes ask a user)."""
     out, on = [], False
     for line in starter.splitlines():
-        if line.startswith("# all ") and ("thermostats'" in line or "air loops' supply air" in line):
+        heading = line.startswith(("# all ", "# the one thermostat's"))
+        if heading and any(k in line for k in ("thermostats'", "thermostat's", "air loops' supply air")):
             on = True  # a block's heading: its lines follow, to a blank line
         elif on and line.startswith("# "):
             line = line[2:]
