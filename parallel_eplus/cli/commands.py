@@ -102,7 +102,7 @@ def _simulate_bacnet(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
-    from parallel_eplus.learning.model_based.settings import MPCSettings
+    from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
     from parallel_eplus.runs.policy_files import normalization_file
     from parallel_eplus.training.config import (
         ComfortConstraint,
@@ -162,6 +162,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             scenarios=[s.strip() for s in args.eval_scenarios.split(",") if s.strip()],
         ),  # fmt: skip
         mpc=MPCSettings.from_text(args.mpc),
+        mbpo=MBPOSettings.from_text(args.mbpo),
     )
     if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)

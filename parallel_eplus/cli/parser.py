@@ -78,12 +78,15 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--forecast-error", choices=["low", "medium", "high"],
                     help="with --forecast: BOPTEST's AR(1) forecast error at this level (default: exact)")  # fmt: skip
     tr.add_argument(
-        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac", "mpc"],
+        "--algorithm", default="trpo", choices=["trpo", "ppo", "sac", "mpc", "mbpo"],
         help="trpo: the paper's (sb3-contrib), default; ppo: Stable-Baselines3's, same network and discounting; "
         "sac: Stable-Baselines3's off-policy SAC (training/config.py SACSettings; --batch-size is unused); "
-        "mpc: learn a model of the building and plan on it, then distil the planner (docs/model-based.md)",
+        "mpc: learn a model of the building and plan on it, then distil the planner (docs/model-based.md); "
+        "mbpo: SAC on real steps and short rollouts of that model, comfort as a constraint (--init-from an mpc run)",
     )  # fmt: skip
     tr.add_argument("--mpc", metavar="NAME=VALUE,...", help="with --algorithm mpc: its settings (docs/model-based.md)")
+    tr.add_argument("--mbpo", metavar="NAME=VALUE,...",
+                    help="with --algorithm mbpo: its settings (docs/model-based.md)")  # fmt: skip
     tr.add_argument(
         "--residual", type=float, default=0.0, metavar="SCALE",
         help="the policy corrects the rule-based controller's action by up to SCALE (e.g. 0.2) instead of acting "
@@ -146,7 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     tr.add_argument(
         "--init-from", type=Path,
-        help="start a new run from a saved model.zip's weights and observation statistics (fine-tuning)",
+        help="start a new run from a saved model.zip's weights and observation statistics (fine-tuning); with "
+        "--algorithm mbpo, from a planner run's folder (its model, and its data where it kept them)",
     )  # fmt: skip
     tr.add_argument("--checkpoint-every", type=int, default=100_000, help="env steps between checkpoints")
     tr.add_argument("--keep-episodes", type=int, default=2, help="full episode directories kept per worker")

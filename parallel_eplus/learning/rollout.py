@@ -307,4 +307,4 @@ class FastPPO(NumpyRollouts, PPO):
 
 
 # SAC is off-policy: SB3's own step-by-step collect_rollouts feeds its replay buffer.
-ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": SAC}
+ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": SAC, "mbpo": SAC}

@@ -13,7 +13,7 @@ from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.buildings.reward import RewardConfig
 from parallel_eplus.buildings.weather import parse_weathers
 from parallel_eplus.engine.config import RESIDUAL_SPACES
-from parallel_eplus.learning.model_based.settings import MPCSettings
+from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
 from parallel_eplus.learning.settings import (
     ComfortConstraint,
     ImitationSettings,
@@ -58,8 +58,9 @@ class TrainConfig:
     overlap: bool = False
     time_features: bool = False  # opt-in hour/weekday observation features (model.TIME_FEATURES)
     schedule_features: bool = False  # opt-in IT-load schedule features (model.SCHEDULE_FEATURES)
-    init_from: str | None = None  # a saved model.zip whose weights and observation statistics start this run
-    algorithm: str = "trpo"  # the paper's; or "ppo", "sac"
+    # a saved model.zip whose weights and observation statistics start this run (mbpo: a planner run's folder)
+    init_from: str | None = None
+    algorithm: str = "trpo"  # the paper's; or "ppo", "sac", "mpc", "mbpo"
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
     residual_space: str = "action"  # what it corrects: each action, or each zone's flow demand (SimulationConfig)
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
@@ -78,6 +79,7 @@ class TrainConfig:
     sac: SACSettings = field(default_factory=SACSettings)
     evaluation: EvalSettings = field(default_factory=EvalSettings)  # --eval-every (training/periodic_eval.py)
     mpc: MPCSettings = field(default_factory=MPCSettings)  # `--algorithm mpc` (learning/model_based/)
+    mbpo: MBPOSettings = field(default_factory=MBPOSettings)  # `--algorithm mbpo` (learning/model_based/mbpo.py)
 
     def resolved(self) -> TrainConfig:
         """Validate, and fill in the run name."""
@@ -110,8 +112,10 @@ class TrainConfig:
             raise ValueError("--timesteps must be >= 0 and --checkpoint-every >= 1")
         if self.init_from is not None:
             self.init_from = str(Path(self.init_from).resolve())
-        if self.algorithm not in ("trpo", "ppo", "sac", "mpc"):
-            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo, ppo, sac or mpc")
+        if self.algorithm not in ("trpo", "ppo", "sac", "mpc", "mbpo"):
+            raise ValueError(f"unknown algorithm {self.algorithm!r}: use trpo, ppo, sac, mpc or mbpo")
+        if self.algorithm == "mbpo":
+            self._check_mbpo()
         if self.algorithm == "mpc" and (self.overlap or self.init_from or self.residual_scale):
             raise ValueError("--algorithm mpc plans on a model it learns: no --overlap, --init-from or --residual")
         if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
@@ -136,7 +140,7 @@ class TrainConfig:
             raise ValueError("--init-from-baseline imitates the building's own controls; --residual corrects ours")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"unknown backend {self.backend!r}: use local or ray")
-        if self.overlap and (self.algorithm == "sac" or self.lockstep):
+        if self.overlap and (self.off_policy or self.lockstep):
             raise ValueError("--overlap is for TRPO and PPO without --lockstep (SAC updates as it steps; lockstep "
                              "steps every worker from the learner)")  # fmt: skip
         if self.run_name is None:
@@ -148,7 +152,7 @@ class TrainConfig:
 
     def check_new_run(self) -> None:
         """What only a new run must satisfy (a resumed run keeps its saved settings)."""
-        if self.algorithm != "sac" and self.batch_size % self.workers:
+        if not self.off_policy and self.batch_size % self.workers:
             b, w = self.batch_size, self.workers
             raise ValueError(
                 f"--batch-size {b} does not split evenly across {w} workers: use {b - b % w} or {b + w - b % w}"
@@ -170,6 +174,21 @@ class TrainConfig:
         if logs.is_relative_to(home):
             self.tensorboard_dir = str(run_dir.parent.parent / logs.relative_to(home))
         self.runs_dir, self.run_name = str(run_dir.parent), run_dir.name
+
+    def _check_mbpo(self) -> None:
+        if not self.constrained:
+            raise ValueError("--algorithm mbpo keeps comfort as a constraint: give --comfort-target PCT (e.g. 99.6)")
+        if self.residual_scale or self.init_from_baseline or self.forecast_hours:
+            raise ValueError("--algorithm mbpo: no --residual, --init-from-baseline or --forecast (a forecast in the "
+                             "observation cannot be rebuilt along the model's rollouts)")  # fmt: skip
+        if self.mbpo.rollout_length > self.mpc.horizon:
+            raise ValueError(f"--mbpo rollout_length {self.mbpo.rollout_length}: at most --mpc horizon "
+                             f"({self.mpc.horizon})")  # fmt: skip
+
+    @property
+    def off_policy(self) -> bool:
+        """SAC's learners: a replay buffer, updates as they step (no batches)."""
+        return self.algorithm in ("sac", "mbpo")
 
     @property
     def constrained(self) -> bool:
@@ -196,6 +215,7 @@ class TrainConfig:
         raw["imitation"] = ImitationSettings(**raw.get("imitation", {}))
         sac = raw.get("sac", {})
         raw["mpc"] = MPCSettings(**raw.get("mpc", {}))
+        raw["mbpo"] = MBPOSettings(**raw.get("mbpo", {}))
         raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
         raw["evaluation"] = EvalSettings(**raw.get("evaluation", {}))  # runs from before it have none
         return cls(**raw)

@@ -16,6 +16,7 @@ MUTABLE = {  # config.json key -> the algorithm's attribute, per algorithm
             "trpo.gamma": "gamma", "trpo.gae_lambda": "gae_lambda"},
     "sac": {"sac.learning_rate": "learning_rate", "sac.tau": "tau", "sac.gamma": "gamma"},
 }  # fmt: skip
+MUTABLE["mbpo"] = MUTABLE["sac"]
 MUTABLE_KEYS = sorted({key for keys in MUTABLE.values() for key in keys})
 
 

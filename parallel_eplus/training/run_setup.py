@@ -41,7 +41,7 @@ def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) ->
             saved.evaluation = cfg.evaluation
         cfg = saved
     cfg = cfg.resolved()
-    if cfg.init_from is not None and checkpoint is None:  # a resumed run has its weights already
+    if cfg.init_from is not None and checkpoint is None and cfg.algorithm != "mbpo":  # resumed: has its weights
         _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
     if checkpoint is None:
         cfg.check_new_run()

@@ -11,6 +11,7 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -132,7 +133,7 @@ def _learn(
         else:
             env = VecNormalize(venv, norm_obs=True, norm_reward=False, gamma=cfg.trpo.gamma)
             model = _new_model(cfg, env)
-            if cfg.init_from is not None:
+            if cfg.init_from is not None and cfg.algorithm != "mbpo":  # mbpo's: a planner run's model and data
                 _warm_start(Path(cfg.init_from), model, env)
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
             if cfg.init_from_baseline:
@@ -142,7 +143,8 @@ def _learn(
         model.set_logger(tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name)))
         start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
-        batch = cfg.workers if cfg.algorithm == "sac" else cfg.n_steps * cfg.workers
+        batch = cfg.workers if cfg.off_policy else cfg.n_steps * cfg.workers
+        model_based = _model_rollouts(cfg, venv, checkpoint, progress) if cfg.algorithm == "mbpo" else None
         end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
         status.write(steps=model.num_timesteps, planned=end)
         bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
@@ -151,7 +153,8 @@ def _learn(
             timer or UpdateTimer(),
             EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * load_building(cfg.building).steps_per_day),
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
-            *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.algorithm == "sac" else []),
+            *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.off_policy else []),
+            *([model_based] if model_based is not None else []),
             status,
             *_evaluation(cfg, model, env),
             *callbacks,
@@ -163,6 +166,8 @@ def _learn(
             if isinstance(e, EnergyPlusError) and model.num_timesteps == start_steps:
                 raise  # nothing learned since the last save
             path = save_checkpoint(model, env, run_dir / "checkpoints" / f"model_{model.num_timesteps}_steps.zip", True)
+            if model_based is not None:
+                model_based.save()
             cause = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped by the failure below"
             log.warning("%s at step %d; checkpoint saved: %s", cause, model.num_timesteps, path)
             log.warning("resume with: parallel-eplus train --resume %s", path)
@@ -209,6 +214,45 @@ def _load_replay_buffer(model, checkpoint: Path) -> None:
                     "empty buffer and updates from it at once", checkpoint.name)  # fmt: skip
 
 
+def _model_rollouts(cfg: TrainConfig, venv, checkpoint: Path | None, progress: bool):
+    """`--algorithm mbpo`'s ensemble beside SAC (learning/model_based/mbpo.py): a resumed run's own, a planner run's
+    (`--init-from`), or fitted on the building's own controls recorded first."""
+    from parallel_eplus.learning.model_based import mbpo
+    from parallel_eplus.learning.model_based.control import MPC
+    from parallel_eplus.learning.model_based.dataset import Transitions
+    from parallel_eplus.learning.model_based.through_model import Starts
+
+    state_dir = cfg.run_dir / mbpo.STATE_DIR
+    n = venv.num_envs
+    if checkpoint is not None and (state_dir / mbpo.STARTS).is_file():
+        mpc, data, starts = mbpo.load_state(state_dir, n, cfg.seed)
+        log.info("the ensemble resumes from %s: %d transitions, %d start states", state_dir, len(data), len(starts))
+    elif cfg.init_from is not None:
+        mpc, data, starts = mbpo.from_planner_run(Path(cfg.init_from), n, cfg.seed)
+        width = venv.observation_space.shape[0]
+        if mpc.building != cfg.building:
+            raise ValueError(f"--init-from {cfg.init_from}: a planner of building {mpc.building!r}; this run's is "
+                             f"{cfg.building!r} (give it --building {mpc.building})")  # fmt: skip
+        if starts.obs and len(starts.obs[0]) != width:
+            raise ValueError(f"--init-from {cfg.init_from}: its planner's states hold {len(starts.obs[0])} values, "
+                             f"this run observes {width}: give the planner run's --time-features and "
+                             "--schedule-features, or a planner folder alone (planner/) to start without its states")
+        log.info("%s starts from the model and data of %s: %d transitions, %d start states", cfg.run_name,
+                 cfg.init_from, len(data), len(starts))  # fmt: skip
+    else:
+        mpc = MPC(cfg.building, cfg.mpc, cfg.comfort.margin_c, cfg.reward.power_weight, n, cfg.seed,
+                  objective=cfg.objective)  # fmt: skip
+        data, starts = Transitions(mpc.layout), Starts()
+    if checkpoint is None and not len(starts):  # nothing to branch from yet: the building's own controls first
+        mbpo.record_own_controls(cfg, mpc, data, starts, progress)
+        log.info("recorded the building's own controls: %d transitions, %d start states", len(data), len(starts))
+    if cfg.init_from is None and checkpoint is None:
+        mpc.model.fit(data, np.arange(len(data)), cfg.mpc.epochs)
+        mpc.set_support(data.array("a"))
+        log.info("model fitted on the building's own controls: %d transitions", len(data))
+    return mbpo.ModelRollouts(cfg, mpc, data, starts, state_dir)
+
+
 def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) -> None:
     """`--init-from-baseline`: fit the new policy to the building's own controls on the training weathers; the
     cloned policy is saved in runs/<name>/cloned/ (evaluate it to see how close it gets before any RL)."""
@@ -247,13 +291,20 @@ def _new_model(cfg: TrainConfig, env: VecNormalize):
 def _algorithm(cfg: TrainConfig, env: VecNormalize):
     from parallel_eplus.learning.rollout import ALGORITHMS
 
-    if cfg.algorithm == "sac":
+    if cfg.off_policy:
         s = cfg.sac
         buffer = {"replay_buffer_class": CostReplayBuffer} if cfg.constrained else {}
+        learning_starts, gradient_steps = s.learning_starts, s.gradient_steps
+        if cfg.algorithm == "mbpo":  # the model's rollouts are data from the first step; more updates per step
+            from parallel_eplus.learning.model_based.mbpo import ModelMixBuffer
+
+            buffer = {"replay_buffer_class": ModelMixBuffer,
+                      "replay_buffer_kwargs": {"model_size": cfg.mbpo.model_buffer}}  # fmt: skip
+            learning_starts, gradient_steps = 0, cfg.mbpo.gradient_steps
         return ALGORITHMS["sac"](
             "MlpPolicy", env, learning_rate=s.learning_rate, buffer_size=s.buffer_size,
-            learning_starts=s.learning_starts, batch_size=s.batch_size, tau=s.tau, gamma=s.gamma,
-            train_freq=s.train_freq, gradient_steps=s.gradient_steps, ent_coef=s.ent_coef, seed=cfg.seed,
+            learning_starts=learning_starts, batch_size=s.batch_size, tau=s.tau, gamma=s.gamma,
+            train_freq=s.train_freq, gradient_steps=gradient_steps, ent_coef=s.ent_coef, seed=cfg.seed,
             device="cpu", policy_kwargs={"net_arch": list(s.net_arch)}, **buffer,
         )  # fmt: skip
 

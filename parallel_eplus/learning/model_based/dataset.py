@@ -22,7 +22,7 @@ import numpy as np
 if TYPE_CHECKING:  # numpy only at run time: the served planner reads `Layout`
     from parallel_eplus.buildings.building import Building
 
-ORIGINS = ("baseline", "explore", "planner")
+ORIGINS = ("baseline", "explore", "planner", "policy")  # policy: a learner's own steps (mbpo.py)
 _FIELDS = ("s", "a_prev", "a", "x", "s_next", "applies", "episode", "step", "origin")
 
 

@@ -3,11 +3,44 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from typing import ClassVar
+
+
+class _FromText:
+    """`--mpc`/`--mbpo "name=value,..."`: a dataclass's fields by name, each converted to its default's type."""
+
+    flag: ClassVar[str]
+
+    def __post_init__(self):
+        pass
+
+    @classmethod
+    def from_text(cls, text: str | None, base=None):
+        """Fields named in `text` over `base` (default: the defaults)."""
+        settings = replace(base) if base is not None else cls()
+        for item in filter(None, (p.strip() for p in (text or "").split(","))):
+            key, sep, value = item.partition("=")
+            key = key.strip().replace("-", "_")
+            if not sep or not hasattr(settings, key):
+                names = ", ".join(f.name for f in fields(cls))
+                raise ValueError(f"{cls.flag} {item!r}: expected NAME=VALUE with NAME one of {names}")
+            default = getattr(cls, key)
+            if isinstance(default, bool):
+                parsed = value.strip().lower() in ("1", "true", "yes", "on")
+            elif default is None:
+                parsed = None if value.strip().lower() == "none" else float(value)
+            else:
+                parsed = type(default)(float(value)) if isinstance(default, int) else type(default)(value)
+            setattr(settings, key, parsed)
+        settings.__post_init__()
+        return settings
 
 
 @dataclass
-class MPCSettings:
+class MPCSettings(_FromText):
     """The model-based learner's settings; saved in the run's config.json and in every planner checkpoint."""
+
+    flag: ClassVar[str] = "--mpc"
 
     # The ensemble (dynamics.py): members, hidden layers, fitting.
     members: int = 5
@@ -74,24 +107,31 @@ class MPCSettings:
         if not 0 < self.shrink <= 1:
             raise ValueError(f"shrink {self.shrink}: within (0, 1]")
 
-    @classmethod
-    def from_text(cls, text: str | None, base: MPCSettings | None = None) -> MPCSettings:
-        """`train --mpc "horizon=12,explore_steps=5000"`: fields by name, each converted to its default's type,
-        over `base` (default: the defaults)."""
-        settings = replace(base) if base is not None else cls()
-        for item in filter(None, (p.strip() for p in (text or "").split(","))):
-            key, sep, value = item.partition("=")
-            key = key.strip().replace("-", "_")
-            if not sep or not hasattr(settings, key):
-                names = ", ".join(f.name for f in fields(cls))
-                raise ValueError(f"--mpc {item!r}: expected NAME=VALUE with NAME one of {names}")
-            default = getattr(cls, key)
-            if isinstance(default, bool):
-                parsed = value.strip().lower() in ("1", "true", "yes", "on")
-            elif default is None:
-                parsed = None if value.strip().lower() == "none" else float(value)
-            else:
-                parsed = type(default)(float(value)) if isinstance(default, int) else type(default)(value)
-            setattr(settings, key, parsed)
-        settings.__post_init__()
-        return settings
+
+@dataclass
+class MBPOSettings(_FromText):
+    """`train --algorithm mbpo` (mbpo.py): SAC on real transitions and short rollouts of the ensemble branched from
+    real states (Janner et al. 2019). The ensemble's own settings, and its refits every `refit_every` env steps,
+    are `--mpc`'s."""
+
+    flag: ClassVar[str] = "--mbpo"
+
+    rollout_length: int = 1  # model steps per branch (MBPO: 1 on most tasks; errors compound beyond a few)
+    rollout_batch: int = 512  # branches per generation
+    rollout_every: int = 96  # env steps (all workers) between generations: a day of one worker
+    real_ratio: float = 0.1  # share of each SAC batch drawn from real transitions (MBPO: 0.05)
+    gradient_steps: int = 4  # SAC's updates per vector step (`--algorithm sac`: 1): the model's data bear more
+    model_buffer: int = 100_000  # model transitions kept, newest first
+    # Days of the building's own controls recorded first where the run has no states to branch from (no
+    # --init-from, or a committed planner without its data): the ensemble's data (without --init-from, its first
+    # fit) and the first start states. None: the run's episode length.
+    record_days: int | None = 14
+    pretrain_updates: int = 5_000  # SAC's updates on the model's rollouts alone, before its first real step
+
+    def __post_init__(self):
+        if not 1 <= self.rollout_length <= 8:
+            raise ValueError(f"rollout_length {self.rollout_length}: 1 to 8 model steps")
+        if not 0 <= self.real_ratio <= 1:
+            raise ValueError(f"real_ratio {self.real_ratio}: within [0, 1]")
+        if self.rollout_batch < 1 or self.rollout_every < 1 or self.model_buffer < 1:
+            raise ValueError("rollout_batch, rollout_every and model_buffer: at least 1")

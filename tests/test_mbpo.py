@@ -1,0 +1,117 @@
+"""`train --algorithm mbpo` on real short episodes: SAC on real steps and the ensemble's rollouts, started from a
+planner run's model and data; the rollouts, the multiplier on them, a Ctrl-C and the resume."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from parallel_eplus.learning.model_based import mbpo
+from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
+from parallel_eplus.learning.rollout import ALGORITHMS
+from parallel_eplus.runs.policy_files import load_policy
+from parallel_eplus.training.config import ComfortConstraint, SACSettings, TrainConfig
+from parallel_eplus.training.train import train
+
+from .test_model_based import mpc_config
+
+ROLLOUTS = MBPOSettings(rollout_length=2, rollout_batch=64, rollout_every=48, gradient_steps=1, pretrain_updates=200)
+
+
+def mbpo_config(root: Path, name: str, planner: Path | None, **overrides) -> TrainConfig:
+    base = dict(
+        algorithm="mbpo", workers=2, weathers=["CA", "FL"], run_days=1, timesteps=384, checkpoint_every=192,
+        batch_size=192,  # the multiplier's update period
+        run_name=name, runs_dir=str(root / "runs"), tensorboard_dir=str(root / "tb"), mbpo=ROLLOUTS,
+        init_from=None if planner is None else str(planner), comfort=ComfortConstraint(target_pct=99.0),
+        mpc=MPCSettings(refit_every=192, refit_epochs=2), sac=SACSettings(batch_size=64, buffer_size=5000),
+    )  # fmt: skip
+    base.update(overrides)
+    return TrainConfig(**base)
+
+
+@pytest.fixture(scope="module")
+def planner_run(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("planner")
+    settings = MPCSettings(explore_steps=96, refit_every=192, epochs=10, candidates=64, distill=False, record_days=1)
+    train(mpc_config(root, "planner", run_days=1, timesteps=288, mpc=settings), progress=False)
+    return root / "runs" / "planner"
+
+
+@pytest.mark.slow
+def test_rollouts_branch_from_real_states_within_the_datas_support_and_pay_the_multiplier(planner_run, tmp_path,
+                                                                                          no_leaks):  # fmt: skip
+    final = train(mbpo_config(tmp_path, "mb", planner_run), progress=False)
+    run = final.parent
+    model = ALGORITHMS["mbpo"].load(final, device="cpu")
+    model.load_replay_buffer(run / "model_replay_buffer.pkl")
+    buffer = model.replay_buffer
+    assert isinstance(buffer, mbpo.ModelMixBuffer)
+    # two generations before the first real step (100 updates each), then one every 48 steps; 64 branches x 2 steps
+    assert buffer.model_rows() == (2 + 384 // 48) * 64 * 2, buffer.model_rows()
+    ensemble, data, starts = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
+    planner_starts = mbpo.from_planner_run(planner_run, 1, 0)[2]
+    assert len(starts) >= len(planner_starts) + 384 - 2 * 2  # the planner's states, then every real step
+    real = np.stack(starts.obs)
+    first = buffer.m_obs[:64]  # the first generation's first steps: states the planner saw, as they were
+    assert all(np.any(np.all(real == row, axis=1)) for row in first)
+    second = buffer.m_obs[64:128]  # their second steps: rebuilt from the model's prediction, not copies
+    assert not any(np.any(np.all(real == row, axis=1)) for row in second)
+    low, high = ensemble.support
+    acts = buffer.m_act[: buffer.model_rows()]
+    assert np.all(acts >= low - 1e-6) and np.all(acts <= high + 1e-6)
+    temps = buffer.m_next[: buffer.model_rows(), 1:3]  # the zones the model predicted: where the real ones went
+    seen = real[:, 1:3]
+    assert np.all((temps >= seen.min() - 5) & (temps <= min(seen.max() + 5, 50))), (temps.min(), temps.max())
+    assert len(data) > len(mbpo.from_planner_run(planner_run, 1, 0)[1])  # SAC's real steps joined the model's data
+
+    # The multiplier charges the model's transitions as it does the real ones.
+    assert buffer.m_cost[: buffer.model_rows()].max() > 0
+    buffer.real_ratio = 0.0
+    buffer.multiplier = 0.0
+    np.random.seed(0)
+    plain = buffer.sample(256).rewards
+    buffer.multiplier = 50.0
+    np.random.seed(0)
+    charged = buffer.sample(256).rewards
+    assert (charged <= plain).all() and (charged < plain).any()
+    assert model.comfort.updates >= 1
+
+    act = load_policy(final)  # an SAC policy, as `export` and `serve` take it
+    assert act(real[:3]).shape == (3, 4)
+
+
+@pytest.mark.slow
+def test_a_run_interrupted_resumes_with_its_model_and_replay_buffer(tmp_path, monkeypatch, no_leaks, caplog):
+    """From scratch: the building's own controls recorded and fitted first; Ctrl-C; the resume keeps both."""
+    cfg = mbpo_config(tmp_path, "cut", None, timesteps=10_000, mbpo=MBPOSettings(**{**ROLLOUTS.__dict__,
+                      "record_days": 1}))  # fmt: skip
+    on_step, hit = mbpo.ModelRollouts._on_step, []
+
+    def ctrl_c_at_step_250(self):  # Ctrl-C, as the terminal sends it, once past the first checkpoint
+        if self.num_timesteps >= 250 and not hit:
+            hit.append(self.num_timesteps)
+            os.kill(os.getpid(), signal.SIGINT)
+        return on_step(self)
+
+    monkeypatch.setattr(mbpo.ModelRollouts, "_on_step", ctrl_c_at_step_250)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, progress=False)
+    assert hit
+    monkeypatch.undo()
+    run = tmp_path / "runs" / "cut"
+    saved = sorted((run / "checkpoints").glob("model_*_steps.zip"))
+    assert saved and (run / "checkpoints" / f"{saved[-1].stem}_replay_buffer.pkl").is_file()
+    _, data, starts = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
+    assert len(starts) > 96  # the first episodes' states (none from a planner)
+    with caplog.at_level("INFO"):
+        final = train(TrainConfig(timesteps=int(saved[-1].stem.split("_")[1]) + 96), resume=saved[-1],
+                      progress=False)  # fmt: skip
+    assert "replay buffer restored" in caplog.text and "the ensemble resumes" in caplog.text
+    _, data_after, starts_after = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
+    assert len(starts_after) > len(starts) and len(data_after) > len(data)
+    assert final.is_file()
