@@ -8,8 +8,13 @@ import signal
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
+from parallel_eplus.deploy.export import export
+from parallel_eplus.deploy.parity import replay
+from parallel_eplus.evaluation.controllers import policy_controller
+from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.model_based import mbpo
 from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
 from parallel_eplus.learning.rollout import ALGORITHMS
@@ -81,8 +86,13 @@ def test_rollouts_branch_from_real_states_within_the_datas_support_and_pay_the_m
     assert (charged <= plain).all() and (charged < plain).any()
     assert model.comfort.updates >= 1
 
-    act = load_policy(final)  # an SAC policy, as `export` and `serve` take it
+    act = load_policy(final)  # an SAC policy: exported, its setpoints over a day equal the policy's in process
     assert act(real[:3]).shape == (3, 4)
+    out = tmp_path / "controller"
+    export(final, out)
+    df = run_sweep([policy_controller(str(final))], ["CA"], 1, 1, tmp_path / "eval", progress=False)
+    result = replay(out, pd.read_parquet(Path(df.episode_dir[0]) / "steps.parquet"))
+    assert result["steps"] == 95 and max(result["max_abs_diff"].values()) <= 1e-5, result
 
 
 @pytest.mark.slow
