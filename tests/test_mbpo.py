@@ -3,6 +3,7 @@ planner run's model and data; the rollouts, the multiplier on them, a Ctrl-C and
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 from pathlib import Path
@@ -12,9 +13,6 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.deploy.export import export
-from parallel_eplus.deploy.parity import replay
-from parallel_eplus.evaluation.controllers import policy_controller
-from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.model_based import mbpo
 from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
 from parallel_eplus.learning.rollout import ALGORITHMS
@@ -23,6 +21,7 @@ from parallel_eplus.training.config import ComfortConstraint, SACSettings, Train
 from parallel_eplus.training.train import train
 
 from .test_model_based import mpc_config
+from .test_train import scalars
 
 ROLLOUTS = MBPOSettings(rollout_length=2, rollout_batch=64, rollout_every=48, gradient_steps=1, pretrain_updates=200)
 
@@ -86,13 +85,10 @@ def test_rollouts_branch_from_real_states_within_the_datas_support_and_pay_the_m
     assert (charged <= plain).all() and (charged < plain).any()
     assert model.comfort.updates >= 1
 
-    act = load_policy(final)  # an SAC policy: exported, its setpoints over a day equal the policy's in process
+    act = load_policy(final)  # an SAC policy: `export` takes it as any policy (its closed-loop parity: test_deploy)
     assert act(real[:3]).shape == (3, 4)
-    out = tmp_path / "controller"
-    export(final, out)
-    df = run_sweep([policy_controller(str(final))], ["CA"], 1, 1, tmp_path / "eval", progress=False)
-    result = replay(out, pd.read_parquet(Path(df.episode_dir[0]) / "steps.parquet"))
-    assert result["steps"] == 95 and max(result["max_abs_diff"].values()) <= 1e-5, result
+    contract = json.loads(export(final, tmp_path / "controller").read_text())
+    assert contract["policy"]["algorithm"] == "mbpo" and contract["export_check"]["max_abs_diff"] <= 1e-5
 
 
 @pytest.mark.slow
@@ -118,6 +114,10 @@ def test_a_run_interrupted_resumes_with_its_model_and_replay_buffer(tmp_path, mo
     assert saved and (run / "checkpoints" / f"{saved[-1].stem}_replay_buffer.pkl").is_file()
     _, data, starts = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
     assert len(starts) > 96  # the first episodes' states (none from a planner)
+    # 200 updates on the model leave SAC close to random: the planner's rail held the zones where EnergyPlus runs
+    railed = [e.value for e in scalars(tmp_path / "tb" / "cut")["mbpo/railed_steps"]]
+    episodes = pd.read_csv(run / "episodes.csv")
+    assert railed[-1] > 0 and episodes["east_temp_max"].max() < 40, (railed[-1], episodes["east_temp_max"].max())
     with caplog.at_level("INFO"):
         final = train(TrainConfig(timesteps=int(saved[-1].stem.split("_")[1]) + 96), resume=saved[-1],
                       progress=False)  # fmt: skip

@@ -306,5 +306,21 @@ class FastPPO(NumpyRollouts, PPO):
     """Stable-Baselines3's PPO with the numpy rollout loop: the comparison the paper did not run."""
 
 
+class GuardedSAC(SAC):
+    """SB3's SAC whose sampled actions a `guard(action, buffer_action)` may override before they are sent and
+    stored (`--algorithm mbpo`'s rail: model_based/mbpo.py); the guard is the run's, never saved."""
+
+    guard = None
+
+    def _sample_action(self, learning_starts, action_noise=None, n_envs=1):
+        action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
+        if self.guard is not None:
+            action, buffer_action = self.guard(action, buffer_action)
+        return action, buffer_action
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "guard"]
+
+
 # SAC is off-policy: SB3's own step-by-step collect_rollouts feeds its replay buffer.
-ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": SAC, "mbpo": SAC}
+ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": SAC, "mbpo": GuardedSAC}

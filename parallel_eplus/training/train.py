@@ -301,7 +301,7 @@ def _algorithm(cfg: TrainConfig, env: VecNormalize):
             buffer = {"replay_buffer_class": ModelMixBuffer,
                       "replay_buffer_kwargs": {"model_size": cfg.mbpo.model_buffer}}  # fmt: skip
             learning_starts, gradient_steps = 0, cfg.mbpo.gradient_steps
-        return ALGORITHMS["sac"](
+        return ALGORITHMS[cfg.algorithm](
             "MlpPolicy", env, learning_rate=s.learning_rate, buffer_size=s.buffer_size,
             learning_starts=learning_starts, batch_size=s.batch_size, tau=s.tau, gamma=s.gamma,
             train_freq=s.train_freq, gradient_steps=gradient_steps, ent_coef=s.ent_coef, seed=cfg.seed,

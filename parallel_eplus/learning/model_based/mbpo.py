@@ -102,7 +102,7 @@ class ModelRollouts(BaseCallback):
         self.comfort = self.building.comfort
         self.margin = cfg.comfort.margin_c
         self.rng = np.random.default_rng(cfg.seed + 7)
-        self.generated = 0
+        self.generated = self.railed = 0
 
     def _on_training_start(self) -> None:
         n = self.training_env.num_envs
@@ -112,8 +112,29 @@ class ModelRollouts(BaseCallback):
         self.episode_of = np.arange(n) + 1000 * (1 + self.num_timesteps // 1000) + 10**6
         self.rollouts = Rollouts(self.mpc, self.building, NormStats.of(self.training_env), self.model.policy,
                                  self.clock, self.margin)  # fmt: skip
+        self.infos: list[dict] = [{} for _ in range(n)]
+        self.temps = [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures]
+        if self.s.rail_k is not None:
+            self.model.guard = self.rail
         if self.num_timesteps == 0 and len(self.starts):
             self.pretrain()
+
+    def rail(self, action: np.ndarray, buffer_action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A worker with a zone more than `rail_k` outside the band is steered by the planner for that step (as
+        `--algorithm mpc`'s DAgger phase steers its student): SAC's first steps on the data center otherwise drove a
+        zone past 100 C before it learned better. The planner's action is what the replay buffer keeps."""
+        obs = np.asarray(self.model._last_original_obs)
+        low, high = self.building.band
+        temps = obs[:, self.temps]
+        far = np.any((temps < low - self.s.rail_k) | (temps > high + self.s.rail_k), axis=1)
+        far &= np.array(["time" in info for info in self.infos])  # a worker's first step has no info kept yet
+        self.railed += int(far.sum())
+        if not far.any():
+            return action, buffer_action
+        rows = np.flatnonzero(far)
+        action = np.array(action, np.float32)
+        action[rows] = self.mpc.act(obs[rows], [self.infos[i] for i in rows], self.prev[rows])
+        return action, action.copy()  # the action space is [-1, 1]: SB3's buffer action is the action itself
 
     def pretrain(self) -> None:
         """SAC on the model's rollouts alone before its first real step: an untrained SAC acts at random, and on the
@@ -146,6 +167,7 @@ class ModelRollouts(BaseCallback):
                           origin=[ORIGINS.index("policy")])  # fmt: skip
             self.starts.add(new[i], actions[i], info["time"], str(info["weather"]))
             self.prev[i], self.step_of[i] = actions[i], self.step_of[i] + 1
+        self.infos = [dict(info) if not done else {} for info, done in zip(infos, dones, strict=True)]
         steps, before = self.num_timesteps, self.num_timesteps - n
         if steps // self.cfg.mpc.refit_every != before // self.cfg.mpc.refit_every:
             self.refit()
@@ -169,6 +191,7 @@ class ModelRollouts(BaseCallback):
         self.logger.record("mbpo/rollout_s", time.perf_counter() - t0)
         self.logger.record("mbpo/model_reward", float(reward.mean()))
         self.logger.record("mbpo/model_cost", float(cost.mean()))
+        self.logger.record("mbpo/railed_steps", self.railed)
         return len(obs)
 
     @th.no_grad()

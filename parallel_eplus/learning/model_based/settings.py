@@ -25,10 +25,14 @@ class _FromText:
                 names = ", ".join(f.name for f in fields(cls))
                 raise ValueError(f"{cls.flag} {item!r}: expected NAME=VALUE with NAME one of {names}")
             default = getattr(cls, key)
-            if isinstance(default, bool):
+            if value.strip().lower() == "none":  # an optional setting left unset (`rail_k=none`)
+                if "None" not in str(next(f.type for f in fields(cls) if f.name == key)):
+                    raise ValueError(f"{cls.flag} {item!r}: {key} takes a value, not none")
+                parsed = None
+            elif isinstance(default, bool):
                 parsed = value.strip().lower() in ("1", "true", "yes", "on")
             elif default is None:
-                parsed = None if value.strip().lower() == "none" else float(value)
+                parsed = float(value)
             else:
                 parsed = type(default)(float(value)) if isinstance(default, int) else type(default)(value)
             setattr(settings, key, parsed)
@@ -127,6 +131,7 @@ class MBPOSettings(_FromText):
     # fit) and the first start states. None: the run's episode length.
     record_days: int | None = 14
     pretrain_updates: int = 5_000  # SAC's updates on the model's rollouts alone, before its first real step
+    rail_k: float | None = 2.0  # a worker with a zone this far outside the band is steered by the planner (None: off)
 
     def __post_init__(self):
         if not 1 <= self.rollout_length <= 8:
