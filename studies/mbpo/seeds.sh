@@ -5,7 +5,8 @@
 #   EXTRA='--batch-size 2688 --mbpo gradient_steps=8' bash studies/mbpo/seeds.sh
 #
 # A seed whose run finished (runs/s<N>/model.zip) is not trained again; the year's evaluation is one `evaluate` of
-# all three (WORK/year/results.csv). WORK, STEPS, EXTRA as pilot.sh's.
+# all three under one label, so its tables hold their mean and the intervals over the seeds (WORK/year/).
+# WORK, STEPS, EXTRA as pilot.sh's.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 REPO=$PWD
@@ -16,7 +17,7 @@ for s in 0 1 2; do
 done
 cd "$WORK"
 echo "$(date -Is) year" >> progress.log
-"$REPO/.venv/bin/parallel-eplus" evaluate --building datacenter-2zone --baseline --policy runs/s0/model.zip=MBPO-s0 \
-  --policy runs/s1/model.zip=MBPO-s1 --policy runs/s2/model.zip=MBPO-s2 --weathers CA,CO,FL,IL,VA --run-days 365 \
+"$REPO/.venv/bin/parallel-eplus" evaluate --building datacenter-2zone --baseline --policy runs/s0/model.zip=MBPO \
+  --policy runs/s1/model.zip=MBPO --policy runs/s2/model.zip=MBPO --weathers CA,CO,FL,IL,VA --run-days 365 \
   --workers 2 --out year --quiet > year.log 2>&1
 echo "$(date -Is) year done (rc=$?)" >> progress.log
