@@ -125,3 +125,20 @@ def test_a_run_interrupted_resumes_with_its_model_and_replay_buffer(tmp_path, mo
     _, data_after, starts_after = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
     assert len(starts_after) > len(starts) and len(data_after) > len(data)
     assert final.is_file()
+
+
+@pytest.mark.slow
+def test_the_multiplier_moves_the_policy_toward_the_band(planner_run, tmp_path, no_leaks):
+    """The same pretraining on the planner's model, comfort priced at the multiplier's floor and at its cap: the
+    policy that pays for comfort keeps the model's zones nearer the band (the constraint's cost of its rollouts)."""
+    costs = {}
+    for name, price in (("cheap", 0.1), ("dear", 100.0)):
+        mbpo_settings = MBPOSettings(**{**ROLLOUTS.__dict__, "pretrain_updates": 3000, "rollout_every": 1000,
+                                        "rollout_length": 4})  # fmt: skip
+        comfort = ComfortConstraint(target_pct=99.0, multiplier_init=price)
+        train(mbpo_config(tmp_path, name, planner_run, timesteps=2, comfort=comfort, mbpo=mbpo_settings),
+              progress=False)  # fmt: skip
+        first = scalars(tmp_path / "tb" / name)["mbpo/model_cost"][0]  # the pretrained policy's last rollouts
+        assert first.step == 0
+        costs[name] = first.value
+    assert costs["dear"] < 0.8 * costs["cheap"], costs  # measured: 0.45 against 0.70

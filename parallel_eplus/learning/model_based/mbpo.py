@@ -147,6 +147,7 @@ class ModelRollouts(BaseCallback):
             done += chunk
         log.info("SAC pretrained on the model: %d updates on %d model transitions (%.0f s)", self.s.pretrain_updates,
                  self.model.replay_buffer.model_rows(), time.perf_counter() - t0)  # fmt: skip
+        self.logger.dump(self.num_timesteps)  # the pretrained policy's rollouts (mbpo/model_cost) at step 0
 
     def _on_step(self) -> bool:
         env, n = self.training_env, self.training_env.num_envs
