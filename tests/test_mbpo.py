@@ -142,3 +142,23 @@ def test_the_multiplier_moves_the_policy_toward_the_band(planner_run, tmp_path, 
         assert first.step == 0
         costs[name] = first.value
     assert costs["dear"] < 0.8 * costs["cheap"], costs  # measured: 0.45 against 0.70
+
+
+def test_settings_text_round_trips_and_refusals():
+    sac = SACSettings.from_text("ent_coef=0.05,net_arch=128x128,gradient_steps=2", SACSettings(gamma=0.95))
+    assert (sac.ent_coef, sac.net_arch, sac.gradient_steps, sac.gamma) == ("0.05", (128, 128), 2, 0.95)
+    settings = MBPOSettings.from_text("rollout_length=3,rail_k=none,real_ratio=0.05")
+    assert (settings.rollout_length, settings.rail_k, settings.real_ratio) == (3, None, 0.05)
+    cfg = TrainConfig(algorithm="mbpo", mbpo=settings, sac=sac, comfort=ComfortConstraint(target_pct=99.6))
+    assert TrainConfig.from_json(cfg.to_json()) == cfg  # a run's config.json gives its settings back
+    with pytest.raises(ValueError, match="horizon takes a value"):
+        MPCSettings.from_text("horizon=none")
+    with pytest.raises(ValueError, match="--mbpo 'rollouts=3': expected NAME=VALUE"):
+        MBPOSettings.from_text("rollouts=3")
+    with pytest.raises(ValueError, match="rollout_length 9"):
+        MBPOSettings.from_text("rollout_length=9")
+    with pytest.raises(ValueError, match="give --comfort-target"):
+        TrainConfig(algorithm="mbpo", weathers=["CA"]).resolved()
+    with pytest.raises(ValueError, match="at most --mpc horizon"):
+        TrainConfig(algorithm="mbpo", weathers=["CA"], mbpo=MBPOSettings(rollout_length=8),
+                    mpc=MPCSettings(horizon=4), comfort=ComfortConstraint(target_pct=99.6)).resolved()  # fmt: skip

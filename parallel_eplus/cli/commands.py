@@ -153,7 +153,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         trpo=TRPOSettings(
             log_std_init=args.log_std_init, gamma=args.gamma, gae_lambda=args.gae_lambda, sde_sample_freq=args.sde_freq
         ),  # fmt: skip
-        sac=SACSettings(gamma=args.gamma),
+        sac=SACSettings.from_text(args.sac, SACSettings(gamma=args.gamma)),
         evaluation=EvalSettings(
             every=args.eval_every,
             weathers=[w.strip() for w in (args.eval_weathers or "").split(",") if w.strip()],

@@ -85,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
         "mbpo: SAC on real steps and short rollouts of that model, comfort as a constraint (--init-from an mpc run)",
     )  # fmt: skip
     tr.add_argument("--mpc", metavar="NAME=VALUE,...", help="with --algorithm mpc: its settings (docs/model-based.md)")
+    tr.add_argument("--sac", metavar="NAME=VALUE,...",
+                    help="with --algorithm sac or mbpo: SAC's settings, e.g. ent_coef=0.05,net_arch=64x64 "
+                    "(training/config.py SACSettings)")  # fmt: skip
     tr.add_argument("--mbpo", metavar="NAME=VALUE,...",
                     help="with --algorithm mbpo: its settings (docs/model-based.md)")  # fmt: skip
     tr.add_argument(

@@ -2,7 +2,45 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from typing import ClassVar
+
+
+class FromText:
+    """`--sac`/`--mpc`/`--mbpo "name=value,..."`: a dataclass's fields by name, each converted to its default's
+    type (a tuple of layer sizes as `64x64`)."""
+
+    flag: ClassVar[str]
+
+    def __post_init__(self):
+        pass
+
+    @classmethod
+    def from_text(cls, text: str | None, base=None):
+        """Fields named in `text` over `base` (default: the defaults)."""
+        settings = replace(base) if base is not None else cls()
+        for item in filter(None, (p.strip() for p in (text or "").split(","))):
+            key, sep, value = item.partition("=")
+            key = key.strip().replace("-", "_")
+            if not sep or not hasattr(settings, key):
+                names = ", ".join(f.name for f in fields(cls))
+                raise ValueError(f"{cls.flag} {item!r}: expected NAME=VALUE with NAME one of {names}")
+            default = getattr(cls, key)
+            if value.strip().lower() == "none":  # an optional setting left unset (`rail_k=none`)
+                if "None" not in str(next(f.type for f in fields(cls) if f.name == key)):
+                    raise ValueError(f"{cls.flag} {item!r}: {key} takes a value, not none")
+                parsed = None
+            elif isinstance(default, bool):
+                parsed = value.strip().lower() in ("1", "true", "yes", "on")
+            elif default is None:
+                parsed = float(value)
+            elif isinstance(default, tuple):
+                parsed = tuple(int(v) for v in value.lower().split("x"))
+            else:
+                parsed = type(default)(float(value)) if isinstance(default, int) else type(default)(value)
+            setattr(settings, key, parsed)
+        settings.__post_init__()
+        return settings
 
 
 @dataclass
@@ -37,7 +75,7 @@ class PPOSettings:
 
 
 @dataclass
-class SACSettings:
+class SACSettings(FromText):
     """Stable-Baselines3's SAC (off-policy) for comparison runs.
 
     64x64 ReLU (SB3's activation for SAC): the problem is small (6-10 observations, 4 actions), and on 2 shared
@@ -45,6 +83,8 @@ class SACSettings:
     per step. One gradient step per vector step (0.5 per env step with 2 workers) keeps 1M env steps at a few
     hours. The replay buffer holds the whole 1M-step budget (~80 MB).
     """
+
+    flag: ClassVar[str] = "--sac"
 
     net_arch: tuple[int, ...] = (64, 64)
     learning_rate: float = 3e-4

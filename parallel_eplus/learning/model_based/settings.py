@@ -2,46 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 from typing import ClassVar
 
-
-class _FromText:
-    """`--mpc`/`--mbpo "name=value,..."`: a dataclass's fields by name, each converted to its default's type."""
-
-    flag: ClassVar[str]
-
-    def __post_init__(self):
-        pass
-
-    @classmethod
-    def from_text(cls, text: str | None, base=None):
-        """Fields named in `text` over `base` (default: the defaults)."""
-        settings = replace(base) if base is not None else cls()
-        for item in filter(None, (p.strip() for p in (text or "").split(","))):
-            key, sep, value = item.partition("=")
-            key = key.strip().replace("-", "_")
-            if not sep or not hasattr(settings, key):
-                names = ", ".join(f.name for f in fields(cls))
-                raise ValueError(f"{cls.flag} {item!r}: expected NAME=VALUE with NAME one of {names}")
-            default = getattr(cls, key)
-            if value.strip().lower() == "none":  # an optional setting left unset (`rail_k=none`)
-                if "None" not in str(next(f.type for f in fields(cls) if f.name == key)):
-                    raise ValueError(f"{cls.flag} {item!r}: {key} takes a value, not none")
-                parsed = None
-            elif isinstance(default, bool):
-                parsed = value.strip().lower() in ("1", "true", "yes", "on")
-            elif default is None:
-                parsed = float(value)
-            else:
-                parsed = type(default)(float(value)) if isinstance(default, int) else type(default)(value)
-            setattr(settings, key, parsed)
-        settings.__post_init__()
-        return settings
+from parallel_eplus.learning.settings import FromText
 
 
 @dataclass
-class MPCSettings(_FromText):
+class MPCSettings(FromText):
     """The model-based learner's settings; saved in the run's config.json and in every planner checkpoint."""
 
     flag: ClassVar[str] = "--mpc"
@@ -113,7 +81,7 @@ class MPCSettings(_FromText):
 
 
 @dataclass
-class MBPOSettings(_FromText):
+class MBPOSettings(FromText):
     """`train --algorithm mbpo` (mbpo.py): SAC on real transitions and short rollouts of the ensemble branched from
     real states (Janner et al. 2019). The ensemble's own settings, and its refits every `refit_every` env steps,
     are `--mpc`'s."""
