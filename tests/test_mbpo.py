@@ -13,7 +13,8 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.deploy.export import export
-from parallel_eplus.learning.model_based import mbpo
+from parallel_eplus.learning.model_based import mbpo, mbpo_state
+from parallel_eplus.learning.model_based.model_buffer import ModelMixBuffer
 from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
 from parallel_eplus.learning.rollout import ALGORITHMS
 from parallel_eplus.runs.policy_files import load_policy
@@ -54,11 +55,11 @@ def test_rollouts_branch_from_real_states_within_the_datas_support_and_pay_the_m
     model = ALGORITHMS["mbpo"].load(final, device="cpu")
     model.load_replay_buffer(run / "model_replay_buffer.pkl")
     buffer = model.replay_buffer
-    assert isinstance(buffer, mbpo.ModelMixBuffer)
+    assert isinstance(buffer, ModelMixBuffer)
     # two generations before the first real step (100 updates each), then one every 48 steps; 64 branches x 2 steps
     assert buffer.model_rows() == (2 + 384 // 48) * 64 * 2, buffer.model_rows()
-    ensemble, data, starts = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
-    planner_starts = mbpo.from_planner_run(planner_run, 1, 0)[2]
+    ensemble, data, starts = mbpo_state.load_state(run / mbpo_state.STATE_DIR, 1, 0)
+    planner_starts = mbpo_state.from_planner_run(planner_run, 1, 0)[2]
     assert len(starts) >= len(planner_starts) + 384 - 2 * 2  # the planner's states, then every real step
     real = np.stack(starts.obs)
     first = buffer.m_obs[:64]  # the first generation's first steps: states the planner saw, as they were
@@ -71,7 +72,7 @@ def test_rollouts_branch_from_real_states_within_the_datas_support_and_pay_the_m
     temps = buffer.m_next[: buffer.model_rows(), 1:3]  # the zones the model predicted: where the real ones went
     seen = real[:, 1:3]
     assert np.all((temps >= seen.min() - 5) & (temps <= min(seen.max() + 5, 50))), (temps.min(), temps.max())
-    assert len(data) > len(mbpo.from_planner_run(planner_run, 1, 0)[1])  # SAC's real steps joined the model's data
+    assert len(data) > len(mbpo_state.from_planner_run(planner_run, 1, 0)[1])  # SAC's real steps joined its data
 
     # The multiplier charges the model's transitions as it does the real ones.
     assert buffer.m_cost[: buffer.model_rows()].max() > 0
@@ -112,7 +113,7 @@ def test_a_run_interrupted_resumes_with_its_model_and_replay_buffer(tmp_path, mo
     run = tmp_path / "runs" / "cut"
     saved = sorted((run / "checkpoints").glob("model_*_steps.zip"))
     assert saved and (run / "checkpoints" / f"{saved[-1].stem}_replay_buffer.pkl").is_file()
-    _, data, starts = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
+    _, data, starts = mbpo_state.load_state(run / mbpo_state.STATE_DIR, 1, 0)
     assert len(starts) > 96  # the first episodes' states (none from a planner)
     # 200 updates on the model leave SAC close to random: the planner's rail held the zones where EnergyPlus runs
     railed = [e.value for e in scalars(tmp_path / "tb" / "cut")["mbpo/railed_steps"]]
@@ -122,7 +123,7 @@ def test_a_run_interrupted_resumes_with_its_model_and_replay_buffer(tmp_path, mo
         final = train(TrainConfig(timesteps=int(saved[-1].stem.split("_")[1]) + 96), resume=saved[-1],
                       progress=False)  # fmt: skip
     assert "replay buffer restored" in caplog.text and "the ensemble resumes" in caplog.text
-    _, data_after, starts_after = mbpo.load_state(run / mbpo.STATE_DIR, 1, 0)
+    _, data_after, starts_after = mbpo_state.load_state(run / mbpo_state.STATE_DIR, 1, 0)
     assert len(starts_after) > len(starts) and len(data_after) > len(data)
     assert final.is_file()
 

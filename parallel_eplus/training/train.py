@@ -217,18 +217,18 @@ def _load_replay_buffer(model, checkpoint: Path) -> None:
 def _model_rollouts(cfg: TrainConfig, venv, checkpoint: Path | None, progress: bool):
     """`--algorithm mbpo`'s ensemble beside SAC (learning/model_based/mbpo.py): a resumed run's own, a planner run's
     (`--init-from`), or fitted on the building's own controls recorded first."""
-    from parallel_eplus.learning.model_based import mbpo
+    from parallel_eplus.learning.model_based import mbpo, mbpo_state
     from parallel_eplus.learning.model_based.control import MPC
     from parallel_eplus.learning.model_based.dataset import Transitions
     from parallel_eplus.learning.model_based.through_model import Starts
 
-    state_dir = cfg.run_dir / mbpo.STATE_DIR
+    state_dir = cfg.run_dir / mbpo_state.STATE_DIR
     n = venv.num_envs
-    if checkpoint is not None and (state_dir / mbpo.STARTS).is_file():
-        mpc, data, starts = mbpo.load_state(state_dir, n, cfg.seed)
+    if checkpoint is not None and (state_dir / mbpo_state.STARTS).is_file():
+        mpc, data, starts = mbpo_state.load_state(state_dir, n, cfg.seed)
         log.info("the ensemble resumes from %s: %d transitions, %d start states", state_dir, len(data), len(starts))
     elif cfg.init_from is not None:
-        mpc, data, starts = mbpo.from_planner_run(Path(cfg.init_from), n, cfg.seed)
+        mpc, data, starts = mbpo_state.from_planner_run(Path(cfg.init_from), n, cfg.seed)
         width = venv.observation_space.shape[0]
         if mpc.building != cfg.building:
             raise ValueError(f"--init-from {cfg.init_from}: a planner of building {mpc.building!r}; this run's is "
@@ -244,7 +244,7 @@ def _model_rollouts(cfg: TrainConfig, venv, checkpoint: Path | None, progress: b
                   objective=cfg.objective)  # fmt: skip
         data, starts = Transitions(mpc.layout), Starts()
     if checkpoint is None and not len(starts):  # nothing to branch from yet: the building's own controls first
-        mbpo.record_own_controls(cfg, mpc, data, starts, progress)
+        mbpo_state.record_own_controls(cfg, mpc, data, starts, progress)
         log.info("recorded the building's own controls: %d transitions, %d start states", len(data), len(starts))
     if cfg.init_from is None and checkpoint is None:
         mpc.model.fit(data, np.arange(len(data)), cfg.mpc.epochs)
@@ -296,7 +296,7 @@ def _algorithm(cfg: TrainConfig, env: VecNormalize):
         buffer = {"replay_buffer_class": CostReplayBuffer} if cfg.constrained else {}
         learning_starts, gradient_steps = s.learning_starts, s.gradient_steps
         if cfg.algorithm == "mbpo":  # the model's rollouts are data from the first step; more updates per step
-            from parallel_eplus.learning.model_based.mbpo import ModelMixBuffer
+            from parallel_eplus.learning.model_based.model_buffer import ModelMixBuffer
 
             buffer = {"replay_buffer_class": ModelMixBuffer,
                       "replay_buffer_kwargs": {"model_size": cfg.mbpo.model_buffer}}  # fmt: skip

@@ -9,19 +9,20 @@ The learner is SB3's SAC on the service's workers, as `--algorithm sac`; three p
   one member of the ensemble drawn at random; every `--mpc refit_every` env steps it refits the ensemble (Dyna).
 - Each model step's reward and comfort cost are the env's own under the constraint: `-power_weight` x the
   objective's energy, and `Comfort.cost` of the predicted zone temperatures against the bounds at that time.
-- `ModelMixBuffer`: SAC's replay buffer with the model's transitions beside the real ones; each batch draws
-  `real_ratio` of its rows from the real ones, the rest from the model's, both charged today's multiplier.
+- `ModelMixBuffer` (model_buffer.py): SAC's replay buffer with the model's transitions beside the real ones; each
+  batch draws `real_ratio` of its rows from the real ones, the rest from the model's, both charged today's
+  multiplier.
 
 A model's actions stay within the data's support (`MPC.set_support`): a model knows nothing beyond its data.
 Started from a planner run (`--init-from runs/<mpc-run>`) it takes that run's ensemble, transitions and the
 planner's states as its first start states: a user with a planner gets a network without new simulation first.
 Without it, the building's own controls are recorded first (`record_days`) and the ensemble fitted on them.
-The ensemble, its data and the start states are saved in runs/<name>/mbpo/ at every refit and checkpoint.
+The ensemble, its data and the start states are saved in runs/<name>/mbpo/ at every refit and checkpoint
+(mbpo_state.py, which also finds what a run starts from).
 """
 
 from __future__ import annotations
 
-import datetime as dt
 import logging
 import time
 from pathlib import Path
@@ -29,65 +30,17 @@ from pathlib import Path
 import numpy as np
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.learning.lagrangian import CostReplayBuffer
-from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
+from parallel_eplus.learning.model_based.control import MPC
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions, next_state
 from parallel_eplus.learning.model_based.exogenous import model_schedule
+from parallel_eplus.learning.model_based.mbpo_state import save_state
 from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts
 from parallel_eplus.runs.norm_stats import NormStats
 
 log = logging.getLogger(__name__)
-STATE_DIR = "mbpo"  # runs/<name>/mbpo/: the ensemble, its transitions, the start states
-TRANSITIONS, STARTS = "transitions.npz", "starts.npz"
 MIN_REFIT_ROWS = 960  # ten days of one worker: fewer would pull a fitted ensemble toward a few days' data
-
-
-class ModelMixBuffer(CostReplayBuffer):
-    """The real transitions (SB3's replay buffer, with their comfort costs) and the model's, sampled together."""
-
-    real_ratio: float = 0.1
-
-    def __init__(self, *args, model_size: int = 100_000, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.model_size, self.model_pos, self.model_full = model_size, 0, False
-        n_obs, n_act = self.obs_shape[0], self.action_dim
-        self.m_obs = np.zeros((model_size, n_obs), np.float32)
-        self.m_next = np.zeros((model_size, n_obs), np.float32)
-        self.m_act = np.zeros((model_size, n_act), np.float32)
-        self.m_reward = np.zeros(model_size, np.float32)
-        self.m_cost = np.zeros(model_size, np.float32)
-
-    def model_rows(self) -> int:
-        return self.model_size if self.model_full else self.model_pos
-
-    def add_model(self, obs, action, reward, cost, next_obs) -> None:
-        """Model transitions (raw observations, as the real ones are kept); the oldest are overwritten."""
-        for i in range(len(obs)):
-            j = self.model_pos
-            self.m_obs[j], self.m_act[j], self.m_next[j] = obs[i], action[i], next_obs[i]
-            self.m_reward[j], self.m_cost[j] = reward[i], cost[i]
-            self.model_pos = (j + 1) % self.model_size
-            self.model_full |= self.model_pos == 0
-
-    def sample(self, batch_size: int, env=None) -> ReplayBufferSamples:
-        rows = self.model_rows()
-        n_model = 0 if rows == 0 else int(round(batch_size * (1 - self.real_ratio)))
-        if self.size() == 0:  # nothing real yet (a run started from a planner's data): the model's alone
-            n_model = batch_size
-        parts = [super().sample(batch_size - n_model, env)] if n_model < batch_size else []
-        if n_model:
-            idx = np.random.randint(0, rows, size=n_model)
-            rewards = self.m_reward[idx] - self.multiplier * self.m_cost[idx]
-            data = (
-                self._normalize_obs(self.m_obs[idx], env), self.m_act[idx], self._normalize_obs(self.m_next[idx], env),
-                np.zeros((n_model, 1), np.float32), self._normalize_reward(rewards.reshape(-1, 1), env),
-            )  # fmt: skip
-            parts.append(ReplayBufferSamples(*tuple(map(self.to_torch, data))))
-        joined = [None if t[0] is None else th.cat(t) for t in zip(*parts, strict=True)]  # SB3's `discounts`: None
-        return ReplayBufferSamples(*joined)
 
 
 class ModelRollouts(BaseCallback):
@@ -244,76 +197,3 @@ class ModelRollouts(BaseCallback):
 
     def save(self) -> None:
         save_state(self.state_dir, self.mpc, self.data, self.starts)
-
-
-def save_state(folder: Path, mpc: MPC, data: Transitions, starts: Starts) -> None:
-    from parallel_eplus import io
-
-    folder.mkdir(parents=True, exist_ok=True)
-    mpc.save(folder / PLANNER_FILE)
-    with io.atomic_path(folder / TRANSITIONS) as tmp, open(tmp, "wb") as f:  # a file: savez adds no suffix
-        data.save(f)
-    with io.atomic_path(folder / STARTS) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, obs=np.asarray(starts.obs), prev=np.asarray(starts.prev),
-                            times=np.asarray(starts.times, "datetime64[s]"), weathers=np.asarray(starts.weathers))
-
-
-def record_own_controls(cfg, mpc: MPC, data: Transitions, starts: Starts, progress: bool) -> None:
-    """`record_days` of the building's own controls on the training weathers, as the policy observes them: their
-    transitions into the ensemble's data, their states into the start states."""
-    import shutil
-
-    from parallel_eplus.learning.imitation import record_baseline
-    from parallel_eplus.learning.model_based.sources import add_baseline
-
-    folder = cfg.run_dir / "baseline-record"
-    days = cfg.mbpo.record_days or cfg.run_days
-    demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, folder,
-                            (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
-    comfort = load_building(cfg.building).comfort
-    first = int(data.array("episode").max()) + 1 if len(data) else 0
-    add_baseline(data, demos, mpc.forecasts, mpc.comfort_times, lambda t, v: comfort.always or comfort.applies(t, v),
-                 first)  # fmt: skip
-    shutil.rmtree(folder, ignore_errors=True)
-    labels = np.array(demos.weathers)
-    for weather in dict.fromkeys(demos.weathers):
-        rows = np.flatnonzero(labels == weather)
-        for r0, r in zip(rows[:-1], rows[1:], strict=True):  # each state after the first, and the action before it
-            starts.add(demos.observations[r], demos.actions[r0], demos.times[r], weather)
-
-
-def load_state(folder: Path, workers: int, seed: int) -> tuple[MPC, Transitions, Starts]:
-    """The ensemble, its data and the start states a run saved (or a planner run's: `from_planner_run`)."""
-    mpc = MPC.load(folder / PLANNER_FILE, workers, seed)
-    data = Transitions.load(folder / TRANSITIONS, mpc.layout)
-    with np.load(folder / STARTS) as z:
-        times = [t.astype(dt.datetime) for t in z["times"].astype("datetime64[s]")]
-        starts = Starts.of(z["obs"], z["prev"], times, [str(w) for w in z["weathers"]])
-    return mpc, data, starts
-
-
-def from_planner_run(run: Path, workers: int, seed: int) -> tuple[MPC, Transitions, Starts]:
-    """`--init-from runs/<mpc-run>` (or its planner/ or best/planner/ folder): its ensemble, and where the run kept
-    them, every transition it saw (transitions.npz, or its newest checkpoint) and the states of the planner's steps
-    (its newest checkpoint) as the first start states. A committed planner (the ensemble alone) starts with
-    neither: the run's own steps supply both."""
-    from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
-
-    folder = run if (run / PLANNER_FILE).is_file() else run / "planner"
-    if not (folder / PLANNER_FILE).is_file():
-        raise FileNotFoundError(f"--init-from {run}: no planner ({folder / PLANNER_FILE}); give a `train "
-                                "--algorithm mpc` run's folder")  # fmt: skip
-    run = run if folder != run else (run.parent.parent if run.parent.name == "best" else run.parent)
-    mpc = MPC.load(folder / PLANNER_FILE, workers, seed)
-    data, starts = Transitions(mpc.layout), Starts()
-    try:
-        _, data, policy = Checkpoint.load(newest_checkpoint(run), mpc.layout)
-    except FileNotFoundError:
-        policy = None
-    if (run / TRANSITIONS).is_file():  # every transition of a finished run
-        data = Transitions.load(run / TRANSITIONS, mpc.layout)
-    if policy is not None and len(policy) == 5:
-        obs, _, prev, times, weathers = policy
-        times = [t.astype(dt.datetime) for t in np.asarray(times).astype("datetime64[s]")]
-        starts = Starts.of(obs[len(obs) - len(prev) :], prev, times, [str(w) for w in weathers])
-    return mpc, data, starts
