@@ -32,6 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from parallel_eplus.learning import fragments
+from parallel_eplus.learning.guarded_sac import GuardedSAC
 from parallel_eplus.learning.overlap import IdleClock, LocalCollector, TimedReady
 from parallel_eplus.learning.pipeline import run_pipeline
 from parallel_eplus.learning.sb3_adapter import SB3VecEnv
@@ -304,22 +305,6 @@ class FastTRPO(NumpyRollouts, TRPO):
 
 class FastPPO(NumpyRollouts, PPO):
     """Stable-Baselines3's PPO with the numpy rollout loop: the comparison the paper did not run."""
-
-
-class GuardedSAC(SAC):
-    """SB3's SAC whose sampled actions a `guard(action, buffer_action)` may override before they are sent and
-    stored (`--algorithm mbpo`'s rail: model_based/mbpo.py); the guard is the run's, never saved."""
-
-    guard = None
-
-    def _sample_action(self, learning_starts, action_noise=None, n_envs=1):
-        action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
-        if self.guard is not None:
-            action, buffer_action = self.guard(action, buffer_action)
-        return action, buffer_action
-
-    def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "guard"]
 
 
 # SAC is off-policy: SB3's own step-by-step collect_rollouts feeds its replay buffer.
