@@ -55,7 +55,7 @@ class ModelRollouts(BaseCallback):
         self.comfort = self.building.comfort
         self.margin = cfg.comfort.margin_c
         self.rng = np.random.default_rng(cfg.seed + 7)
-        self.generated = self.railed = 0
+        self.railed = 0
 
     def _on_training_start(self) -> None:
         n = self.training_env.num_envs
@@ -140,7 +140,6 @@ class ModelRollouts(BaseCallback):
         t0 = time.perf_counter()
         obs, act, reward, cost, nxt = self.rollout(self.rng.integers(0, len(self.starts), self.s.rollout_batch))
         self.model.replay_buffer.add_model(obs, act, reward, cost, nxt)
-        self.generated += len(obs)
         self.logger.record("mbpo/model_rows", self.model.replay_buffer.model_rows())
         self.logger.record("mbpo/rollout_s", time.perf_counter() - t0)
         self.logger.record("mbpo/model_reward", float(reward.mean()))
