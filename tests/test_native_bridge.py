@@ -60,7 +60,7 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
 @pytest.mark.slow
 @pytest.mark.parametrize("use_c", _bridges())
 def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_leaks):
-    from parallel_eplus.engine import pipe
+    from parallel_eplus.engine import frames
     from parallel_eplus.engine.config import SimulationConfig
     from parallel_eplus.engine.simulation import Simulation
     from parallel_eplus.errors import EnergyPlusError
@@ -70,7 +70,7 @@ def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_lea
         sim.start()
         sim.send(np.zeros(4))
         sim.receive()  # one exchange first, so the C bridge is armed
-        sim.pipes.send(pipe.encode([1.0, 2.0]))  # two values where EnergyPlus expects four
+        sim.pipes.send(frames.encode([1.0, 2.0]))  # two values where EnergyPlus expects four
         with pytest.raises(EnergyPlusError, match=r"failed \(status") as e:
             sim.receive()
         assert "expected an action of 4 values" in str(e.value)

@@ -9,42 +9,42 @@ import struct
 import numpy as np
 import pytest
 
-from parallel_eplus.engine import pipe, spin
+from parallel_eplus.engine import frames, pipe, spin
 from parallel_eplus.errors import ProtocolError
 
 
 @pytest.mark.parametrize("values", [[], [1.5], [23.5, -20.0, 1e9, 0.1, 7.0, 3.25]])
 def test_data_frame_round_trip(values):
-    frame = pipe.encode(values)
+    frame = frames.encode(values)
     assert frame[:4] == struct.pack("<i", len(values))
-    code, out = pipe.decode(frame)
-    assert code == pipe.DATA
+    code, out = frames.decode(frame)
+    assert code == frames.DATA
     np.testing.assert_array_equal(out, values)
 
 
-@pytest.mark.parametrize("code", [pipe.END, pipe.ERROR])
+@pytest.mark.parametrize("code", [frames.END, frames.ERROR])
 def test_control_frame_round_trip(code):
-    code_out, out = pipe.decode(pipe.encode([1.0, 2.0], code))
+    code_out, out = frames.decode(frames.encode([1.0, 2.0], code))
     assert code_out == code
     np.testing.assert_array_equal(out, [1.0, 2.0])
 
 
 def test_unknown_control_code_is_rejected():
     with pytest.raises(ProtocolError, match="control code"):
-        pipe.decode(struct.pack("<ii", -7, 0))
+        frames.decode(struct.pack("<ii", -7, 0))
     with pytest.raises(ValueError):
-        pipe.encode([1.0], code=-7)
+        frames.encode([1.0], code=-7)
 
 
 def test_absurd_count_is_rejected():
     with pytest.raises(ProtocolError, match="count"):
-        pipe.decode(struct.pack("<i", pipe.MAX_VALUES + 1))
+        frames.decode(struct.pack("<i", frames.MAX_VALUES + 1))
 
 
 def test_truncated_frame_is_an_error_not_zeros():
-    frame = pipe.encode([1.0, 2.0, 3.0])
+    frame = frames.encode([1.0, 2.0, 3.0])
     with pytest.raises(ProtocolError):
-        pipe.decode(frame[:-3])
+        frames.decode(frame[:-3])
 
 
 def test_pipe_pair_is_private_unique_and_removed():
@@ -67,13 +67,13 @@ def test_pipe_pair_times_out_and_reads_truncation():
             pp.recv(timeout=0.05)
         # A writer on the other end sends half a frame: the reader waits, then times out.
         fd = os.open(pp.obs_path, os.O_WRONLY)
-        os.write(fd, pipe.encode([1.0, 2.0])[:7])
+        os.write(fd, frames.encode([1.0, 2.0])[:7])
         with pytest.raises(TimeoutError, match="7 bytes of a frame"):
             pp.recv(timeout=0.05)
-        os.write(fd, pipe.encode([1.0, 2.0])[7:] + pipe.encode([3.0], pipe.END))  # the rest, then one more
+        os.write(fd, frames.encode([1.0, 2.0])[7:] + frames.encode([3.0], frames.END))  # the rest, then one more
         assert [(c, v.tolist()) for c, v in (pp.recv(1.0), pp.recv(1.0))] == [
-            (pipe.DATA, [1.0, 2.0]),
-            (pipe.END, [3.0]),
+            (frames.DATA, [1.0, 2.0]),
+            (frames.END, [3.0]),
         ]
         os.close(fd)
     finally:

@@ -33,7 +33,8 @@ import numpy as np
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import control_model
-from parallel_eplus.engine import pipe
+from parallel_eplus.engine import frames
+from parallel_eplus.errors import ProtocolError
 
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
 
@@ -95,8 +96,8 @@ class Bridge:
         self.actuator_handles: list[tuple[int, int]] = []  # (handle, action index)
         self.last_obs: list[float] = [0.0] * len(self.sensors)
         self.raw = obs_fd is None
-        self._wait = None if act_fd is None else pipe.wait_readable(act_fd)
-        self._actions = None if act_fd is None else pipe.FrameReader(act_fd)
+        self._wait = None if act_fd is None else frames.wait_readable(act_fd)
+        self._actions = None if act_fd is None else frames.FrameReader(act_fd)
         self.spin_s = spin_s
         self.replay = None if replay is None else np.ascontiguousarray(replay, dtype=np.float64)
         if self.replay is not None and (self.replay.ndim != 2 or self.replay.shape[1] != len(self.elements)):
@@ -170,15 +171,15 @@ class Bridge:
                 self.replayed += 1
                 self.pending = True
             return
-        os.write(self.obs_fd, pipe.encode(values))
+        os.write(self.obs_fd, frames.encode(values))
         self.awaiting = True
 
     def _take_action(self) -> None:
         """The action for the observation last written, read where it is first needed."""
         self.awaiting = False
         code, action = self._actions.read(self._wait, self.spin_s)
-        if code != pipe.DATA or len(action) != len(self.elements):
-            raise pipe.ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
+        if code != frames.DATA or len(action) != len(self.elements):
+            raise ProtocolError(f"expected an action of {len(self.elements)} values, got code {code}")
         self.action = action.tolist()
         self.pending = True
 
@@ -271,7 +272,7 @@ class Bridge:
     def _arm(self) -> None:
         """Hand every later step to the C callbacks, in the state this Bridge has reached."""
         if self._actions is not None and self._actions.buf:
-            raise pipe.ProtocolError("bytes beyond the action frame")
+            raise ProtocolError("bytes beyond the action frame")
         ints = lambda xs: (ctypes.c_int * len(xs))(*xs)  # noqa: E731
         handles = [h for h, _ in self.actuator_handles]
         indices = [i for _, i in self.actuator_handles]
@@ -319,7 +320,7 @@ class Bridge:
             if self.raw:  # the rest of the day would run under the last action; nobody wants it
                 self.api.runtime.stop_simulation(state)
             else:
-                os.write(self.obs_fd, pipe.encode(values, pipe.END))
+                os.write(self.obs_fd, frames.encode(values, frames.END))
             self.done = True
             self.done_at = time.monotonic()
             return

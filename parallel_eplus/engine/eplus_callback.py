@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from parallel_eplus.engine import native, pipe
+from parallel_eplus.engine import frames, native
 from parallel_eplus.engine.bridge import Bridge
 
 
@@ -105,7 +105,7 @@ def tell_failure(obs_fd: int | None, status: float) -> int:
     """An ERROR frame to the env (if there is one to tell), and the episode's exit code."""
     if obs_fd is not None:
         with contextlib.suppress(OSError):  # if the env is gone, there is nobody to tell
-            os.write(obs_fd, pipe.encode([status], pipe.ERROR))
+            os.write(obs_fd, frames.encode([status], frames.ERROR))
     return 1
 
 

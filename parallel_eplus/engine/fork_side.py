@@ -34,7 +34,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from parallel_eplus.engine import native, pipe
+from parallel_eplus.engine import frames, native
 from parallel_eplus.engine.bridge import Bridge
 
 TEMPLATE_LOG = "energyplus.log"  # the template's own log, in its directory; each child writes its episode's
@@ -158,7 +158,7 @@ def _become_episode(bridge: Bridge, request: dict, template_dir: Path) -> None:
         sys.stderr.flush()
         os._exit(1)
     bridge.obs_fd, bridge.act_fd, bridge.raw = obs_fd, act_fd, False
-    bridge._wait, bridge._actions = pipe.wait_readable(act_fd), pipe.FrameReader(act_fd)
+    bridge._wait, bridge._actions = frames.wait_readable(act_fd), frames.FrameReader(act_fd)
     bridge.spin_s = float(request["spin_us"]) * 1e-6
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from parallel_eplus.buildings.forecast import Forecaster
 from parallel_eplus.buildings.model import schedule_features, time_features
-from parallel_eplus.engine import pipe
+from parallel_eplus.engine import frames
 from parallel_eplus.engine.setup import WorkerSetup
 
 
@@ -20,7 +20,7 @@ class Observer:
 
     def __init__(self, setup: WorkerSetup):
         self.sensor_names = setup.building.sensor_names
-        self.width = pipe.TIME_FIELDS + len(self.sensor_names)
+        self.width = frames.TIME_FIELDS + len(self.sensor_names)
         self.obs_low, self.obs_high = setup.obs_low, setup.obs_high
         self._lows, self._highs = (tuple(b.tolist()) for b in (setup.obs_low, setup.obs_high))  # float32, as floats
         self._observed = setup.observed
@@ -30,15 +30,15 @@ class Observer:
 
     def __call__(self, values: np.ndarray, weather: str, forecaster: Forecaster | None):
         fields = values.tolist()
-        sensed = fields[pipe.TIME_FIELDS :]
+        sensed = fields[frames.TIME_FIELDS :]
         info = dict(zip(self.sensor_names, sensed, strict=True))
-        info["time"] = pipe.frame_time(fields)
+        info["time"] = frames.frame_time(fields)
         info["weather"] = weather
         if self._hidden:
-            raw = values[pipe.TIME_FIELDS : pipe.TIME_FIELDS + self._observed]
+            raw = values[frames.TIME_FIELDS : frames.TIME_FIELDS + self._observed]
             observed = sensed[: self._observed]
         else:
-            raw, observed = values[pipe.TIME_FIELDS :], sensed
+            raw, observed = values[frames.TIME_FIELDS :], sensed
         obs = raw.astype(np.float32)
         for lo, v, hi in zip(self._lows, observed, self._highs, strict=True):
             if not lo <= v <= hi:  # (NaN too)

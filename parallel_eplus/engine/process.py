@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.engine import pipe, spin
+from parallel_eplus.engine import frames, pipe, spin
 from parallel_eplus.engine.fork import ANSWER_S, ForkedEpisode, Template
 from parallel_eplus.engine.warm_process import Episode, WarmProcess, engine_side_env
 
@@ -137,7 +137,7 @@ class EnergyPlusProcess:
         `grace_s`, or a process of its own, is killed."""
         if isinstance(self.proc, Episode) and self.running():  # a fork (or a process of its own) is just killed
             with contextlib.suppress(OSError):
-                self.pipes.send(pipe.encode([], pipe.END))  # not an action: the bridge stops EnergyPlus
+                self.pipes.send(frames.encode([], frames.END))  # not an action: the bridge stops EnergyPlus
             with contextlib.suppress(subprocess.TimeoutExpired):
                 self.proc.wait(timeout=grace_s)
         self.kill()

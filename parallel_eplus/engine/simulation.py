@@ -22,7 +22,7 @@ import numpy as np
 from parallel_eplus.buildings.forecast import Forecaster
 from parallel_eplus.buildings.reward import reward
 from parallel_eplus.buildings.weather import weather_label
-from parallel_eplus.engine import native, pipe
+from parallel_eplus.engine import frames, native, pipe
 from parallel_eplus.engine.actions import ActionMap
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import StepRecorder, err_tail, write_records
@@ -188,7 +188,7 @@ class Simulation:
             self.episode -= 1  # the same episode again: the weather rotation does not move on
             self.launch(plan=self.plan)
             code, values = self._recv("the first observation", self.config.start_timeout_s)
-        if code != pipe.DATA:
+        if code != frames.DATA:
             raise self._error(f"EnergyPlus sent control frame {code} instead of the first observation")
         obs, info = self._observation(values)
         self._prepare_due = self.supply.prepare_next and self.prepared is None
@@ -203,7 +203,7 @@ class Simulation:
             self.prepare()
         self._action = self.actions.frame(action, self._info)
         try:
-            self.process.send(pipe.encode(self._action), self.config.step_timeout_s)
+            self.process.send(frames.encode(self._action), self.config.step_timeout_s)
         except BrokenPipeError as e:  # pragma: no cover - the FIFO is held open by us
             raise self._error(f"cannot send the action: {e}") from e
 
@@ -228,7 +228,7 @@ class Simulation:
             info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
         acted = self.actions.applied(self._action, info)
         self.records.add(info["time"], (*self._sensed, *acted, r, *parts.values(), float(applies)))
-        terminated = code == pipe.END
+        terminated = code == frames.END
         if terminated:
             self._finish()
             info["episode_summary"] = self.last_summary
@@ -254,7 +254,7 @@ class Simulation:
             raise self._error(f"EnergyPlus died while we waited for {what}: {e}") from e
         except ProtocolError as e:
             raise self._error(f"malformed frame from EnergyPlus: {e}", ProtocolError) from e
-        if code == pipe.ERROR:
+        if code == frames.ERROR:
             raise self._error(f"EnergyPlus failed (status {values[0] if len(values) else '?'})")
         return code, values
 

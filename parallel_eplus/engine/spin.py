@@ -1,6 +1,6 @@
 """When a side of the pipes spins for its next frame instead of blocking: only where a core is free to spin on.
 
-Both sides' reads (engine/pipe.py's FrameReader, the EnergyPlus side's bridge) busy-wait up to a spin time
+Both sides' reads (engine/frames.py's FrameReader, the EnergyPlus side's bridge) busy-wait up to a spin time
 before blocking; a spin on a machine with no spare core steals the cycles the other side needs.
 """
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 
-SPIN_S = 0.002  # see engine/pipe.py's FrameReader
+SPIN_S = 0.002  # see engine/frames.py's FrameReader
 
 
 def others_running(ours: int) -> int:
