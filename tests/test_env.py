@@ -138,7 +138,7 @@ def test_two_envs_with_different_weathers_step_alternately(tmp_path, no_leaks):
     try:
         oa, _ = a.reset()
         ob, _ = b.reset()
-        assert a.sim.pipes.dir != b.sim.pipes.dir
+        assert a.sim.process.pipes.dir != b.sim.process.pipes.dir
         outdoor_a, outdoor_b = [], []
         done = False
         while not done:

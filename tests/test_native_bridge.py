@@ -37,7 +37,7 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
     runs = []
     for use_c, spin_s, delay_s in ((True, 0.002, 0.0), (True, 0.0, 0.0), (True, 0.0, 0.002), (False, None, 0.0)):
         sim = Simulation(SimulationConfig(run_days=1, native_bridge=use_c, spin_s=spin_s))
-        assert (sim.native_bridge is not None) == use_c
+        assert (sim.process.native_bridge is not None) == use_c
         try:
             obs, _ = sim.start()
             trajectory, terminated = [obs], False
@@ -70,7 +70,7 @@ def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_lea
         sim.start()
         sim.send(np.zeros(4))
         sim.receive()  # one exchange first, so the C bridge is armed
-        sim.pipes.send(frames.encode([1.0, 2.0]))  # two values where EnergyPlus expects four
+        sim.process.pipes.send(frames.encode([1.0, 2.0]))  # two values where EnergyPlus expects four
         with pytest.raises(EnergyPlusError, match=r"failed \(status") as e:
             sim.receive()
         assert "expected an action of 4 values" in str(e.value)

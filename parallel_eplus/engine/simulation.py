@@ -1,10 +1,10 @@
 """One episode after another on one worker: the unit the env and the vector env step.
 
-`Simulation` owns everything per step that must not be written twice: action checks and scaling, the
-reward, observation clipping, the step record and the error messages. Where an episode comes from (a prepared
-one or a cold start) is `supply.EpisodeSupply`; the EnergyPlus process itself (spawn, deadlines, exit) is
-`process.EnergyPlusProcess`. `EnergyPlusEnv` drives one Simulation; the vector env
-drives several, writing every action before reading any observation.
+`Simulation` owns everything per step that must not be written twice: action checks and scaling, observation
+clipping, the step record and the error messages; what a step is worth (reward, comfort cost) is
+`scoring.StepScorer`. Where an episode comes from (a prepared one or a cold start) is `supply.EpisodeSupply`; the
+EnergyPlus process itself (spawn, deadlines, exit) is `process.EnergyPlusProcess`. `EnergyPlusEnv` drives one
+Simulation; the vector env drives several, writing every action before reading any observation.
 """
 
 from __future__ import annotations
@@ -20,15 +20,15 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.forecast import Forecaster
-from parallel_eplus.buildings.reward import reward
 from parallel_eplus.buildings.weather import weather_label
-from parallel_eplus.engine import frames, native, pipe
+from parallel_eplus.engine import frames, native
 from parallel_eplus.engine.actions import ActionMap
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import StepRecorder, err_tail, write_records
 from parallel_eplus.engine.observation import Observer
 from parallel_eplus.engine.prepared import EpisodePlan, PreparedEpisode
 from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
+from parallel_eplus.engine.scoring import StepScorer
 from parallel_eplus.engine.setup import WorkerSetup
 from parallel_eplus.engine.supply import EpisodeSupply
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
@@ -56,7 +56,8 @@ class Simulation:
         s = self.setup = WorkerSetup.resolve(config, weathers)  # every check before anything is spawned
         self.building, self.model, self.comfort, self.idf = s.building, s.model, s.comfort, s.idf
         self.elements, self.observer, self.sensor_names = s.elements, Observer(s), s.building.sensor_names
-        self._temps, self.noise, self.forecasts = s.comfort.temperatures, s.noise, s.forecasts
+        self.noise, self.forecasts = s.noise, s.forecasts
+        self.scorer = StepScorer(s.comfort, config.reward, config.comfort_margin_c)
         self.weathers, self.weather_paths, self.steps_per_episode = s.weathers, s.weather_paths, s.steps_per_episode
         self.low, self.high = tuple(e.low for e in s.elements), tuple(e.high for e in s.elements)
         self.initial_action, self.policy_names = s.initial_action, s.policy_names
@@ -86,11 +87,10 @@ class Simulation:
         self.last_summary: dict | None = None
         self._area: float | None = None  # the model's floor area (m²), for the per-m² figures
         self._action = self.initial_action.tolist()
-        self._demand = None  # the demand charges' surrogate of the running episode (cost objective)
         self._closed = False
         _LIVE.add(self)
 
-    # -- the process, as the vector env's `wait_any` and the tests see it -----------------------
+    # -- the process (the vector env's `wait_any` watches `sim.process`) ----------------------
     @property
     def process(self) -> EnergyPlusProcess:
         """The running episode's EnergyPlus process."""
@@ -102,24 +102,8 @@ class Simulation:
         return self.supply.prepared
 
     @property
-    def pipes(self) -> pipe.PipePair | None:
-        return self.process.pipes
-
-    @property
     def proc(self):
         return self.process.proc
-
-    @property
-    def deadline(self) -> float:
-        return self.process.deadline
-
-    @property
-    def spin_s(self) -> float:
-        return self.process.spin_s
-
-    @property
-    def native_bridge(self) -> str | None:
-        return self.process.native_bridge
 
     def running(self) -> bool:
         """Whether this episode's EnergyPlus process is alive (it exits on its own only after its last step)."""
@@ -162,7 +146,7 @@ class Simulation:
         self._action = self.initial_action.tolist()
         self.last_summary = None
         self.actions.start()  # a fresh rule-based controller (integral state) per episode, where one is corrected
-        self._demand = self.comfort.demand_tracker()  # the month's running peaks start at 0 each episode
+        self.scorer.start()  # the month's running peaks start at 0 each episode
         if self._from_prepared and not self.process.has_frame():
             self.prepare()  # it is still warming up and the spare is idle: the next starts now (back-to-back short
             # episodes); else at this episode's first action, so a reset that finds it parked returns at once, and a
@@ -211,21 +195,7 @@ class Simulation:
         """(observation, reward, terminated, info) for the action last sent, due `step_timeout_s` after it."""
         code, values = self._recv("an observation", self.config.step_timeout_s)
         obs, info = self._observation(values)
-        comfort = self.comfort
-        applies = comfort.always or comfort.applies(info["time"], info)
-        temps = tuple(map(info.__getitem__, self._temps))
-        margin = self.config.comfort_margin_c
-        energy = comfort.energy_w(info)
-        if self._demand is not None:  # --objective cost with demand charges: their per-step share (buildings/bill.py)
-            info["demand_charge"], demand_w = comfort.demand_w(self._demand, info)
-            energy += demand_w
-        r, parts = reward(temps, energy, self.config.reward, applies and margin is None)
-        info.update(parts)
-        info["comfort_applies"] = applies
-        if margin is not None:  # comfort as a constraint: its cost goes to the learner beside the energy reward
-            bounds = comfort.bounds(info) if comfort.per_step else None
-            cost, out = comfort.cost(temps, margin, bounds) if applies else (0.0, 0)
-            info.update(comfort_cost=cost, comfort_out=out, comfort_zones=len(temps) if applies else 0)
+        r, parts, applies = self.scorer(info)
         acted = self.actions.applied(self._action, info)
         self.records.add(info["time"], (*self._sensed, *acted, r, *parts.values(), float(applies)))
         terminated = code == frames.END
@@ -245,7 +215,7 @@ class Simulation:
         return obs, self._info
 
     def _recv(self, what: str, limit_s: float) -> tuple[int, np.ndarray]:
-        """The frame awaited next, by `self.deadline` (set `limit_s` after the launch or the action)."""
+        """The frame awaited next, by the process's deadline (set `limit_s` after the launch or the action)."""
         try:
             code, values = self.process.recv()
         except TimeoutError as e:

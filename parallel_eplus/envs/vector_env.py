@@ -147,7 +147,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         Blocks until there is at least one. Like a single worker's read, it polls for the workers' spin
         time first (none when the workers and the learner have no spare core: see `spin.default_spin_s`).
         """
-        return wait_any(self.sims, indices, self._send_errors)
+        return wait_any([sim.process for sim in self.sims], indices, self._send_errors)
 
     def receive_one(self, i: int) -> tuple[np.ndarray, float, bool, bool, dict] | None:
         """Worker i's (observation, reward, terminated, truncated, info) for its last action, as `step`

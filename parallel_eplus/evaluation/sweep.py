@@ -183,7 +183,7 @@ def run_local(
             # Pipelined: each job gets its next action as soon as it answers, so a cheap episode (the
             # built-in controller's) runs ahead of a costly one instead of at its pace.
             finished, broken = [], []
-            for k in wait_any([job["sim"] for job in active], range(len(active))):
+            for k in wait_any([job["sim"].process for job in active], range(len(active))):
                 job = active[k]
                 try:
                     obs, _, terminated, info = job["sim"].receive()
