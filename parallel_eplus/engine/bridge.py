@@ -17,15 +17,15 @@ they would act a timestep late. Actuators keep their values, so the action is wr
 timestep. Frame values: year, day of year, hour, minute (when the
 observation was taken; EnergyPlus's own clock at this point is the last sub-timestep's), then the sensors.
 
-With the C bridge (native.py, eplus_callback.c) the callbacks EnergyPlus calls are C: they hand each call
-to this Bridge until its first exchange is done, then the Bridge arms them and every later step stays in C.
+With the C bridge (native.py, eplus_callback.c; the hand-off: native_handoff.py) the callbacks EnergyPlus calls
+are C: they hand each call to this Bridge until its first exchange is done, then the Bridge arms them and every
+later step stays in C.
 """
 
 from __future__ import annotations
 
 import ctypes
 import os
-import sys
 import time
 import traceback
 
@@ -34,12 +34,13 @@ import numpy as np
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import control_model
 from parallel_eplus.engine import frames
+from parallel_eplus.engine.native_handoff import NativeHandoff
 from parallel_eplus.errors import ProtocolError
 
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
 
 
-class Bridge:
+class Bridge(NativeHandoff):
     """Holds the handles and the current action; its two methods are the EnergyPlus callbacks."""
 
     def __init__(
@@ -247,61 +248,6 @@ class Bridge:
             e = self.elements[i]
             value = get(state, self.sensor_handles[j]) + (self.action[i] if self.started else 0.0)
             set_value(state, h, min(max(value, e.low), e.high))
-
-    def _hold(self) -> None:
-        """Sizing and warm-up in C (`bridge_hold`): what `_apply_action` and `_observe` do there (write the held
-        action once per zone timestep, keep the latest sensors) without ~2,700 Python callbacks an episode."""
-        if self.native is None or self.python_only or self._holding:
-            return
-        ints = lambda xs: (ctypes.c_int * len(xs))(*xs)  # noqa: E731
-        doubles = lambda xs: (ctypes.c_double * len(xs))(*xs)  # noqa: E731
-        handles = [h for h, _ in self.actuator_handles]
-        indices = [i for _, i in self.actuator_handles]
-        status = self.native.bridge_hold(
-            len(self.sensor_handles), ints(self.sensor_handles), len(handles), ints(handles), ints(indices),
-            len(self.action), doubles(self.action), int(self.pending), doubles(self.last_obs),
-        )  # fmt: skip
-        self._holding = status == 0  # else (too many values for it) Python holds it, as before
-
-    def _unhold(self) -> None:
-        last = (ctypes.c_double * len(self.sensors))()
-        self.pending = bool(self.native.bridge_unhold(last))
-        self.last_obs = list(last)
-        self._holding = False
-
-    def _arm(self) -> None:
-        """Hand every later step to the C callbacks, in the state this Bridge has reached."""
-        if self._actions is not None and self._actions.buf:
-            raise ProtocolError("bytes beyond the action frame")
-        ints = lambda xs: (ctypes.c_int * len(xs))(*xs)  # noqa: E731
-        handles = [h for h, _ in self.actuator_handles]
-        indices = [i for _, i in self.actuator_handles]
-        replay = self.replay if self.replay is not None else np.zeros((0, len(self.action)))
-        status = self.native.bridge_arm(
-            -1 if self.raw else self.obs_fd, -1 if self.raw else self.act_fd,
-            len(self.sensor_handles), ints(self.sensor_handles), len(handles), ints(handles), ints(indices),
-            len(self.action), (ctypes.c_double * len(self.action))(*self.action), int(self.pending),
-            self.step, self.steps, self.minutes, self.spin_s,
-            replay.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(replay), self.replayed,
-        )  # fmt: skip
-        if status != 0:
-            raise RuntimeError("the C bridge refused to arm: too many or unmapped sensors or actuators, or a bad pipe")
-        self.native, self._armed = None, self.native
-
-    def collect(self) -> None:
-        """After the run: take the step count, completion and any error from the C side if it was armed."""
-        lib = self._armed
-        if lib is None:
-            return
-        self.step, self.done, self.done_at = lib.bridge_step(), bool(lib.bridge_done()), lib.bridge_done_at()
-        self.counters = {
-            "waited_s": lib.bridge_wait_s(), "ahead_s": lib.bridge_ahead_s(), "exchanges": lib.bridge_exchanges(),
-            "apply_calls": lib.bridge_apply_calls(), "observe_calls": lib.bridge_observe_calls(),
-        }  # fmt: skip
-        message = lib.bridge_error()
-        if message and self.error is None:
-            self.error = RuntimeError(message.decode())
-            print(f"C bridge: {message.decode()}", file=sys.stderr)
 
     def _observe(self, state) -> None:
         if not self._handles_ready(state):
