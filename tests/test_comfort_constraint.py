@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from parallel_eplus.learning.algorithms import ALGORITHMS
 from parallel_eplus.learning.lagrangian import Lagrangian
-from parallel_eplus.learning.rollout import ALGORITHMS
 from parallel_eplus.training.config import ComfortConstraint
 from parallel_eplus.training.train import train
 

@@ -67,7 +67,7 @@ def test_the_cloned_policy_tracks_what_the_built_in_controls_chose(tmp_path, no_
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from parallel_eplus.envs.env import action_space, observation_space
-    from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.learning.algorithms import ALGORITHMS
 
     demos = record_baseline(None, ["CA", "FL"], 2, 2, tmp_path / "record", progress=False)
     assert len(demos) == 2 * 2 * 96 and demos.observations.shape[1] == 6

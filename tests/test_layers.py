@@ -28,8 +28,8 @@ def test_a_checkpoint_pickled_before_the_move_still_loads():
     import paths are gone in 1.0, and `load_model` still reads such a file, leaving no old path importable."""
     import importlib
 
+    from parallel_eplus.learning.algorithms import ALGORITHMS
     from parallel_eplus.learning.lagrangian import ConstrainedRolloutBuffer, Lagrangian
-    from parallel_eplus.learning.rollout import ALGORITHMS
     from parallel_eplus.learning.saved_models import MOVED, load_model
 
     old = ROOT / "results/learned/datacenter-2zone/logstd-3/datacenter-2zone-seed0/model.zip"

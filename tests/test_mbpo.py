@@ -13,10 +13,10 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.deploy.export import export
+from parallel_eplus.learning.algorithms import ALGORITHMS
 from parallel_eplus.learning.model_based import mbpo, mbpo_state
 from parallel_eplus.learning.model_based.model_buffer import ModelMixBuffer
 from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
-from parallel_eplus.learning.rollout import ALGORITHMS
 from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ComfortConstraint, SACSettings, TrainConfig
 from parallel_eplus.training.train import train

@@ -14,7 +14,8 @@ from parallel_eplus.buildings.model import STEPS_PER_DAY
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.env import action_space, observation_space
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
-from parallel_eplus.learning.rollout import FastTRPO, _pipelinable
+from parallel_eplus.learning.algorithms import FastTRPO
+from parallel_eplus.learning.rollout import _pipelinable
 from parallel_eplus.learning.sb3_adapter import SB3VecEnv
 from parallel_eplus.runs.numpy_policy import NumpyPolicy
 from parallel_eplus.training.config import TRPOSettings

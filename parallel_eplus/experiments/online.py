@@ -48,7 +48,7 @@ def run_online_episode(
     """One episode of `weather` while a copy of the controller's model keeps training; returns its results row."""
     import torch as th
 
-    from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.learning.algorithms import ALGORITHMS
     from parallel_eplus.learning.saved_models import load_model
     from parallel_eplus.runs.norm_stats import read_stats
     from parallel_eplus.runs.policy_files import normalization_file, run_dir_of

@@ -25,14 +25,11 @@ import time
 
 import numpy as np
 import torch as th
-from sb3_contrib import TRPO
-from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.buffers import RolloutBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from parallel_eplus.learning import fragments
-from parallel_eplus.learning.guarded_sac import GuardedSAC
 from parallel_eplus.learning.overlap import IdleClock, LocalCollector, TimedReady
 from parallel_eplus.learning.pipeline import run_pipeline
 from parallel_eplus.learning.sb3_adapter import SB3VecEnv
@@ -297,15 +294,3 @@ class NumpyRollouts:
         callback.update_locals({"new_obs": obs, "dones": starts, "values": values})
         callback.on_rollout_end()
         return True
-
-
-class FastTRPO(NumpyRollouts, TRPO):
-    """sb3-contrib's TRPO (the paper's algorithm) with the numpy rollout loop."""
-
-
-class FastPPO(NumpyRollouts, PPO):
-    """Stable-Baselines3's PPO with the numpy rollout loop: the comparison the paper did not run."""
-
-
-# SAC is off-policy: SB3's own step-by-step collect_rollouts feeds its replay buffer.
-ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": SAC, "mbpo": GuardedSAC}

@@ -117,7 +117,7 @@ def _learn(
     cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus,
     callbacks: Sequence[BaseCallback] = (),
 ) -> Path:  # fmt: skip
-    from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.learning.algorithms import ALGORITHMS
     from parallel_eplus.learning.saved_models import load_model
 
     run_dir = cfg.run_dir
@@ -289,7 +289,7 @@ def _new_model(cfg: TrainConfig, env: VecNormalize):
 
 
 def _algorithm(cfg: TrainConfig, env: VecNormalize):
-    from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.learning.algorithms import ALGORITHMS
 
     if cfg.off_policy:
         s = cfg.sac

@@ -34,9 +34,9 @@ from parallel_eplus.buildings.building import load_building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_local
+from parallel_eplus.learning.algorithms import ALGORITHMS
 from parallel_eplus.learning.model_based.control import MPC
 from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts, train, widen
-from parallel_eplus.learning.rollout import ALGORITHMS
 from parallel_eplus.learning.saved_models import load_model
 from parallel_eplus.runs.norm_stats import read_stats
 from parallel_eplus.runs.policy_files import normalization_file, stats_target

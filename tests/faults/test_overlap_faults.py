@@ -14,7 +14,7 @@ import pytest
 
 from parallel_eplus.engine import pipe_sweep
 from parallel_eplus.errors import EnergyPlusError, WorkerLostError
-from parallel_eplus.learning.rollout import FastTRPO
+from parallel_eplus.learning.algorithms import FastTRPO
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
 

@@ -155,7 +155,7 @@ def test_an_append_cut_short_is_cut_off_by_the_next_and_rows_read_as_pandas_wrot
     "name, algorithm", [("paper-ca", "trpo"), ("ppo-ca-co-fl-time", "ppo"), ("residual-demand", "trpo")]
 )
 def test_a_policy_loads_without_unpickling_and_acts_as_sb3s_own_load(name, algorithm):
-    from parallel_eplus.learning.rollout import ALGORITHMS
+    from parallel_eplus.learning.algorithms import ALGORITHMS
     from parallel_eplus.runs.policy_files import _saved_policy
 
     model_zip = COMMITTED.parent / name / "model.zip"
