@@ -11,7 +11,6 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import torch as th
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
@@ -144,7 +143,11 @@ def _learn(
         start_steps = model.num_timesteps
         remaining = max(cfg.timesteps - model.num_timesteps, 0)
         batch = cfg.workers if cfg.off_policy else cfg.n_steps * cfg.workers
-        model_based = _model_rollouts(cfg, venv, checkpoint, progress) if cfg.algorithm == "mbpo" else None
+        model_based = None
+        if cfg.algorithm == "mbpo":  # (imported here: the ensemble's modules are not every run's)
+            from parallel_eplus.training.mbpo import model_rollouts
+
+            model_based = model_rollouts(cfg, venv, checkpoint, progress)
         end = model.num_timesteps + math.ceil(remaining / batch) * batch  # SB3 finishes whole batches
         status.write(steps=model.num_timesteps, planned=end)
         bar = tqdm(total=end, initial=model.num_timesteps, unit="step", disable=not progress,
@@ -212,45 +215,6 @@ def _load_replay_buffer(model, checkpoint: Path) -> None:
     else:
         log.warning("%s has no replay buffer beside it (periodic checkpoints leave it out): SAC resumes with an "
                     "empty buffer and updates from it at once", checkpoint.name)  # fmt: skip
-
-
-def _model_rollouts(cfg: TrainConfig, venv, checkpoint: Path | None, progress: bool):
-    """`--algorithm mbpo`'s ensemble beside SAC (learning/model_based/mbpo.py): a resumed run's own, a planner run's
-    (`--init-from`), or fitted on the building's own controls recorded first."""
-    from parallel_eplus.learning.model_based import mbpo, mbpo_state
-    from parallel_eplus.learning.model_based.control import MPC
-    from parallel_eplus.learning.model_based.dataset import Transitions
-    from parallel_eplus.learning.model_based.through_model import Starts
-
-    state_dir = cfg.run_dir / mbpo_state.STATE_DIR
-    n = venv.num_envs
-    if checkpoint is not None and (state_dir / mbpo_state.STARTS).is_file():
-        mpc, data, starts = mbpo_state.load_state(state_dir, n, cfg.seed)
-        log.info("the ensemble resumes from %s: %d transitions, %d start states", state_dir, len(data), len(starts))
-    elif cfg.init_from is not None:
-        mpc, data, starts = mbpo_state.from_planner_run(Path(cfg.init_from), n, cfg.seed)
-        width = venv.observation_space.shape[0]
-        if mpc.building != cfg.building:
-            raise ValueError(f"--init-from {cfg.init_from}: a planner of building {mpc.building!r}; this run's is "
-                             f"{cfg.building!r} (give it --building {mpc.building})")  # fmt: skip
-        if starts.obs and len(starts.obs[0]) != width:
-            raise ValueError(f"--init-from {cfg.init_from}: its planner's states hold {len(starts.obs[0])} values, "
-                             f"this run observes {width}: give the planner run's --time-features and "
-                             "--schedule-features, or a planner folder alone (planner/) to start without its states")
-        log.info("%s starts from the model and data of %s: %d transitions, %d start states", cfg.run_name,
-                 cfg.init_from, len(data), len(starts))  # fmt: skip
-    else:
-        mpc = MPC(cfg.building, cfg.mpc, cfg.comfort.margin_c, cfg.reward.power_weight, n, cfg.seed,
-                  objective=cfg.objective)  # fmt: skip
-        data, starts = Transitions(mpc.layout), Starts()
-    if checkpoint is None and not len(starts):  # nothing to branch from yet: the building's own controls first
-        mbpo_state.record_own_controls(cfg, mpc, data, starts, progress)
-        log.info("recorded the building's own controls: %d transitions, %d start states", len(data), len(starts))
-    if cfg.init_from is None and checkpoint is None:
-        mpc.model.fit(data, np.arange(len(data)), cfg.mpc.epochs)
-        mpc.set_support(data.array("a"))
-        log.info("model fitted on the building's own controls: %d transitions", len(data))
-    return mbpo.ModelRollouts(cfg, mpc, data, starts, state_dir)
 
 
 def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) -> None:
