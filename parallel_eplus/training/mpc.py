@@ -35,15 +35,13 @@ from parallel_eplus.learning.lagrangian import Lagrangian
 from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
 from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE, planner_controller
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
-from parallel_eplus.learning.model_based.distill import act, distill, fit
 from parallel_eplus.learning.model_based.dynamics import summary
 from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
-from parallel_eplus.learning.model_based.through_model import Starts, train_student
-from parallel_eplus.runs.checkpoints import save_checkpoint
-from parallel_eplus.runs.run_files import BEST_DIR, MODEL_FILE
+from parallel_eplus.runs.run_files import BEST_DIR
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import CallbackHost, EpisodeMetrics, tensorboard_logger
 from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.mpc_student import Student
 
 log = logging.getLogger(__name__)
 # The student takes over (DAgger) once it has this many of the planner's steps to learn from: a day of one worker.
@@ -81,13 +79,12 @@ class _Loop:
         self.data = Transitions(self.mpc.layout)
         self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
         self.mpc.comfort_weight = self.s.comfort_weight or cfg.comfort.multiplier_init
-        self.steps, self.policy_obs, self.policy_act, self.replay = 0, [], [], {}
-        self.policy_prev, self.policy_times, self.policy_weathers = [], [], []  # the planner's steps: starts
+        self.steps, self.replay = 0, {}
         if self.s.student == "gradient" and cfg.forecast_hours:
             raise ValueError("--mpc student=gradient: a policy observing --forecast cannot be rebuilt along the "
                              "model's rollouts; leave --forecast out (the clock's features are rebuilt)")
-        self.student, self.student_fitted = None, False  # DAgger's phase: the distilled policy acts
         self.logger = tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name))
+        self.student = Student(cfg, venv, self.building, new_model, self.logger)
         self.shim = CallbackHost(venv, self.logger)
         self.bar = tqdm(total=cfg.timesteps, unit="step", disable=not progress, desc=f"train {cfg.run_name}")
         self.callbacks = [EpisodeMetrics(cfg.run_dir / "episodes.csv", self.bar, 365 * self.building.steps_per_day),
@@ -122,49 +119,9 @@ class _Loop:
         self.data.save(self.cfg.run_dir / "transitions.npz")
         planner = self._save_planner() / PLANNER_FILE
         self._save_checkpoint()
-        if not self.s.distill or not self.policy_obs:
+        if not self.s.distill or not self.student.rows:
             return planner
-
-        model, env = self._student()
-        model.num_timesteps = self.steps  # what the run took (a sweep reads it from model.zip)
-        if self.s.student == "gradient":
-            if not self.student_fitted:
-                self._refit_student()  # the clone it starts from
-            report = self._through_model(model, env)
-            io.write_text(self.cfg.run_dir / "distill.json", __import__("json").dumps(report, indent=2))
-            log.info("trained the student through the model from %d states: %s", report["starts"], report["cost"])
-            return save_checkpoint(model, env, self.cfg.run_dir / MODEL_FILE)
-        obs, act = np.concatenate(self.policy_obs), np.concatenate(self.policy_act)
-        return distill(model, env, self.cfg, obs, act)
-
-    def _student(self):
-        """The policy the planner is distilled into (made on first use; DAgger's phase and the end refit it)."""
-        if self.student is None:
-            from stable_baselines3.common.vec_env import VecNormalize
-
-            env = VecNormalize(self.venv, norm_obs=True, norm_reward=False, gamma=self.cfg.trpo.gamma)
-            self.student = (self.new_model(self.cfg, env), env)
-        return self.student
-
-    def _refit_student(self) -> None:
-        model, env = self._student()
-        if self.s.student == "gradient" and self.student_fitted:
-            for name, value in self._through_model(model, env)["cost"].items():
-                self.logger.record(f"distill/through_model/{name}", value)
-            return
-        report = fit(model, env, self.cfg, np.concatenate(self.policy_obs), np.concatenate(self.policy_act))
-        for name, value in report["rmse"].items():
-            self.logger.record(f"distill/rmse/{name}", value)
-        self.student_fitted = True
-
-    def _through_model(self, model, env) -> dict:
-        """The student trained on the planner's cost through the model, from the states of the planner's steps
-        (the student's own in DAgger's phase)."""
-        prev = np.concatenate(self.policy_prev)
-        obs = np.concatenate(self.policy_obs)
-        starts = Starts.of(obs[len(obs) - len(prev) :], prev, np.concatenate(self.policy_times),
-                           np.concatenate(self.policy_weathers))  # rows with starts (older checkpoints: the newest)
-        return train_student(self.mpc, self.building, model, env, starts, self.cfg, self.cfg.seed + self.steps)
+        return self.student.finish(self.mpc, self.steps)
 
     def _steps(self) -> None:
         venv, n = self.venv, self.venv.num_envs
@@ -181,21 +138,17 @@ class _Loop:
         while self.steps < self.cfg.timesteps:
             planning = self.steps >= self.s.explore_steps or explorer is None
             dagger = planning and self.s.distill and self.steps >= (1 - self.s.dagger_share) * self.cfg.timesteps
-            if dagger and not self.student_fitted and sum(map(len, self.policy_obs)) >= DAGGER_MIN_ROWS:
-                self._refit_student()
+            if dagger and not self.student.fitted and self.student.rows >= DAGGER_MIN_ROWS:
+                self.student.refit(self.mpc, self.cfg.seed + self.steps)
             if planning:
                 planned = self.mpc.act(obs, infos, a_last)
-                self.policy_obs.append(obs.copy())
-                self.policy_act.append(planned)
-                self.policy_prev.append(a_last.copy())
-                self.policy_times.append(np.array([info["time"] for info in infos], object))
-                self.policy_weathers.append(np.array([str(info["weather"]) for info in infos]))
+                self.student.add(obs, planned, a_last, infos)
                 actions = np.clip(planned + self.s.noise * rng.standard_normal(planned.shape), -1, 1).astype(np.float32)
-                if dagger and self.student_fitted:  # the student acts; the planner takes over a worker far out of band
+                if dagger and self.student.fitted:  # the student acts; the planner takes over a worker far out of band
                     temps = obs[:, [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures]]
                     low, high = self.building.band
                     far = np.any((temps < low - 2) | (temps > high + 2), axis=1)
-                    actions = np.where(far[:, None], actions, act(*self._student(), obs))
+                    actions = np.where(far[:, None], actions, self.student.actions(obs))
             else:
                 actions = explorer.act(obs, infos, step_of)
             new_obs, _, dones, new_infos = venv.step(actions)
@@ -226,8 +179,8 @@ class _Loop:
                 self._update_comfort(out, zones)
                 out = zones = 0.0
                 self._refit(self.s.refit_epochs)
-                if self.student_fitted:
-                    self._refit_student()
+                if self.student.fitted:
+                    self.student.refit(self.mpc, self.cfg.seed + self.steps)
                 for cb in self.callbacks:
                     cb.on_rollout_end()
             if self.steps // self.cfg.checkpoint_every != (self.steps - n) // self.cfg.checkpoint_every:
@@ -304,7 +257,7 @@ class _Loop:
                  summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
     def _update_comfort(self, out: float, zones: float) -> None:
-        if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student_fitted:
+        if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student.fitted:
             self.mpc.comfort_weight = self.lagrangian.update(out, zones)
             self.lagrangian.record(self.logger)
 
@@ -312,13 +265,7 @@ class _Loop:
     def _save_checkpoint(self) -> Path:
         extra = {"steps": self.steps, "lagrangian": None if self.lagrangian is None else self.lagrangian.multiplier,
                  "replay": {w: th.as_tensor(a) for w, a in self.replay.items()}}  # fmt: skip
-        policy = None
-        if self.policy_obs:
-            policy = (np.concatenate(self.policy_obs), np.concatenate(self.policy_act))
-            if self.policy_prev:  # where each planner step started from (a checkpoint before them has none)
-                times = np.concatenate(self.policy_times).astype("datetime64[s]")
-                policy += (np.concatenate(self.policy_prev), times, np.concatenate(self.policy_weathers))
-        return self.checkpoints.save(self.steps, self.mpc, self.data, extra, policy)
+        return self.checkpoints.save(self.steps, self.mpc, self.data, extra, self.student.arrays())
 
     def _restore(self, checkpoint: Path) -> None:
         state, self.data, policy = self.checkpoints.load(checkpoint, self.mpc.layout)
@@ -328,11 +275,7 @@ class _Loop:
         self.replay = {w: np.asarray(a) for w, a in state["replay"].items()}
         if self.lagrangian is not None and state["lagrangian"] is not None:
             self.lagrangian.multiplier = state["lagrangian"]
-        if policy is not None:
-            self.policy_obs, self.policy_act = [policy[0]], [policy[1]]
-            if len(policy) == 5:  # the starts of a student trained through the model (older checkpoints lack them)
-                self.policy_prev, self.policy_weathers = [policy[2]], [policy[4]]
-                self.policy_times = [policy[3].astype("datetime64[s]").astype(object)]
+        self.student.restore(policy)
         log.info("resuming %s from %s at step %d (%d transitions)", self.cfg.run_name, checkpoint, self.steps,
                  len(self.data))  # fmt: skip
 
