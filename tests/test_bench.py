@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -126,3 +127,18 @@ def test_a_training_run_replays_in_raw_energyplus(tmp_path, no_leaks):
     train(cut, progress=False)
     with pytest.raises(ValueError, match="--keep-episodes"):
         replay_run(tmp_path / "runs" / "cut", 2, tmp_path / "replay2", progress=False)
+
+
+def test_bench_planner_times_a_committed_planner_and_its_policy_as_the_run_observed(no_leaks):
+    """`bench --planner`: the office's committed planner run observed the clock (`--time-features`), so its
+    distilled policy takes 14 values where the building has 10 sensors; both act in closed loop for a day."""
+    from parallel_eplus.bench.decisions import decisions, format_decisions
+
+    run = Path(__file__).parents[1] / "results/model-based/office-small/runs/office-small-mpc-seed0"
+    r = decisions(run, days=1, repeats=1, options="candidates=32")
+    assert r["building"] == "office-small" and r["settings"]["candidates"] == 32
+    for name in ("planner", "policy"):
+        assert r[name]["decisions"] == 144  # a day of 10-minute steps
+        assert 0 < r[name]["cpu_ms"]["median"] <= r[name]["cpu_ms"]["p99"]
+    assert r["planner"]["cpu_ms"]["median"] > r["policy"]["cpu_ms"]["median"]
+    assert "policy network" in format_decisions(r)

@@ -19,8 +19,8 @@ from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
 
 
-def _timed_episode(act, building: str | None, weather: str, days: int) -> dict:
-    venv = EnergyPlusVectorEnv(SimulationConfig(weather=weather, run_days=days, building=building), [[weather]])
+def _timed_episode(act, sim: SimulationConfig) -> dict:
+    venv = EnergyPlusVectorEnv(sim, [[sim.weather]])
     wall, cpu = [], []
     try:
         infos = venv.start_all([0])
@@ -70,14 +70,20 @@ def decisions(run: Path, days: int = 2, repeats: int = 3, options: str | None = 
         return planner.last
 
     planner.last = mpc.initial[None].copy()
+    # what the run observed (the clock's and the schedule's features, a forecast): its distilled policy needs them
+    sim = SimulationConfig(weather=weather, run_days=days, building=building,
+                           time_features=bool(saved.get("time_features")),
+                           schedule_features=bool(saved.get("schedule_features")),
+                           forecast_hours=int(saved.get("forecast_hours", 0)),
+                           forecast_error=saved.get("forecast_error"))  # fmt: skip
     runs = {"planner": [], "policy": []}
     act = load_policy(policy_zip) if policy_zip.is_file() else None
     for _ in range(repeats):
         mpc.reset(0)
         planner.last = mpc.initial[None].copy()
-        runs["planner"].append(_timed_episode(planner, building, weather, days))
+        runs["planner"].append(_timed_episode(planner, sim))
         if act is not None:
-            runs["policy"].append(_timed_episode(lambda obs, infos: act(obs), building, weather, days))
+            runs["policy"].append(_timed_episode(lambda obs, infos: act(obs), sim))
     for name, episodes in runs.items():
         if episodes:
             out[name] = {k: {s: statistics.median(e[k][s] for e in episodes) for s in ("median", "p99", "mean")}
