@@ -64,8 +64,8 @@ def test_bill_and_demand_surrogate_against_a_hand_computation(tmp_path, no_leaks
     from parallel_eplus.engine.simulation import Simulation
 
     spec = office_spec(tmp_path, EXAMPLE)
-    cfg = SimulationConfig(weather="CA", building=str(spec), run_days=2, start_day=31, objective="cost",
-                           output_dir=str(tmp_path / "run"))  # fmt: skip
+    cfg = SimulationConfig(weather="CA", building=str(spec), run_days=2, start_day=31, start_weekday="Sunday",
+                           objective="cost", output_dir=str(tmp_path / "run"))  # fmt: skip
     sim = Simulation(cfg)
     charged, power_terms = [], []
     try:
@@ -82,7 +82,8 @@ def test_bill_and_demand_surrogate_against_a_hand_computation(tmp_path, no_leaks
     steps = pd.read_parquet(Path(info["episode_dir"]) / "steps.parquet")
     start = steps["time"] - pd.Timedelta(minutes=10)
     assert set(start.dt.month) == {1, 2}
-    assert (start.iloc[0].day_name(), start.iloc[-1].day_name()) == ("Sunday", "Monday")  # the model's own weekdays
+    # a weekend day in January (no on-peak demand charge), a weekday in February
+    assert (start.iloc[0].day_name(), start.iloc[-1].day_name()) == ("Sunday", "Monday")
 
     kwh = steps["power_w"] * 10 / 60 / 1000  # the facility's meter: lights and plugs too
     energy = (kwh * start.map(winter_price)).groupby(start.dt.month).sum()

@@ -96,6 +96,10 @@ def test_a_forecast_is_the_files_values_ahead_clipped_at_the_run_periods_end():
     day = Forecaster((ForecastSpec("x", "drybulb", 4, 2, in_steps=True),), CA, 1, 4, seed=0)  # 30-min stride
     assert day(dt.datetime(2013, 1, 1, 23)) == pytest.approx([*np.interp([23.5, 24], [23, 24], drybulb[22:24]),
                                                               drybulb[23], drybulb[23]])  # fmt: skip
+    # a run of 2 days from July 1 (day 182; a test period's, or a random start's) ends at hour 183 x 24, not 48
+    july = Forecaster((outdoor_forecast(6),), CA, 2, 4, seed=0, start_day=182)
+    assert july(dt.datetime(2013, 7, 1, 10)) == pytest.approx(drybulb[181 * 24 + 10 : 181 * 24 + 16])
+    assert july(dt.datetime(2013, 7, 2, 21))[-1] == pytest.approx(drybulb[183 * 24 - 1])
 
 
 def test_forecast_error_is_zero_when_off_and_seeded_when_on():

@@ -65,13 +65,15 @@ def outdoor_forecast(hours: int, error: str | None = None) -> ForecastSpec:
 class Forecaster:
     """One episode's forecasts: built from its weather file when it starts, asked at each observation."""
 
-    def __init__(self, specs: tuple[ForecastSpec, ...], epw: Path, run_days: int, steps_per_hour: int, seed: int):
+    def __init__(self, specs: tuple[ForecastSpec, ...], epw: Path, run_days: int, steps_per_hour: int, seed: int,
+                 start_day: int = 1):  # fmt: skip
+        """`start_day`, `run_days`: the run period (day of the year it starts on, its length), where forecasts end."""
         header, data = read_epw(epw)
         rph = records_per_hour(header)
         self.specs = specs
         self.times = np.arange(1, len(data) + 1) / rph  # hours since Jan 1 00:00 at each record's end
         self.columns = {s.column: data[s.column].to_numpy(float) for s in specs}
-        self.end_h = min(run_days * 24.0, float(self.times[-1]))
+        self.end_h = min((start_day - 1 + run_days) * 24.0, float(self.times[-1]))  # the run's last hour
         self.steps_per_hour = steps_per_hour
         self.rng = np.random.default_rng(seed)
         self._origin: dt.datetime | None = None

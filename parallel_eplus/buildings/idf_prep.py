@@ -74,6 +74,9 @@ def _object(kind: str, fields: list[str], note: str) -> str:
     return f"  {kind},\n{body};  ! {note}"
 
 
+WEEKDAYS = ("Monday", "Tuesday", "Wednesday", "Thursday", "Friday", "Saturday", "Sunday")
+
+
 def _run_period(first: IdfObject | None, run_days: int, start_day: int = 1, weekday: str | None = None) -> str:
     """The episode's RunPeriod: `run_days` from day of year `start_day`; `weekday` that day's (a period cut from a
     year starts on the weekday that date had in the year, so the schedules fall as they did)."""
@@ -85,6 +88,8 @@ def _run_period(first: IdfObject | None, run_days: int, start_day: int = 1, week
     end = first_day + dt.timedelta(days=run_days - 1)
     # Name, begin month/day/year, end month/day/year, then the model's own flags (day of week, holidays, ...).
     flags = first.fields[7:] if first is not None else []
+    if weekday is None and flags and flags[0].strip().capitalize() in WEEKDAYS:  # the model names January 1's
+        weekday = WEEKDAYS[(WEEKDAYS.index(flags[0].strip().capitalize()) + start_day - 1) % 7]
     if weekday is not None:
         flags = [weekday, *flags[1:]]
     fields = ["Episode", str(first_day.month), str(first_day.day), "", str(end.month), str(end.day), "", *flags]

@@ -124,6 +124,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         building=args.building,
         timesteps=args.timesteps,
         run_days=args.run_days,
+        random_start=args.random_start,
         batch_size=args.batch_size,
         seed=args.seed,
         run_name=args.run_name,

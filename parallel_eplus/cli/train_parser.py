@@ -95,6 +95,11 @@ def add_train(sub) -> argparse.ArgumentParser:
     )  # fmt: skip
     tr.add_argument("--timesteps", type=int, default=1_000_000, help="total env steps (default 1e6)")
     tr.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
+    tr.add_argument(
+        "--random-start", action="store_true",
+        help="each episode starts on a day of the year drawn for it (from --seed), --run-days long within the year: "
+        "training sees every season, not only the weeks after January 1 (BOPTEST-Gym's random start time)",
+    )  # fmt: skip
     tr.add_argument("--batch-size", type=int, default=16384, help="steps per TRPO update, split across workers")
     tr.add_argument("--seed", type=int, default=0)
     tr.add_argument(

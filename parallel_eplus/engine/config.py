@@ -65,6 +65,9 @@ class SimulationConfig:
     start_day: int = 1
     start_weekday: str | None = None
     warmup_days: int = 0
+    # Training across the seasons (BOPTEST-Gym's random start time): each episode starts on a day of the year drawn
+    # for it (fixed by the seed, the worker and the episode's number), `run_days` long within the year.
+    random_start: bool = False
     # Weather that varies per episode (buildings/weather_noise.py's `parse_noise` form, e.g. "drybulb=1:0:24"):
     # each episode runs a perturbed copy of its EPW, written into its folder. None: the file as it is.
     weather_noise: str | None = None

@@ -44,6 +44,7 @@ class EpisodePlan:
     epw: Path
     seed: int | None = None
     options: tuple = field(default=())  # the reset's options as sorted (key, value) pairs
+    start_day: int | None = None  # the run's first day of the year (`random_start`); None: the config's
 
     @staticmethod
     def options_key(options: dict | None) -> tuple:
@@ -61,22 +62,26 @@ class EpisodeStarter:
         the node setpoints the actions own, taken from the model's managers (buildings/takeover.py)."""
         self.output_dir, self.idf, self.config, self.args = output_dir, idf, config, args
         self.takeover = takeover
-        self._model: bytes | None = None  # the episode's model (idf_prep.py), the same for every episode
+        self._models: dict[int, bytes] = {}  # the episode's model (idf_prep.py) per first day of the run
 
-    def model(self, path: Path | None = None) -> bytes:
-        """The episode's model (tokenized once, ~20 ms; the same for every episode), written to `path` if given."""
-        if self._model is None:
-            cfg = self.config
+    def model(self, path: Path | None = None, start_day: int | None = None) -> bytes:
+        """The episode's model (tokenized once per first day, ~20 ms; else the same for every episode), written to
+        `path` if given. `start_day`: the run's first day of the year (None: the config's)."""
+        cfg = self.config
+        day = cfg.start_day if start_day is None else start_day
+        model = self._models.get(day)
+        if model is None:
             with tempfile.TemporaryDirectory(prefix="parallel-eplus-model-") as tmp:
                 made = Path(tmp) / MODEL_FILE
                 report = prepare_idf(self.idf, made, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
-                                     cfg.start_day, cfg.start_weekday, self.takeover)  # fmt: skip
-                self._model = made.read_bytes()
-            for line in report.lines():
-                log.info("prepared model %s: %s", self.idf.name, line)
+                                     day, cfg.start_weekday, self.takeover)  # fmt: skip
+                model = self._models[day] = made.read_bytes()
+            if not cfg.random_start or len(self._models) == 1:  # the same report for every start day
+                for line in report.lines():
+                    log.info("prepared model %s: %s", self.idf.name, line)
         if path is not None:
-            path.write_bytes(self._model)
-        return self._model
+            path.write_bytes(model)
+        return model
 
     def start(
         self,
@@ -98,7 +103,7 @@ class EpisodeStarter:
         episode_dir, number = claim_episode_dir(self.output_dir, weather_label(plan.weather), number)
         cfg, model, log_path = self.config, episode_dir / MODEL_FILE, episode_dir / "energyplus.log"
         try:
-            self.model(model)
+            self.model(model, plan.start_day)
             epw, extras = weather(plan, episode_dir, number)
             if template is not None:
                 try:

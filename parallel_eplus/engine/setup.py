@@ -116,6 +116,8 @@ class WorkerSetup:
         named = building.spec.weathers  # the spec's short names, then codes and .epw paths
         if config.warmup_days >= config.run_days and config.warmup_days:
             raise ValueError(f"warmup_days ({config.warmup_days}) must be fewer than run_days ({config.run_days})")
+        if config.random_start and (config.start_day != 1 or config.warmup_days):
+            raise ValueError("random_start draws each episode's first day: leave start_day and warmup_days unset")
         elements = model.actions
         initial = np.array(config.initial_action or [e.initial for e in elements], float)
         if len(initial) != len(elements):
@@ -135,6 +137,13 @@ class WorkerSetup:
             [named.get(w) or resolve_weather(w) for w in weathers],  # fail before spawning
             config.run_days * building.steps_per_day, initial, tuple(policy_action_names(config)),
         )  # fmt: skip
+
+    def start_day(self, worker: str, episode: int) -> int:
+        """`random_start`: the first day of the year of this worker's `episode`-th episode, drawn from the config's
+        seed, the worker's name and the episode's number, so a prepared episode and a cold one agree; uniform over
+        the days whose run of `run_days` ends within the year."""
+        rng = np.random.default_rng([self.config.seed, zlib.crc32(worker.encode()), episode, 0x5EA5])
+        return int(rng.integers(1, 365 - self.config.run_days + 2))
 
     def episode_weather(self, plan: EpisodePlan, episode_dir: Path, number: int, worker: str) -> tuple[Path, tuple]:
         """The episode's weather file in its folder (perturbed with `weather_noise`, else a link to the file), and
@@ -157,7 +166,8 @@ class WorkerSetup:
         if self.forecasts and any(f.error for f in self.forecasts):
             params.setdefault("weather_seed", seed)
         per_hour, days = self.building.steps_per_day // 24, config.run_days
-        forecaster = Forecaster(self.forecasts, target, days, per_hour, seed) if self.forecasts else None
+        start = config.start_day if plan.start_day is None else plan.start_day
+        forecaster = Forecaster(self.forecasts, target, days, per_hour, seed, start) if self.forecasts else None
         return target, (params, forecaster)
 
 

@@ -120,7 +120,8 @@ class Simulation:
         episode's weather noise and forecast error (None: drawn from the config's seed, this worker's name and the
         episode's number, when its directory is claimed)."""
         i = self.episode % len(self.weathers) if weather_index is None else weather_index
-        return EpisodePlan(i, self.weathers[i], self.weather_paths[i], seed, EpisodePlan.options_key(options))
+        start = self.setup.start_day(self.name, self.episode + 1) if self.config.random_start else None
+        return EpisodePlan(i, self.weathers[i], self.weather_paths[i], seed, EpisodePlan.options_key(options), start)
 
     def launch(self, weather_index: int | None = None, plan: EpisodePlan | None = None) -> None:
         """Start the next episode without waiting for its first observation (the vector env starts many at once):
@@ -252,6 +253,8 @@ class Simulation:
             return
         extra = {"episode": self.episode, "worker": self.name, "weather": weather_label(self.weather),
                  "complete": complete, **self.weather_params}  # fmt: skip
+        if self.plan is not None and self.plan.start_day is not None:  # random_start: the day drawn
+            extra["start_day"] = self.plan.start_day
         steps = self.records.frame()
         scored = self.setup.scored_steps(steps, extra)
         table = not (complete and self.config.keep_episodes == 0)  # pruned at once: ~8 ms an episode saved

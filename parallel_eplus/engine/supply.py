@@ -51,8 +51,8 @@ class EpisodeSupply:
         taken = () if config.relinquish else taken_setpoints(setup.elements)
         self._starter = EpisodeStarter(output_dir, setup.idf, config, setup.process_args(), taken)
         # Episodes forked from a template parked at their first control step (fork.py): not with weather noise (a
-        # new weather file each episode), nor for one episode (an evaluation's)
-        forks = prepare and config.fork_episodes and setup.noise is None
+        # new weather file each episode) or random starts (a new run period), nor for one episode (an evaluation's)
+        forks = prepare and config.fork_episodes and setup.noise is None and not config.random_start
         native_arg = ["--native", bridge] if bridge else []
         self.templates = Templates(self._starter.model, MODEL_FILE, [*setup.process_args(), *native_arg],
                                    config.start_timeout_s) if forks else None  # fmt: skip

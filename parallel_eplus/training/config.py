@@ -36,6 +36,7 @@ class TrainConfig:
     building: str | None = None  # a building spec (TOML); None: the data center (`model` picks its variant)
     timesteps: int = 1_000_000
     run_days: int = 365
+    random_start: bool = False  # each episode from a day of the year drawn for it (every season), not January 1
     prepare_next: bool = True  # each worker prepares its next episode while one runs (engine/prepared.py)
     fork_episodes: bool = True  # ...forked from an EnergyPlus parked at its first step (engine/fork.py)
     batch_size: int = 16384  # the paper's timesteps_per_batch, split evenly across workers
@@ -107,7 +108,7 @@ class TrainConfig:
         if self.batch_size < self.workers:
             raise ValueError("--batch-size must be at least the number of workers")
         if not 1 <= self.run_days <= 365:
-            raise ValueError(f"--run-days must be within 1..365 (episodes start on Jan 1), got {self.run_days}")
+            raise ValueError(f"--run-days must be within 1..365 (episodes run within the year), got {self.run_days}")
         if self.timesteps < 0 or self.checkpoint_every < 1:
             raise ValueError("--timesteps must be >= 0 and --checkpoint-every >= 1")
         if self.init_from is not None:

@@ -132,7 +132,8 @@ class _Loop:
         episode_of = np.arange(n) + 1000 * (1 + self.steps // 1000)  # unique episode keys for this session
         explorer = Explorer(self.replay, n, self.s.explore_increment, self.s.explore_offset, self.building.band,
                             [self.mpc.layout.sensors.index(t) for t in self.mpc.layout.temperatures],
-                            self.cfg.seed + self.steps, self.s.explore_hold) if self.replay else None  # fmt: skip
+                            self.cfg.seed + self.steps, self.s.explore_hold,
+                            self.building.steps_per_day) if self.replay else None  # fmt: skip
         rng = np.random.default_rng(self.cfg.seed + self.steps)
         out = zones = 0.0
         while self.steps < self.cfg.timesteps:
@@ -227,7 +228,7 @@ class _Loop:
 
     # -- the model, the comfort weight ----------------------------------------------------------
     def _record(self) -> None:
-        days = self.s.record_days or self.cfg.run_days
+        days = self.s.record_days or (365 if self.cfg.random_start else self.cfg.run_days)  # dates to explore around
         self.replay = record_own_controls(self.cfg, days, self.data, self.mpc, progress=self.bar.disable is False)
         log.info("recorded the building's own controls: %d transitions", len(self.data))
 

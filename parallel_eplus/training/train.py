@@ -54,6 +54,7 @@ def sim_config(cfg: TrainConfig) -> SimulationConfig:
         model=cfg.model,
         building=cfg.building,
         run_days=cfg.run_days,
+        random_start=cfg.random_start,
         prepare_next=cfg.prepare_next,
         fork_episodes=cfg.fork_episodes,
         output_dir=str(cfg.run_dir / "episodes"),

@@ -69,11 +69,15 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc, progress: bool) 
 
 
 class Explorer:
-    """The recorded actions of each worker's weather at its step, plus an offset walking toward held targets."""
+    """The recorded actions of each worker's weather at its step, plus an offset walking toward held targets.
+
+    The record runs from January 1: with `steps_per_day`, a step is found by its time of the year (an episode that
+    starts later, `--random-start`, explores around the built-in's actions of its own dates), else by its number."""
 
     def __init__(self, replay: dict[str, np.ndarray], workers: int, increment: float, offset: float,
-                 band: tuple[float, float], temperatures: list[int], seed: int = 0, hold: int = 32):  # fmt: skip
-        self.replay = replay
+                 band: tuple[float, float], temperatures: list[int], seed: int = 0, hold: int = 32,
+                 steps_per_day: int | None = None):  # fmt: skip
+        self.replay, self.step_minutes = replay, 1440 // steps_per_day if steps_per_day else None
         self.rng = np.random.default_rng(seed)
         self.increment, self.limit, self.hold = increment, offset, max(hold, 4)
         self.band, self.temperatures = band, temperatures
@@ -92,7 +96,11 @@ class Explorer:
             record = self.replay.get(info["weather"])
             if record is None:  # a weather whose built-in controls did not finish: the nearest recorded one
                 record = next(iter(self.replay.values()))
-            base = record[min(int(steps[i]), len(record) - 1)]
+            step = int(steps[i])
+            if self.step_minutes and "time" in info:
+                t = info["time"]
+                step = ((t.timetuple().tm_yday - 1) * 1440 + t.hour * 60 + t.minute) // self.step_minutes
+            base = record[min(step, len(record) - 1)]
             temps = obs[i, self.temperatures]
             if np.any((temps < self.band[0] - 2) | (temps > self.band[1] + 2)):  # the rail: halfway back, and stay
                 self.offset[i] *= 0.5
