@@ -211,7 +211,7 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
         if deadline - time.time() < 600:
             return False
         known = sorted(study.folder(name).glob("eval/*/scenarios.json"))
-        if known:  # each weather's BOPTEST days, found once from a year of the built-in controls: reused
+        if known and not (out / "scenarios.json").is_file():  # each weather's BOPTEST days, found once: reused
             out.mkdir(parents=True, exist_ok=True)
             shutil.copy(known[0], out / "scenarios.json")
         LOG.info("%s: evaluating %s", name, scenario)
