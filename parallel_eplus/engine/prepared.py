@@ -30,6 +30,7 @@ from parallel_eplus.engine.process import EnergyPlusProcess
 
 log = logging.getLogger(__name__)
 STOP_GRACE_S = 5.0  # for a discarded parked episode to stop before its process is killed
+MODELS_KEPT = 4  # prepared models kept per worker, one per first day (`random_start` draws a day an episode)
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,8 @@ class EpisodeStarter:
         day = cfg.start_day if start_day is None else start_day
         model = self._models.get(day)
         if model is None:
+            if len(self._models) >= MODELS_KEPT:  # random starts: a model per day drawn, not a year of them in memory
+                self._models.pop(next(iter(self._models)))
             with tempfile.TemporaryDirectory(prefix="parallel-eplus-model-") as tmp:
                 made = Path(tmp) / MODEL_FILE
                 report = prepare_idf(self.idf, made, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
