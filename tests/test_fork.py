@@ -15,7 +15,8 @@ from parallel_eplus.engine import fork
 from parallel_eplus.engine.fork import ForkedEpisode
 
 from .conftest import our_processes
-from .test_prepared import ZERO, _episode, _parked, _state
+from .test_prepared import ZERO, _episode, _parked
+from .test_prepared_faults import _state
 
 
 def _forked(env: EnergyPlusEnv) -> bool:
