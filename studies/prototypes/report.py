@@ -1,0 +1,95 @@
+"""The prototypes study's report: each building's figures as ratios to its own controls, the table a reader wants,
+and the figure (savings against discomfort, one point per building)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pandas as pd
+
+if TYPE_CHECKING:  # the study (prototypes.py) imports this module
+    from prototypes import Study
+
+SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")
+
+
+def ratios(folder: Path) -> dict | None:
+    """The planner's figures over the four scenarios and five weathers, each as a ratio to the building's own."""
+    frames = [pd.read_csv(folder / f"{s}.csv").assign(scenario=s) for s in SCENARIOS if (folder / f"{s}.csv").is_file()]
+    if len(frames) < len(SCENARIOS):
+        return None
+    df = pd.concat(frames)
+    own, learned = df[df.controller == "Baseline"], df[df.controller != "Baseline"]
+    figures = {}
+    for column, how in (("hvac_energy_kwh", "sum"), ("bill", "sum"), ("peak_15min_kw", "max"),
+                        ("occupied_discomfort_kh", "sum")):  # fmt: skip
+        if column not in df:
+            continue
+        base = own[column].agg(how)
+        per_run = learned.groupby("run")[column].agg(how)  # each seed's planner; their mean
+        figures[column] = (per_run / base).mean() if base else float("nan")
+        figures[f"{column}_own"] = base
+        figures[f"{column}_learned"] = per_run.mean()
+    figures["in_band_pct"] = learned.in_band_pct.mean()
+    figures["in_band_pct_own"] = own.in_band_pct.mean()
+    return figures
+
+
+def _x(value: float) -> str:
+    return "" if pd.isna(value) else f"{value:.3f}"
+
+
+def markdown(df: pd.DataFrame, study: Study) -> str:
+    """The table a reader wants: every building, its figures as ratios to its own controls, or why it has none."""
+    lines = ["# Every DOE reference prototype, scored", "",
+             "Made by `python studies/prototypes/prototypes.py table` (the study: studies/prototypes/README.md). Each",
+             "row is one model of the EnergyPlus wheel taken as a new user takes it: `building init`, the starter's",
+             "recommended actions, `building check`, the planner's recipe on CA, CO and FL "
+             f"({study.steps:,} steps, seeds {', '.join(map(str, study.seeds))}), then `evaluate` on BOPTEST's four",
+             "scenarios (peak and typical heating and cooling fortnights) on all five weathers (IL and VA held out).",
+             "Ratios are the planner's over its own controls' (× built-in, CityLearn's form), summed over the 20",
+             "fortnights (peak: the highest 15-minute mean); the bill under the example tariff with demand charges.",
+             "", "| building | actions | supply-air loops | HVAC energy × | bill × | peak × "
+             "| occupied K·h: own → planner | in own bounds: own → planner | stage |",
+             "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for _, r in df.iterrows():
+        kh = in_band = ""
+        if not pd.isna(r.get("hvac_energy_kwh", float("nan"))):
+            kh = f"{r.occupied_discomfort_kh_own:.0f} → {r.occupied_discomfort_kh_learned:.0f}"
+            in_band = f"{r.in_band_pct_own:.2f} % → {r.in_band_pct:.2f} %"
+        stage = r.stage + (f": {r.reason}" if r.reason else "")
+        lines.append(f"| {r.building} | {r.actions} | {r['supply-air loops']} | {_x(r.get('hvac_energy_kwh'))} | "
+                     f"{_x(r.get('bill'))} | {_x(r.get('peak_15min_kw'))} | {kh} | {in_band} | {stage} |")  # fmt: skip
+    done = df.dropna(subset=["hvac_energy_kwh"]) if "hvac_energy_kwh" in df else df.iloc[:0]
+    if len(done):
+        saves = ((done.hvac_energy_kwh < 1) | (done.get("bill", 1) < 1)).sum()
+        holds = (done.occupied_discomfort_kh_learned <= done.occupied_discomfort_kh_own).sum()
+        lines += ["", f"Scored: {len(done)} of {len(df)}. Lower HVAC energy or bill: {saves}; no more occupied",
+                  f"discomfort than its own controls: {holds} (goal: all, savings on 12 of 16)."]  # fmt: skip
+    if (study.out / "savings.png").is_file():
+        lines += ["", "![savings against discomfort](savings.png)"]
+    return "\n".join(lines) + "\n"
+
+
+def figure(df: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    done = df.dropna(subset=["hvac_energy_kwh"])
+    fig, ax = plt.subplots(figsize=(7, 5))
+    x = 100 * (done.hvac_energy_kwh - 1)
+    y = done.occupied_discomfort_kh_learned - done.occupied_discomfort_kh_own
+    ax.scatter(x, y)
+    for xi, yi, label in zip(x, y, done.building, strict=True):
+        ax.annotate(label, (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax.axvline(0, color="grey", lw=0.5)
+    ax.axhline(0, color="grey", lw=0.5)
+    ax.set_xlabel("HVAC energy vs its own controls (%)")
+    ax.set_ylabel("occupied discomfort vs its own controls (K·h, 4 scenarios × 5 weathers)")
+    ax.set_title("DOE prototypes: the planner against each building's own controls")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
