@@ -200,6 +200,8 @@ class PlannerOptions:
         if self.settings:
             mpc.settings = mpc.planner.settings = MPCSettings.from_text(self.settings, mpc.settings)
             mpc.warm = np.zeros((len(mpc.warm), mpc.settings.horizon, mpc.layout.n_actions), np.float32)
+            if mpc.settings.comfort_weight is not None:  # the weight the planner plans with, not only its setting
+                mpc.comfort_weight = mpc.settings.comfort_weight
         if self.seed is not None:
             mpc.seed = self.seed
         if self.forecast != "perfect":
