@@ -187,7 +187,7 @@ def test_the_planner_reads_the_thermostats_by_date_across_daylight_saving_time(t
     earlier on the simulation's standard-time clock); by weekday and time alone, the planner's bounds at either end
     of its day blended both weeks, and it let the zones go an hour early."""
     from parallel_eplus.evaluation.scenarios import Period
-    from parallel_eplus.learning.model_based.calendar import ComfortTimes
+    from parallel_eplus.learning.model_based.calendar import Calendar, ComfortTimes
 
     march = Period("test", day=64, start_day=65, weekday="Monday", run_days=14, warmup_days=0)  # March 6-19
     df = run_sweep([Controller("Baseline", "baseline")], ["CA"], 14, 1, tmp_path, False, building="office-small",
@@ -201,12 +201,18 @@ def test_the_planner_reads_the_thermostats_by_date_across_daylight_saving_time(t
     ]
     assert {lo for d, lo in weekday_21h if d < 12} == {21.0} and {lo for d, lo in weekday_21h if d > 12} == {15.6}
 
+    occupied = steps["comfort_applies"].to_numpy(np.float32)
+    assert 0 < occupied.mean() < 1
     comfort = ComfortTimes("office-small", 10)
-    comfort.learn(times, np.ones(len(times)), bounds)
+    comfort.learn(times, occupied, bounds)
     np.testing.assert_allclose(comfort.bounds(times), bounds + [-0.2, 0.2], atol=1e-5)  # every step, as recorded
-    again = ComfortTimes("office-small", 10)  # a planner saved and loaded reads the same bounds
+    assert np.all(comfort(times) == 1)  # the planner pays for every step's bounds, setbacks too (BOPTEST's)
+    again = ComfortTimes("office-small", 10, occupied_only=True)  # a planner saved and loaded reads the same
     again.load({k: th.as_tensor(v).numpy() for k, v in comfort.state().items()})
     np.testing.assert_allclose(again.bounds(times), comfort.bounds(times))
+    np.testing.assert_array_equal(again(times), occupied)  # comfort_hours=occupied: the occupied hours, by date
+    served = Calendar.from_arrays(again.settings(), again.state())  # an exported planner's
+    np.testing.assert_array_equal(served(times), occupied)
     next_year = [t.replace(year=2007) for t in times]  # other weekdays: the weekly slots, the spec's band unseen
     assert np.all(np.isfinite(again.bounds(next_year)))
 

@@ -178,7 +178,7 @@ class PlannerRuntime:
 
 
 _CALENDAR = ("comfort_seen", "comfort_applied", "bound_sum", "bound_seen", "dated_runs", "dated_bounds",
-             "dated_weekday")  # fmt: skip
+             "dated_weekday", "dated_applies")  # fmt: skip
 
 
 def calendar_arrays(calendar: Calendar) -> dict[str, np.ndarray]:

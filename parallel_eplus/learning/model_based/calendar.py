@@ -10,7 +10,11 @@ building's own controls are recorded over it), else at that weekday and time of 
 the spec's band where nothing was). The date first: a model's schedules follow its holidays and daylight-saving
 time, which moves an office's day an hour earlier from March to November against the simulation's standard-time
 clock; by weekday and time alone, the hours at either end of its day were a blend of both, and the planner let the
-zones go an hour early (2026-11-27). Numpy only: the server imports this.
+zones go an hour early (2026-11-27). With `occupied_only` (the planner's `comfort_hours = "occupied"`) the
+thermostat's bounds count only where the band applies (its occupied hours, as recorded on that date, else by
+majority at that weekday and time): what the share in own bounds and occupied K.h score. Every step's setback
+bound cost the warehouse's planner heat at night that no score counted (docs/model-based.md).
+Numpy only: the server imports this.
 """
 
 from __future__ import annotations
@@ -26,8 +30,9 @@ class Calendar:
     """The lookups, from arrays: `state()` writes them, `from_state` reads them back (a planner file, an export)."""
 
     def __init__(self, mode: str, step_minutes: float, fixed: np.ndarray, tolerance: float,
-                 clock: np.ndarray | None = None):  # fmt: skip
+                 clock: np.ndarray | None = None, occupied_only: bool = False):  # fmt: skip
         self.mode, self.step_minutes, self.tolerance = mode, step_minutes, float(tolerance)
+        self.occupied_only = occupied_only
         self.day_slots = int(round(24 * 60 / step_minutes))
         self.slots = self.day_slots * 7
         self.fixed = np.asarray(fixed, np.float32)  # [K, 2]: the spec's band per zone
@@ -39,6 +44,7 @@ class Calendar:
         dated = 366 * self.day_slots if mode == THERMOSTAT else 0
         self.dated = np.zeros((dated, *self.fixed.shape), np.float32)
         self.dated_weekday = np.full(dated, -1, np.int8)
+        self.dated_applies = np.full(dated, -1, np.int8)  # -1: not recorded (a planner saved before it was kept)
 
     def _slot(self, t: dt.datetime) -> int:
         return int((t.weekday() * 24 * 60 + t.hour * 60 + t.minute) // self.step_minutes) % self.slots
@@ -49,12 +55,17 @@ class Calendar:
 
     def __call__(self, times: list[dt.datetime]) -> np.ndarray:
         """Whether the band applies to the steps ending at `times`, [T]."""
-        if self.mode in (ALWAYS, THERMOSTAT):
+        if self.mode == ALWAYS or (self.mode == THERMOSTAT and not self.occupied_only):
             return np.ones(len(times), np.float32)
         slots = [self._slot(t) for t in times]
         if self.mode == CLOCK:
             return self.clock[slots].astype(np.float32)
-        return np.array([self.applied[k] * 2 > self.seen[k] for k in slots], np.float32)
+        observed = np.array([self.applied[k] * 2 > self.seen[k] for k in slots], np.float32)
+        if not len(self.dated):
+            return observed
+        dates = [self._date_slot(t) for t in times]
+        known = (self.dated_weekday[dates] == [t.weekday() for t in times]) & (self.dated_applies[dates] >= 0)
+        return np.where(known, self.dated_applies[dates], observed).astype(np.float32)
 
     def bounds(self, times: list[dt.datetime]) -> np.ndarray:
         """Each zone's (lower, upper) edges at `times`, [T, K, 2]: its bounds widened by the spec's `tolerance`, the
@@ -76,11 +87,12 @@ class Calendar:
         out = {"comfort_seen": self.seen, "comfort_applied": self.applied, "bound_sum": self.bound_sum,
                "bound_seen": self.bound_seen}  # fmt: skip
         if len(self.dated):
-            flat, day = self.dated.reshape(len(self.dated), -1), self.dated_weekday
+            flat, day, on = self.dated.reshape(len(self.dated), -1), self.dated_weekday, self.dated_applies
             starts = np.ones(len(day), bool)
-            starts[1:] = (day[1:] != day[:-1]) | np.any(flat[1:] != flat[:-1], axis=1)
+            starts[1:] = (day[1:] != day[:-1]) | (on[1:] != on[:-1]) | np.any(flat[1:] != flat[:-1], axis=1)
             at = np.flatnonzero(starts)
-            out |= {"dated_runs": at.astype(np.int32), "dated_bounds": self.dated[at], "dated_weekday": day[at]}
+            out |= {"dated_runs": at.astype(np.int32), "dated_bounds": self.dated[at], "dated_weekday": day[at],
+                    "dated_applies": on[at]}  # fmt: skip
         return out
 
     def load(self, state: dict) -> None:
@@ -96,6 +108,8 @@ class Calendar:
         if "dated_runs" in state:  # each run holds until the next one starts
             run = np.searchsorted(np.asarray(state["dated_runs"], int), np.arange(len(self.dated)), side="right") - 1
             self.dated, self.dated_weekday = bounds[run], day[run]
+            if "dated_applies" in state:
+                self.dated_applies = np.asarray(state["dated_applies"], np.int8)[run]
         else:  # the first planners (2026-11-27): the entries that differ from the weekly slots' means
             at = np.asarray(state["dated_at"], int)
             self.dated[at], self.dated_weekday[at] = bounds, day
@@ -104,13 +118,14 @@ class Calendar:
         """What `Calendar(**settings)` needs besides `state()`: the export's JSON."""
         clock = None if self.clock is None else self.clock.astype(int).tolist()
         return {"mode": self.mode, "step_minutes": self.step_minutes, "fixed": self.fixed.tolist(),
-                "tolerance": self.tolerance, "clock": clock}  # fmt: skip
+                "tolerance": self.tolerance, "clock": clock, "occupied_only": self.occupied_only}  # fmt: skip
 
     @classmethod
     def from_arrays(cls, settings: dict, state: dict) -> Calendar:
         clock = settings.get("clock")
         calendar = cls(settings["mode"], settings["step_minutes"], np.asarray(settings["fixed"], np.float32),
-                       settings["tolerance"], None if clock is None else np.asarray(clock, bool))  # fmt: skip
+                       settings["tolerance"], None if clock is None else np.asarray(clock, bool),
+                       settings.get("occupied_only", False))  # fmt: skip
         calendar.load(state)
         return calendar
 
@@ -118,12 +133,12 @@ class Calendar:
 class ComfortTimes(Calendar):
     """A building's calendar, learned from the steps the model sees (`learn`)."""
 
-    def __init__(self, building: str | None, step_minutes: float):
+    def __init__(self, building: str | None, step_minutes: float, occupied_only: bool = False):
         from parallel_eplus.buildings.building import load_building
 
         self.comfort = c = load_building(building).comfort
         mode = THERMOSTAT if c.per_step else ALWAYS if c.always else OBSERVED if c.occupied.observation else CLOCK
-        super().__init__(mode, step_minutes, np.array(c.zone_bands, np.float32), c.tolerance)
+        super().__init__(mode, step_minutes, np.array(c.zone_bands, np.float32), c.tolerance, None, occupied_only)
         if mode == CLOCK:  # the spec's hours, at each weekly slot's end (a Monday: weekday 0)
             monday = dt.datetime(2024, 1, 1)
             ends = [monday + dt.timedelta(minutes=step_minutes * k) for k in range(self.slots)]
@@ -140,7 +155,7 @@ class ComfortTimes(Calendar):
                 self.bound_sum[k] += bounds[i]
                 self.bound_seen[k] += 1
                 d = self._date_slot(t)
-                self.dated[d], self.dated_weekday[d] = bounds[i], t.weekday()
+                self.dated[d], self.dated_weekday[d], self.dated_applies[d] = bounds[i], t.weekday(), bool(a)
 
     def bounds_of(self, values: dict) -> np.ndarray | None:
         """[1, K, 2]: a step's per-zone thermostat bounds from its sensor values (info), or None."""

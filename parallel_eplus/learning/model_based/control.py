@@ -46,7 +46,7 @@ class MPC:
         self.layout = model.layout if model is not None else Layout.of(b, width)  # a saved model keeps its own
         self.settings = settings
         self.model = model or Ensemble(self.layout, settings, seed)
-        self.comfort_times = ComfortTimes(building, self.step_minutes)
+        self.comfort_times = ComfortTimes(building, self.step_minutes, settings.comfort_hours == "occupied")
         self.energy_weights = EnergyWeights.of_building(self.layout, b, objective)  # the run's objective's
         self.margin_c, self.power_weight = margin_c, power_weight
         self.seed = seed
@@ -202,6 +202,7 @@ class PlannerOptions:
             mpc.warm = np.zeros((len(mpc.warm), mpc.settings.horizon, mpc.layout.n_actions), np.float32)
             if mpc.settings.comfort_weight is not None:  # the weight the planner plans with, not only its setting
                 mpc.comfort_weight = mpc.settings.comfort_weight
+            mpc.comfort_times.occupied_only = mpc.settings.comfort_hours == "occupied"
         if self.seed is not None:
             mpc.seed = self.seed
         if self.forecast != "perfect":

@@ -52,6 +52,11 @@ class MPCSettings(FromText):
     # if every member's prediction keeps it, a chance constraint from the ensemble's spread).
     comfort_risk: str = "mean"
     terminal_weight: float = 0.0  # the horizon's last step's comfort term counts 1 + this many times
+    # Where a building scored against its own thermostats (`band = "thermostat"`) pays for comfort: "all" steps,
+    # setbacks too (BOPTEST's total discomfort), or "occupied" steps only (its share in own bounds and occupied
+    # K.h; calendar.py). At every step, the warehouse's planner heated at night against setbacks its own controls
+    # droop 0.3 K below, which no occupied score counts.
+    comfort_hours: str = "all"
     noise: float = 0.0  # exploration added to the planner's action in training (normalized units)
     # Distillation (distill.py): the policy network fitted to the planner's own actions.
     distill: bool = True
@@ -72,6 +77,8 @@ class MPCSettings(FromText):
     student_comfort_weight: float = 1.0  # the comfort term's weight in the student's cost (the energy term ~1 a step)
 
     def __post_init__(self):
+        if self.comfort_hours not in ("all", "occupied"):
+            raise ValueError(f"comfort_hours {self.comfort_hours!r}: 'all' or 'occupied'")
         if self.comfort_risk not in ("mean", "worst"):
             raise ValueError(f"comfort_risk {self.comfort_risk!r}: 'mean' or 'worst'")
         if self.student not in ("dagger", "gradient"):
