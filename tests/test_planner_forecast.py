@@ -73,19 +73,6 @@ def test_planner_options_are_checked_before_anything_runs():
         PlannerOptions.parse("comfort_risk=best")
 
 
-def test_planner_options_replace_the_saved_comfort_settings():
-    """`--planner comfort_weight=W` plans with W, not with the multiplier the run ended with; `comfort_hours`
-    reaches the calendar the planner reads."""
-    from parallel_eplus.learning.model_based.control import MPC, planner_file
-
-    saved = MPC.load(planner_file(PLANNER))
-    other = PlannerOptions.parse("candidates=64").apply(MPC.load(planner_file(PLANNER)))
-    assert other.comfort_weight == saved.comfort_weight != 3.5
-    assert PlannerOptions.parse("comfort_weight=3.5").apply(saved).comfort_weight == 3.5
-    assert not saved.comfort_times.occupied_only
-    assert PlannerOptions.parse("comfort_hours=occupied").apply(saved).comfort_times.occupied_only
-
-
 @pytest.mark.slow
 def test_a_planner_with_forecast_errors_plans_differently_on_the_same_day(tmp_path, no_leaks):
     perfect = planner_controller(f"{PLANNER}=Perfect")

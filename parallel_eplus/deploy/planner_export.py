@@ -124,6 +124,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
             "margin_c": mpc.margin_c, "power_weight": mpc.power_weight, "comfort_weight": mpc.comfort_weight,
             "seed": mpc.seed, "step_minutes": mpc.step_minutes,
             "layout": asdict(mpc.layout), "calendar": mpc.comfort_times.settings(),
+            "comfort_reference": mpc.settings.comfort_reference, "thermostat_sides": mpc.thermostat_sides,
             "schedule": [list(p) for p in mpc.forecasts(weathers[0]).schedule or ()] or None,
             "energy": mpc.energy_weights.entry(_tariff_values(mpc.energy_weights, spec, out_dir)),
         },  # fmt: skip

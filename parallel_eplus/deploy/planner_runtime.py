@@ -23,7 +23,7 @@ import numpy as np
 
 from parallel_eplus.buildings.weather_forecast import WEATHER
 from parallel_eplus.deploy.contract import Contract, InputError
-from parallel_eplus.learning.model_based.calendar import Calendar
+from parallel_eplus.learning.model_based.calendar import Calendar, own_reference
 from parallel_eplus.learning.model_based.dataset import Layout
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble
@@ -61,6 +61,8 @@ class PlannerRuntime:
         parts = self.layout.n_state - len(self.layout.temperatures)
         self.energy = EnergyWeights.from_entry(p.get("energy"), parts, Path(directory))  # the objective's prices
         self.calendar = Calendar.from_arrays(p["calendar"], {k: v for k, v in arrays.items() if k in _CALENDAR})
+        self.reference = p.get("comfort_reference", "bound")  # "own": discomfort beyond the own thermostats' is paid
+        self.sides = [tuple(x) if x is not None else None for x in p.get("thermostat_sides", [])]
         self.own = arrays["own_controls"]  # [12, 24, A] physical: the building's own setpoints by month and hour
         self.x_mean, self.x_std = arrays["x_mean"], arrays["x_std"]
         self.low = np.array([o["low"] for o in contract.outputs])
@@ -82,8 +84,12 @@ class PlannerRuntime:
         exo = exogenous(weather, times, self.schedule)[None]
         seed = decision_seed(self.seed, when.isoformat(), s[0])
         weights = None if self.energy.objective == "energy" else self.energy.at([when, *times[:-1]])[None]
-        plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], self.calendar.bounds(times)[None],
-                                 self.comfort_weight, self.support, warm[None], [seed], weights)  # fmt: skip
+        bounds = self.calendar.bounds(times)
+        reference = None
+        if self.reference == "own":
+            reference = own_reference(bounds, self.calendar.tolerance, self.sides, self.low, self.high, a_last)[None]
+        plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], bounds[None], self.comfort_weight,
+                                 self.support, warm[None], [seed], weights, reference)  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),

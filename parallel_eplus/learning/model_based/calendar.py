@@ -162,3 +162,19 @@ class ComfortTimes(Calendar):
         if self.mode != THERMOSTAT:
             return None
         return np.array([self.comfort.bounds(values)], float)
+
+
+def own_reference(bounds: np.ndarray, tolerance: float, sides: list, low: np.ndarray, high: np.ndarray,
+                  a_last: np.ndarray) -> np.ndarray:  # fmt: skip
+    """What the building's own thermostats would set over a horizon, normalized [H, A]: each thermostat action at
+    its zone's own setpoint (the bounds `bounds` [H, K, 2], less the tolerance they were widened by), every other
+    action held at `a_last` [A]. `sides`: per action, (zone, 0 heating or 1 cooling), or None (not a thermostat).
+    The planner's `comfort_reference = "own"` plays it through the model: a candidate pays only for discomfort
+    beyond what these would have from the same state."""
+    ref = np.repeat(np.asarray(a_last, np.float32)[None], len(bounds), axis=0)
+    for i, side in enumerate(sides):
+        if side is not None:
+            zone, edge = side
+            value = bounds[:, zone, edge] + (tolerance if edge == 0 else -tolerance)
+            ref[:, i] = 2 * (value - low[i]) / (high[i] - low[i]) - 1
+    return np.clip(ref, -1, 1)

@@ -20,7 +20,7 @@ from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.weather_forecast import FORECASTS
-from parallel_eplus.learning.model_based.calendar import ComfortTimes
+from parallel_eplus.learning.model_based.calendar import ComfortTimes, own_reference
 from parallel_eplus.learning.model_based.dataset import Layout
 from parallel_eplus.learning.model_based.dynamics import Ensemble
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
@@ -58,6 +58,15 @@ class MPC:
         self.warm = np.zeros((workers, settings.horizon, n_actions), np.float32)
         self.last: Plan | None = None
         self.initial = np.array([2 * (a.initial - a.low) / (a.high - a.low) - 1 for a in b.actions], np.float32)
+        self.action_low = np.array([a.low for a in b.actions], float)  # as the served planner reads them
+        self.action_high = np.array([a.high for a in b.actions], float)
+        self.thermostat_sides = thermostat_sides(b)
+        self.check_reference()
+
+    def check_reference(self) -> None:
+        if self.settings.comfort_reference == "own" and not any(self.thermostat_sides):
+            raise ValueError(f"comfort_reference=own: {self.building or 'the building'} has no thermostat action "
+                             "(a zone's heating or cooling setpoint) whose own setpoints the planner could play")
 
     def refresh(self) -> None:
         """The planner's forward from the model's current weights (after every fit)."""
@@ -94,8 +103,13 @@ class MPC:
         s = self.layout.state(np.asarray(obs)[:, : len(self.layout.sensors)])
         a_last = np.asarray(a_last, np.float32)
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
+        reference = None
+        if self.settings.comfort_reference == "own":
+            tol = self.comfort_times.tolerance
+            reference = np.stack([own_reference(bounds[i], tol, self.thermostat_sides, self.action_low,
+                                                self.action_high, a_last[i]) for i in range(len(s))])  # fmt: skip
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
-                                      self.warm[: len(s)], seeds, weights)  # fmt: skip
+                                      self.warm[: len(s)], seeds, weights, reference)  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         return self.last.action
 
@@ -130,6 +144,20 @@ class MPC:
     def load(cls, path: Path, workers: int = 1, seed: int = 0) -> MPC:
         state = th.load(path, weights_only=True)  # tensors, numbers, strings: a shared planner cannot run code
         return cls.from_state(state, workers, seed)
+
+
+def thermostat_sides(building) -> list[tuple[int, int] | None]:
+    """Per action, the comfort zone whose thermostat it sets and which side (0 heating, 1 cooling), from its first
+    actuator and the zone temperatures' keys; None for any other action (a supply-air node, a fan)."""
+    keys = {o.key.lower(): o.name for o in building.spec.observations if o.key}
+    zones = list(building.temperatures)
+    sides: list[tuple[int, int] | None] = []
+    for action in building.actions:
+        a = action.actuators[0] if action.actuators else None
+        edge = {"heating setpoint": 0, "cooling setpoint": 1}.get(a.control_type.lower()) if a else None
+        name = keys.get(a.key.lower()) if a and edge is not None else None
+        sides.append((zones.index(name), edge) if name in zones else None)
+    return sides
 
 
 def planner_controller(spec: str, options: str | None = None):
@@ -203,6 +231,7 @@ class PlannerOptions:
             if mpc.settings.comfort_weight is not None:  # the weight the planner plans with, not only its setting
                 mpc.comfort_weight = mpc.settings.comfort_weight
             mpc.comfort_times.occupied_only = mpc.settings.comfort_hours == "occupied"
+            mpc.check_reference()
         if self.seed is not None:
             mpc.seed = self.seed
         if self.forecast != "perfect":

@@ -63,15 +63,19 @@ class Planner:
 
     def plan(self, s: np.ndarray, a_last: np.ndarray, exo: np.ndarray, applies: np.ndarray, bounds: np.ndarray,
              comfort_weight: float, support: tuple[np.ndarray, np.ndarray], warm: np.ndarray,
-             seeds: list[int], energy_weights: np.ndarray | None = None) -> Plan:  # fmt: skip
+             seeds: list[int], energy_weights: np.ndarray | None = None,
+             reference: np.ndarray | None = None) -> Plan:  # fmt: skip
         """s [W, n_state], a_last [W, A], exo [W, H, X], applies [W, H], each zone's bounds [W, H, K, 2], the
-        actions' support (low [A], high [A]), the warm start [W, H, A], one sampler seed per worker, and the
-        weights of the predicted energy parts [W, H, P] (None: each counts once)."""
+        actions' support (low [A], high [A]), the warm start [W, H, A], one sampler seed per worker, the
+        weights of the predicted energy parts [W, H, P] (None: each counts once), and the actions [W, H, A] whose
+        predicted discomfort is free (`comfort_reference = "own"`; None: every K beyond the bounds costs); the
+        reference is itself a candidate, so the search can always fall back on it."""
         t0 = time.perf_counter()
         c = self.settings
         w, h, a_n = len(s), c.horizon, a_last.shape[1]
         s, a_last = np.asarray(s, np.float32), np.asarray(a_last, np.float32)
         low, high = (np.asarray(b, np.float32) for b in support)
+        reference = None if reference is None else np.asarray(reference, np.float32)
         rngs = [np.random.default_rng(seed) for seed in seeds]
         mean, std = np.asarray(warm, np.float32).copy(), np.full((w, h, a_n), c.init_std, np.float32)
         for i in range(c.iterations):
@@ -81,9 +85,12 @@ class Planner:
             noise = np.stack([r.standard_normal((n, h, a_n), np.float32) for r in rngs])
             delta = mean[:, None] + std[:, None] * noise
             delta[:, 0] = mean  # the warm start itself is always a candidate
+            if reference is not None:  # and so is the reference: the own thermostats' plan, however far away
+                delta[:, 1] = np.diff(np.concatenate([a_last[:, None], reference], axis=1), axis=1)
             np.clip(delta, -c.max_increment, c.max_increment, out=delta)
             actions = np.clip(a_last[:, None, None, :] + np.cumsum(delta, axis=2), low, high)
-            cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight, energy_weights)
+            cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight, energy_weights,
+                                      reference)  # fmt: skip
             elite = np.argpartition(cost, elites - 1, axis=1)[:, :elites]
             chosen = np.take_along_axis(delta, elite[:, :, None, None], axis=1)
             mean, std = chosen.mean(1), np.maximum(chosen.std(1, ddof=1), 0.01)
@@ -96,9 +103,13 @@ class Planner:
         return Plan(plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms)
 
     def _cost(self, s, a_last, actions, exo, applies, bounds, comfort_weight: float,
-              energy_weights: np.ndarray | None) -> tuple[np.ndarray, ...]:  # fmt: skip
+              energy_weights: np.ndarray | None, reference=None) -> tuple[np.ndarray, ...]:  # fmt: skip
         """Each candidate's cost over the horizon and its members' largest temperature spread: ([W, N], [W, N]),
-        from actions [W, N, H, A]. (Sums, not means, over the members: numpy's mean costs more per call.)"""
+        from actions [W, N, H, A]. (Sums, not means, over the members: numpy's mean costs more per call.) A
+        `reference` [W, H, A] rides along as one more candidate, each member's discomfort on it subtracted from
+        that member's on every candidate."""
+        if reference is not None:
+            actions = np.concatenate([actions, reference[:, None]], axis=1)
         w, n, h, a_n = actions.shape
         e, k, ns, b = self.members, self.n_temps, s.shape[1], w * n
         x0, x1 = ns + 2 * a_n, ns + 2 * a_n + exo.shape[2]
@@ -124,6 +135,9 @@ class Planner:
                 total += (out[:, :, k:].sum(0) * weights[:, step]).sum(-1) * energy_scale
             over = np.maximum(lo[:, step] - temps, temps - hi[:, step])
             np.maximum(over, 0, out=over)
+            if reference is not None:  # beyond the reference's, per member and zone (no credit for beating it)
+                rows = over.reshape(e, w, n, k)
+                over = np.maximum(rows - rows[:, :, -1:], 0).reshape(e, b, k)
             over = over.sum(-1)  # [E, W*N]
             weight = applied[:, step] * (1 + self.settings.terminal_weight if step == h - 1 else 1)
             total += (over.max(0) if worst_case else over.sum(0) * (1 / e)) * weight
@@ -136,4 +150,6 @@ class Planner:
                 flat[:, :, :k] = temps
                 flat[:, :, k:ns] = out[:, :, k:]
                 inputs[..., ns : ns + a_n] = actions[:, :, step]
+        if reference is not None:
+            return total.reshape(w, n)[:, :-1], worst.reshape(w, n)[:, :-1]
         return total.reshape(w, n), worst.reshape(w, n)

@@ -57,6 +57,12 @@ class MPCSettings(FromText):
     # K.h; calendar.py). At every step, the warehouse's planner heated at night against setbacks its own controls
     # droop 0.3 K below, which no occupied score counts.
     comfort_hours: str = "all"
+    # What discomfort a candidate pays for: all of it beyond the bounds ("bound"), or only what exceeds the
+    # discomfort the building's own thermostats would have from the same state, played through the same model
+    # ("own"; calendar.own_reference). A zone its own controls cannot hold either (the warehouse's bulk storage,
+    # which has no cooling) then costs nothing to leave as it is; against the bound, the planner cooled its
+    # neighbours for it.
+    comfort_reference: str = "bound"
     noise: float = 0.0  # exploration added to the planner's action in training (normalized units)
     # Distillation (distill.py): the policy network fitted to the planner's own actions.
     distill: bool = True
@@ -79,6 +85,8 @@ class MPCSettings(FromText):
     def __post_init__(self):
         if self.comfort_hours not in ("all", "occupied"):
             raise ValueError(f"comfort_hours {self.comfort_hours!r}: 'all' or 'occupied'")
+        if self.comfort_reference not in ("bound", "own"):
+            raise ValueError(f"comfort_reference {self.comfort_reference!r}: 'bound' or 'own'")
         if self.comfort_risk not in ("mean", "worst"):
             raise ValueError(f"comfort_risk {self.comfort_risk!r}: 'mean' or 'worst'")
         if self.student not in ("dagger", "gradient"):

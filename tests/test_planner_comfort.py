@@ -1,0 +1,105 @@
+"""What the planner pays for comfort: `comfort_weight`, `comfort_hours` and `comfort_reference` (settings.py), on
+the committed planners."""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.learning.model_based.calendar import own_reference
+from parallel_eplus.learning.model_based.control import MPC, PlannerOptions, planner_file, thermostat_sides
+
+ROOT = Path(__file__).resolve().parents[1]
+PLANNER = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0/best/planner"
+OFFICE = ROOT / "results/model-based/office-small/runs/office-small-mpc-seed0/planner"
+
+
+def test_planner_options_replace_the_saved_comfort_settings():
+    """`--planner comfort_weight=W` plans with W, not with the multiplier the run ended with; `comfort_hours`
+    reaches the calendar the planner reads."""
+    saved = MPC.load(planner_file(PLANNER))
+    other = PlannerOptions.parse("candidates=64").apply(MPC.load(planner_file(PLANNER)))
+    assert other.comfort_weight == saved.comfort_weight != 3.5
+    assert PlannerOptions.parse("comfort_weight=3.5").apply(saved).comfort_weight == 3.5
+    assert not saved.comfort_times.occupied_only
+    assert PlannerOptions.parse("comfort_hours=occupied").apply(saved).comfort_times.occupied_only
+
+
+
+def test_the_own_reference_sets_each_thermostat_to_its_zone_s_own_setpoint():
+    office = load_building("office-small")
+    sides = thermostat_sides(office)
+    assert sides == [(0, 1), (0, 0)]  # cooling, heating: the core zone's thermostat (all five share its schedules)
+    low, high = (np.array([getattr(a, k) for a in office.actions], np.float32) for k in ("low", "high"))
+    bounds = np.zeros((3, 5, 2), np.float32)
+    bounds[..., 0], bounds[..., 1] = 15.4, 26.9  # the setbacks 15.6 and 26.7, widened by the 0.2 K tolerance
+    ref = own_reference(bounds, 0.2, sides, low, high, np.zeros(2, np.float32))
+    physical = low + (ref + 1) / 2 * (high - low)
+    np.testing.assert_allclose(physical, np.broadcast_to([26.7, 15.6], (3, 2)), atol=1e-5)
+    held = own_reference(bounds, 0.2, [None, (0, 0)], low, high, np.array([0.3, 0.0], np.float32))
+    assert np.all(held[:, 0] == np.float32(0.3))  # not a thermostat: held where it is
+
+
+def test_a_candidate_that_plays_the_reference_pays_for_no_discomfort():
+    """Against the bound, a plan that lets the office drift pays for it; measured against itself, nothing."""
+    mpc = MPC.load(planner_file(OFFICE))
+    info = {"time": dt.datetime(2013, 1, 8, 7, 0), "weather": "CA"}
+    exo, applies, bounds, weights = mpc.future([info])
+    obs = np.array([[8.0, 15.0, 15.0, 15.0, 15.0, 15.0, 3000.0, 0.0, 0.0, 0.0]], np.float32)
+    s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
+    a_last = np.array([[1.0, -1.0]], np.float32)  # the setbacks' far ends: cold at the day's start
+    plans = np.repeat(a_last[:, None, None, :], mpc.settings.horizon, axis=2)  # [1, 1, H, A]
+    free, _ = mpc.planner._cost(s, a_last, plans, exo, applies, bounds, 0.0, weights)
+    paid, _ = mpc.planner._cost(s, a_last, plans, exo, applies, bounds, 100.0, weights)
+    relative, _ = mpc.planner._cost(s, a_last, plans, exo, applies, bounds, 100.0, weights, plans[:, 0])
+    assert paid[0, 0] > free[0, 0] + 1  # out of its bounds at 07:00: the comfort term is paid
+    np.testing.assert_allclose(relative, free, rtol=1e-5)
+
+
+def test_comfort_reference_own_is_refused_where_no_action_is_a_thermostat():
+    with pytest.raises(ValueError, match="no thermostat action"):
+        PlannerOptions.parse("comfort_reference=own").apply(MPC.load(planner_file(PLANNER)))
+
+
+@pytest.mark.slow
+def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_and_serves_the_same(tmp_path):
+    """The export's own check: the served planner answers sampled decisions exactly as the in-process one."""
+    import json
+    import shutil
+
+    from parallel_eplus.buildings.weather_forecast import WEATHER
+    from parallel_eplus.deploy.contract import Contract
+    from parallel_eplus.deploy.export import export
+    from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+    from parallel_eplus.learning.model_based.features import step_times
+
+    mpc = PlannerOptions.parse("comfort_reference=own,comfort_hours=occupied").apply(MPC.load(planner_file(OFFICE)))
+    folder = tmp_path / "run" / "planner"
+    mpc.save(folder / "planner.pt")
+    shutil.copy(OFFICE / "config.json", folder / "config.json")
+    export(folder, tmp_path / "served", record_days=1)
+    planner = Contract.read(tmp_path / "served").data["planner"]
+    assert planner["comfort_reference"] == "own" and planner["calendar"]["occupied_only"] is True
+    assert planner["thermostat_sides"] == [[0, 1], [0, 0]]
+    # a cold morning, where paying only beyond the own thermostats' discomfort changes the plan
+    runtime = PlannerRuntime(tmp_path / "served", Contract.read(tmp_path / "served"))
+    when, last = dt.datetime(2013, 1, 8, 7, 0), np.array([24.0, 21.0])
+    obs = np.array([[8.0, 18.0, 18.0, 18.0, 18.0, 18.0, 3000.0, 0.0, 0.0, 0.0]], np.float32)
+    sensors = [i["name"] for i in json.loads((tmp_path / "served" / "controller.json").read_text())["inputs"]]
+    truth = mpc.forecasts("CA").file.truth(step_times(when, mpc.step_minutes, mpc.settings.horizon))
+    body = {"time": when.isoformat(), "sensors": dict(zip(sensors, map(float, obs[0, : len(sensors)]), strict=True)),
+            "last_setpoints": {"cooling_setpoint_c": 24.0, "heating_setpoint_c": 21.0},
+            "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)}}  # fmt: skip
+    answer = runtime.act(body)["setpoints"]
+    served = np.array([answer[n]["value"] for n in ("cooling_setpoint_c", "heating_setpoint_c")])
+    a_last = (2 * (last - mpc.action_low) / (mpc.action_high - mpc.action_low) - 1).astype(np.float32)[None]
+    info = {"time": when, "weather": "CA"}
+    own = mpc.act(obs, [info], a_last)[0]
+    mpc.reset(0)
+    bound = PlannerOptions.parse("comfort_reference=bound").apply(mpc).act(obs, [info], a_last)[0]
+    assert not np.allclose(own, bound)  # the reference reached the plan
+    np.testing.assert_allclose(served, mpc.action_low + (own + 1) / 2 * (mpc.action_high - mpc.action_low), atol=1e-4)
