@@ -61,6 +61,10 @@ RECIPES = {
     # own bounds and occupied K.h count): at every step, the warehouse's planner heated against night setbacks
     "occupied": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05",
                  "--mpc", f"{PLANNER},comfort_hours=occupied", *COMMON],
+    # and only the discomfort beyond its own thermostats' plan paid for, that plan always a candidate
+    # (`comfort_reference=own`): the warehouse's planner cooled the storage for a zone with no cooling
+    "own": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05",
+            "--mpc", f"{PLANNER},comfort_hours=occupied,comfort_reference=own", *COMMON],
 }
 
 
