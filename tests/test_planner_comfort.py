@@ -103,3 +103,16 @@ def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_a
     bound = PlannerOptions.parse("comfort_reference=bound").apply(mpc).act(obs, [info], a_last)[0]
     assert not np.allclose(own, bound)  # the reference reached the plan
     np.testing.assert_allclose(served, mpc.action_low + (own + 1) / 2 * (mpc.action_high - mpc.action_low), atol=1e-4)
+
+
+def test_the_reference_candidate_makes_up_a_jump_it_cannot_make_at_once():
+    """From a setback at the top of the range to an occupied setpoint 1.5 away, 0.15 a step: there in ten steps
+    and held (clipping each step's increment alone left it 0.15 from the start for the whole horizon)."""
+    from parallel_eplus.learning.model_based.planner import _follow
+
+    target = np.full((1, 12, 1), -0.5, np.float32)
+    path = _follow(np.ones((1, 1), np.float32), target, 0.15, np.full(1, -1.0), np.full(1, 1.0))
+    np.testing.assert_allclose(path[0, :, 0], [0.85, 0.7, 0.55, 0.4, 0.25, 0.1, -0.05, -0.2, -0.35, -0.5, -0.5, -0.5],
+                               atol=1e-6)  # fmt: skip
+    inside = _follow(np.ones((1, 1), np.float32), target, 1.0, np.full(1, 0.0), np.full(1, 1.0))
+    assert np.all(inside == 0.0)  # the support's edge, where the target lies beyond it

@@ -78,7 +78,8 @@ class _Loop:
                        objective=cfg.objective)
         self.data = Transitions(self.mpc.layout)
         self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
-        self.mpc.comfort_weight = self.s.comfort_weight or cfg.comfort.multiplier_init
+        fixed = self.s.comfort_weight
+        self.mpc.comfort_weight = cfg.comfort.multiplier_init if fixed is None else fixed  # 0: comfort unpaid
         self.steps, self.replay = 0, {}
         if self.s.student == "gradient" and cfg.forecast_hours:
             raise ValueError("--mpc student=gradient: a policy observing --forecast cannot be rebuilt along the "

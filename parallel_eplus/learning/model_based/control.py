@@ -10,6 +10,7 @@ planner's settings, the comfort weight and the comfort calendar) one episode at 
 
 from __future__ import annotations
 
+import logging
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.weather_forecast import FORECASTS
-from parallel_eplus.learning.model_based.calendar import ComfortTimes, own_reference
+from parallel_eplus.learning.model_based.calendar import THERMOSTAT, ComfortTimes, own_reference
 from parallel_eplus.learning.model_based.dataset import Layout
 from parallel_eplus.learning.model_based.dynamics import Ensemble
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
@@ -31,6 +32,7 @@ from parallel_eplus.learning.model_based.planner import Plan, Planner, decision_
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 PLANNER_FILE = "planner.pt"
+log = logging.getLogger(__name__)
 
 
 class MPC:
@@ -64,9 +66,18 @@ class MPC:
         self.check_reference()
 
     def check_reference(self) -> None:
-        if self.settings.comfort_reference == "own" and not any(self.thermostat_sides):
+        """`comfort_reference=own` needs the own thermostats' schedules as bounds (`band = "thermostat"`) and an
+        action setting one; `comfort_hours=occupied` on a planner saved before the calendar kept occupied hours by
+        date falls back on the weekly majority (daylight-saving time and holidays blurred): said, not refused."""
+        thermostat = self.comfort_times.mode == THERMOSTAT
+        if self.settings.comfort_reference == "own" and not (thermostat and any(self.thermostat_sides)):
             raise ValueError(f"comfort_reference=own: {self.building or 'the building'} has no thermostat action "
-                             "(a zone's heating or cooling setpoint) whose own setpoints the planner could play")
+                             "(a zone's heating or cooling setpoint) that follows a schedule its comfort bounds "
+                             "read (`band = \"thermostat\"`)")
+        dated = self.comfort_times.dated_applies
+        if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
+            log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
+                        "they were kept); it uses the weekly majority, which blurs daylight-saving time and holidays")
 
     def refresh(self) -> None:
         """The planner's forward from the model's current weights (after every fit)."""
@@ -138,6 +149,7 @@ class MPC:
         mpc.comfort_weight = float(state["comfort_weight"])
         mpc.support = tuple(np.asarray(state[k], np.float32) for k in ("support_low", "support_high"))
         mpc.comfort_times.load(state)
+        mpc.check_reference()
         return mpc
 
     @classmethod
@@ -147,16 +159,14 @@ class MPC:
 
 
 def thermostat_sides(building) -> list[tuple[int, int] | None]:
-    """Per action, the comfort zone whose thermostat it sets and which side (0 heating, 1 cooling), from its first
-    actuator and the zone temperatures' keys; None for any other action (a supply-air node, a fan)."""
-    keys = {o.key.lower(): o.name for o in building.spec.observations if o.key}
-    zones = list(building.temperatures)
+    """Per action, a comfort zone whose bound is the schedule the action's own thermostat setpoint follows, and
+    which bound (0 lower, 1 upper): `Building.own` against `Building.zone_bounds`. None where its actuators follow
+    no such schedule, or not all the same one (a supply-air node, a fan)."""
+    bounds = building.zone_bounds or ()
     sides: list[tuple[int, int] | None] = []
-    for action in building.actions:
-        a = action.actuators[0] if action.actuators else None
-        edge = {"heating setpoint": 0, "cooling setpoint": 1}.get(a.control_type.lower()) if a else None
-        name = keys.get(a.key.lower()) if a and edge is not None else None
-        sides.append((zones.index(name), edge) if name in zones else None)
+    for schedules in building.own or [() for _ in building.actions]:
+        found = [(k, e) for k, pair in enumerate(bounds) for e in (0, 1) if schedules and pair[e] == schedules[0]]
+        sides.append(found[0] if found and len(set(schedules)) == 1 else None)
     return sides
 
 

@@ -54,6 +54,18 @@ def decision_seed(seed: int, when: str, state: np.ndarray) -> int:
     return int.from_bytes(h.digest(), "little")
 
 
+def _follow(a_last: np.ndarray, target: np.ndarray, max_increment: float, low: np.ndarray,
+            high: np.ndarray) -> np.ndarray:  # fmt: skip
+    """The path [W, H, A] that moves from `a_last` [W, A] toward `target` [W, H, A] by at most `max_increment` a
+    step, within the support: what a candidate can make of the target (a jump it cannot make at once, it makes up
+    over the next steps)."""
+    path, x = np.empty_like(target), np.asarray(a_last, np.float32)
+    for t in range(target.shape[1]):
+        x = np.clip(x + np.clip(target[:, t] - x, -max_increment, max_increment), low, high)
+        path[:, t] = x
+    return path
+
+
 class Planner:
     """CEM over action increments; `settings` is an MPCSettings (or anything with its planner fields)."""
 
@@ -75,7 +87,8 @@ class Planner:
         w, h, a_n = len(s), c.horizon, a_last.shape[1]
         s, a_last = np.asarray(s, np.float32), np.asarray(a_last, np.float32)
         low, high = (np.asarray(b, np.float32) for b in support)
-        reference = None if reference is None else np.asarray(reference, np.float32)
+        if reference is not None:  # as a candidate can follow it: within the support, ±max_increment a step
+            reference = _follow(a_last, np.asarray(reference, np.float32), c.max_increment, low, high)
         rngs = [np.random.default_rng(seed) for seed in seeds]
         mean, std = np.asarray(warm, np.float32).copy(), np.full((w, h, a_n), c.init_std, np.float32)
         for i in range(c.iterations):
@@ -85,7 +98,7 @@ class Planner:
             noise = np.stack([r.standard_normal((n, h, a_n), np.float32) for r in rngs])
             delta = mean[:, None] + std[:, None] * noise
             delta[:, 0] = mean  # the warm start itself is always a candidate
-            if reference is not None:  # and so is the reference: the own thermostats' plan, however far away
+            if reference is not None:  # and so is the reference: the own thermostats' plan, as far as it can be
                 delta[:, 1] = np.diff(np.concatenate([a_last[:, None], reference], axis=1), axis=1)
             np.clip(delta, -c.max_increment, c.max_increment, out=delta)
             actions = np.clip(a_last[:, None, None, :] + np.cumsum(delta, axis=2), low, high)
