@@ -6,7 +6,7 @@
 #   bash studies/planner-year/run.sh [BUILDING[:FORECAST]...]   # default: every building, perfect then medium
 #   bash studies/planner-year/run.sh merge                       # the seeds' tables into results/model-based/*/
 #
-# Environment: WORK (episodes, outside the repository; default ../planner-year), SETTINGS (extra --planner
+# Environment: SEEDS (default "0 1 2"), WORK (episodes, outside the repository; default ../planner-year), SETTINGS (extra --planner
 # settings, default none: the planners' own), WORKERS (2: Ray tasks, one planner and one EnergyPlus each), COMMIT
 # (the code the study runs, a `git archive` copy, so later edits to the working tree cannot change its figures).
 set -euo pipefail
@@ -46,5 +46,5 @@ targets=("$@")
 for t in "${targets[@]}"; do
     b=${t%%:*}; f=perfect; [[ $t == *:* ]] && f=${t##*:}
     mkdir -p "$WORK/$b/$f"
-    for s in 0 1 2; do one "$b" "$f" "$s"; done
+    for s in ${SEEDS:-0 1 2}; do one "$b" "$f" "$s"; done
 done
