@@ -4,6 +4,10 @@ results/model-based/<building>/year-planner[-<forecast>]/.
 
     .venv/bin/python studies/planner-year/merge.py WORK RESULTS
     .venv/bin/python studies/planner-year/merge.py --one FOLDER OUT    # FOLDER/seed*/results.csv into OUT
+    .venv/bin/python studies/planner-year/merge.py --restore OUT FOLDER   # the reverse, for a new machine
+
+`--restore` writes back each committed seed's FOLDER/seed<k>/results.csv from OUT/results.csv, so that on a new
+machine the study resumes with the seeds still missing (and `--one` merges all of them again).
 """
 
 from __future__ import annotations
@@ -33,8 +37,21 @@ def merge(folder: Path, out: Path) -> None:
     log.info("%s: %d seeds -> %s", folder, len(parts), out)
 
 
+def restore(out: Path, folder: Path) -> None:
+    df = pd.read_csv(out / "results.csv")
+    baseline = df[df.controller == BASELINE_LABEL]
+    for run, rows in df[df.controller != BASELINE_LABEL].groupby("run"):
+        seed = folder / f"seed{str(run).rsplit('seed', 1)[1]}"
+        seed.mkdir(parents=True, exist_ok=True)
+        pd.concat([baseline, rows]).to_csv(seed / "results.csv", index=False)
+        log.info("%s: %s restored", seed, run)
+
+
 def main() -> None:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if sys.argv[1] == "--restore":
+        restore(Path(sys.argv[2]), Path(sys.argv[3]))
+        return
     if sys.argv[1] == "--one":
         merge(Path(sys.argv[2]), Path(sys.argv[3]))
         return
