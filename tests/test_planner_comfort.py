@@ -7,6 +7,7 @@ import datetime as dt
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.building import load_building
@@ -58,6 +59,18 @@ def test_a_candidate_that_plays_the_reference_pays_for_no_discomfort():
     relative, _ = mpc.planner._cost(s, a_last, plans, exo, applies, bounds, 100.0, weights, plans[:, 0])
     assert paid[0, 0] > free[0, 0] + 1  # out of its bounds at 07:00: the comfort term is paid
     np.testing.assert_allclose(relative, free, rtol=1e-5)
+
+
+def test_comfort_level_own_needs_a_comfort_target(tmp_path):
+    from parallel_eplus.learning.model_based.settings import MPCSettings
+    from parallel_eplus.training.config import ComfortConstraint, TrainConfig
+
+    with pytest.raises(ValueError, match="comfort_level=own .* --comfort-target"):
+        TrainConfig(algorithm="mpc", mpc=MPCSettings(comfort_level="own"), runs_dir=str(tmp_path)).resolved()
+    with pytest.raises(ValueError, match="comfort_level 'mine'"):
+        MPCSettings(comfort_level="mine")
+    TrainConfig(algorithm="mpc", mpc=MPCSettings(comfort_level="own"), comfort=ComfortConstraint(99.8),
+                runs_dir=str(tmp_path)).resolved()  # fmt: skip
 
 
 def test_comfort_reference_own_is_refused_where_no_action_is_a_thermostat():
@@ -116,3 +129,36 @@ def test_the_reference_candidate_makes_up_a_jump_it_cannot_make_at_once():
                                atol=1e-6)  # fmt: skip
     inside = _follow(np.ones((1, 1), np.float32), target, 1.0, np.full(1, 0.0), np.full(1, 1.0))
     assert np.all(inside == 0.0)  # the support's edge, where the target lies beyond it
+
+
+@pytest.mark.slow
+def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(tmp_path, no_leaks):
+    """`comfort_level=own`: the share out of band the record gives the multiplier, date by date, is the share
+    `evaluate` scores the building's own controls with over the same days (the office on CO, January 1-4 of
+    2017: a Sunday, then workdays with cold mornings)."""
+    from parallel_eplus.evaluation.controllers import Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
+    from parallel_eplus.learning.imitation import record_baseline
+    from parallel_eplus.learning.model_based.own_level import OwnLevel
+
+    office = load_building("office-small")
+    comfort = office.comfort
+    # the record pairs each observation with the next action: five days cover the four evaluated steps' ends
+    demos = record_baseline("office-small", ["CO"], 5, 1, tmp_path / "record", progress=False)
+    level = OwnLevel.from_record(demos, [s.name for s in office.observed], list(office.temperatures), comfort,
+                                 lambda t, v: comfort.applies(t, v), office.steps_per_day)  # fmt: skip
+    df = run_sweep([Controller("Baseline", "baseline")], ["CO"], 4, 1, tmp_path / "eval", False,
+                   building="office-small")  # fmt: skip
+    steps = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
+    applied = steps["time"][steps["comfort_applies"].astype(bool)].dt.to_pydatetime()
+    counts = [level.count("CO", t) for t in applied]
+    assert None not in counts and len(counts) > 200  # every occupied step evaluated is in the record
+    out = sum(counts)
+    share_out = 100 * out / (len(counts) * level.zones)
+    assert share_out > 0.5  # cold mornings: the count has something to count
+    assert share_out == pytest.approx(100 - df["in_band_pct"].iloc[0], abs=1e-9)
+    assert level.count("CO", dt.datetime(2017, 1, 1, 12, 0)) is None  # a Sunday: the band did not apply
+    assert level.allowed_pct(99.8, out, len(counts) * level.zones) == pytest.approx(share_out)
+    assert level.allowed_pct(90.0, out, len(counts) * level.zones) == 10.0  # the target's, where larger
+    again = OwnLevel.from_state(level.state(tensors=True))  # a checkpoint's round trip
+    np.testing.assert_array_equal(again.out["CO"], level.out["CO"])

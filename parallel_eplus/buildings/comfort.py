@@ -117,15 +117,12 @@ class Comfort:
         dollars = tracker.step(start, values[self.power])
         return dollars, self.kpis.demand_w(dollars, self.step_minutes)
 
-    def out_of_band(self, temps: tuple[float, ...], bounds=None) -> tuple[int, float]:
-        """(zones outside their bounds, their summed distance outside them in K)."""
-        n, dist = 0, 0.0
-        for t, (low, high) in zip(temps, bounds or self.zone_bands, strict=True):
-            if t < low:
-                n, dist = n + 1, dist + low - t
-            elif t > high:
-                n, dist = n + 1, dist + t - high
-        return n, dist
+    def outside(self, temps: tuple[float, ...], bounds=None) -> int:
+        """Zones outside their bounds widened by `tolerance`: what the share in band (`summarize`) counts as out.
+        `train --algorithm mpc` first counted against the bare bounds, where thermostat controls sit: on a
+        building scored with 0.2 K of tolerance its multiplier saw more samples out than any evaluation did."""
+        tol, pairs = self.tolerance, zip(temps, bounds or self.zone_bands, strict=True)
+        return sum(t < low - tol or t > high + tol for t, (low, high) in pairs)
 
     def cost(self, temps: tuple[float, ...], margin_c: float, bounds=None) -> tuple[float, int]:
         """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside its scored edges

@@ -57,19 +57,22 @@ class Lagrangian:
     settings: ComfortConstraint
     multiplier: float = 0.0
     measured_pct: float = float("nan")  # the last batch's share in band, where it applies
+    allowed_pct: float = float("nan")  # the share out of band it was allowed (the planner's own level: own_level.py)
     updates: int = 0
 
     @classmethod
     def start(cls, settings: ComfortConstraint) -> Lagrangian:
         return cls(settings, settings.multiplier_init)
 
-    def update(self, out: float, zones: float) -> float:
-        """The multiplier after a batch in which `out` of `zones` zone samples (where the band applied) left it."""
+    def update(self, out: float, zones: float, allowed_pct: float | None = None) -> float:
+        """The multiplier after a batch in which `out` of `zones` zone samples (where the band applied) left it;
+        `allowed_pct`: the share out of band this batch may have (None: the target's, 100 - target)."""
         s = self.settings
         if zones <= 0:  # nothing to measure (an unoccupied stretch): hold
             return self.multiplier
         self.measured_pct = 100.0 * (1.0 - out / zones)
-        ratio = (100.0 - self.measured_pct + s.floor_pct) / (100.0 - s.target_pct + s.floor_pct)
+        self.allowed_pct = 100.0 - s.target_pct if allowed_pct is None else allowed_pct
+        ratio = (100.0 - self.measured_pct + s.floor_pct) / (self.allowed_pct + s.floor_pct)
         self.multiplier = float(np.clip(self.multiplier * ratio**s.rate, s.multiplier_min, s.multiplier_max))
         self.updates += 1
         return self.multiplier
@@ -78,6 +81,7 @@ class Lagrangian:
         logger.record("comfort/multiplier", self.multiplier)
         logger.record("comfort/in_band_pct", self.measured_pct)
         logger.record("comfort/target_pct", self.settings.target_pct)
+        logger.record("comfort/allowed_out_pct", self.allowed_pct)
 
 
 def comfort_of(model) -> Lagrangian | None:

@@ -119,6 +119,9 @@ class TrainConfig:
             self._check_mbpo()
         if self.algorithm == "mpc" and (self.overlap or self.init_from or self.residual_scale):
             raise ValueError("--algorithm mpc plans on a model it learns: no --overlap, --init-from or --residual")
+        if self.mpc.comfort_level == "own" and (not self.constrained or self.mpc.comfort_weight is not None):
+            raise ValueError("--mpc comfort_level=own sets the share in band the multiplier holds: give "
+                             "--comfort-target PCT and no fixed comfort_weight")  # fmt: skip
         if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
             raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
         if self.residual_space not in RESIDUAL_SPACES:

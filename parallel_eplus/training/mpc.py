@@ -36,6 +36,7 @@ from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_ch
 from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE, planner_controller
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.dynamics import summary
+from parallel_eplus.learning.model_based.own_level import OwnLevel
 from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
 from parallel_eplus.runs.run_files import BEST_DIR
 from parallel_eplus.runs.run_status import RunStatus
@@ -80,7 +81,7 @@ class _Loop:
         self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
         fixed = self.s.comfort_weight
         self.mpc.comfort_weight = cfg.comfort.multiplier_init if fixed is None else fixed  # 0: comfort unpaid
-        self.steps, self.replay = 0, {}
+        self.steps, self.replay, self.own_level = 0, {}, None
         if self.s.student == "gradient" and cfg.forecast_hours:
             raise ValueError("--mpc student=gradient: a policy observing --forecast cannot be rebuilt along the "
                              "model's rollouts; leave --forecast out (the clock's features are rebuilt)")
@@ -136,7 +137,7 @@ class _Loop:
                             self.cfg.seed + self.steps, self.s.explore_hold,
                             self.building.steps_per_day) if self.replay else None  # fmt: skip
         rng = np.random.default_rng(self.cfg.seed + self.steps)
-        out = zones = 0.0
+        out = zones = own_out = own_zones = 0.0  # zone samples out of band: the planner's; its own controls' then
         while self.steps < self.cfg.timesteps:
             planning = self.steps >= self.s.explore_steps or explorer is None
             dagger = planning and self.s.distill and self.steps >= (1 - self.s.dagger_share) * self.cfg.timesteps
@@ -162,8 +163,11 @@ class _Loop:
                     temps = [after[t] for t in self.building.temperatures]
                     if after.get("comfort_applies", True):
                         bounds = self.building.comfort.bounds(after)  # the thermostat's, where they move
-                        out += self.building.comfort.out_of_band(tuple(temps), bounds)[0]
+                        out += self.building.comfort.outside(tuple(temps), bounds)
                         zones += len(temps)
+                        own = self.own_level.count(after["weather"], after["time"]) if self.own_level else None
+                        if own is not None:
+                            own_out, own_zones = own_out + own, own_zones + len(temps)
                 if dones[i]:
                     a_last[i], step_of[i], episode_of[i] = self.mpc.initial, 0, episode_of[i] + n
                     self.mpc.reset(i)
@@ -178,8 +182,8 @@ class _Loop:
                 cb.update_locals({"infos": new_infos, "dones": dones})
                 cb.on_step()
             if self.steps // self.s.refit_every != (self.steps - n) // self.s.refit_every:
-                self._update_comfort(out, zones)
-                out = zones = 0.0
+                self._update_comfort(out, zones, own_out, own_zones)
+                out = zones = own_out = own_zones = 0.0
                 self._refit(self.s.refit_epochs)
                 if self.student.fitted:
                     self.student.refit(self.mpc, self.cfg.seed + self.steps)
@@ -230,7 +234,8 @@ class _Loop:
     # -- the model, the comfort weight ----------------------------------------------------------
     def _record(self) -> None:
         days = self.s.record_days or (365 if self.cfg.random_start else self.cfg.run_days)  # dates to explore around
-        self.replay = record_own_controls(self.cfg, days, self.data, self.mpc, progress=self.bar.disable is False)
+        self.replay, level = record_own_controls(self.cfg, days, self.data, self.mpc, progress=not self.bar.disable)
+        self.own_level = level if self.s.comfort_level == "own" else None
         log.info("recorded the building's own controls: %d transitions", len(self.data))
 
     def _refit(self, epochs: int) -> None:
@@ -258,15 +263,19 @@ class _Loop:
         log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,
                  summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
-    def _update_comfort(self, out: float, zones: float) -> None:
+    def _update_comfort(self, out: float, zones: float, own_out: float, own_zones: float) -> None:
+        """The multiplier from the planner's batch; `own_*`: the own controls' on the batch's dates and weathers."""
         if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student.fitted:
-            self.mpc.comfort_weight = self.lagrangian.update(out, zones)
+            target = self.lagrangian.settings.target_pct
+            allowed = self.own_level.allowed_pct(target, own_out, own_zones) if self.own_level else None
+            self.mpc.comfort_weight = self.lagrangian.update(out, zones, allowed)
             self.lagrangian.record(self.logger)
 
     # -- checkpoints ----------------------------------------------------------------------------
     def _save_checkpoint(self) -> Path:
         extra = {"steps": self.steps, "lagrangian": None if self.lagrangian is None else self.lagrangian.multiplier,
-                 "replay": {w: th.as_tensor(a) for w, a in self.replay.items()}}  # fmt: skip
+                 "replay": {w: th.as_tensor(a) for w, a in self.replay.items()},
+                 "own_level": None if self.own_level is None else self.own_level.state(tensors=True)}  # fmt: skip
         return self.checkpoints.save(self.steps, self.mpc, self.data, extra, self.student.arrays())
 
     def _restore(self, checkpoint: Path) -> None:
@@ -275,6 +284,11 @@ class _Loop:
         self.data.layout = self.mpc.layout
         self.steps = state["steps"]
         self.replay = {w: np.asarray(a) for w, a in state["replay"].items()}
+        if self.s.comfort_level == "own":
+            if state.get("own_level") is None:
+                raise ValueError(f"--resume with comfort_level=own: {checkpoint} has no record of the building's "
+                                 "own comfort (a run started without it); start a new run")
+            self.own_level = OwnLevel.from_state(state["own_level"])
         if self.lagrangian is not None and state["lagrangian"] is not None:
             self.lagrangian.multiplier = state["lagrangian"]
         self.student.restore(policy)

@@ -23,6 +23,7 @@ import numpy as np
 from parallel_eplus.learning.model_based.calendar import ComfortTimes
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.exogenous import Forecasts
+from parallel_eplus.learning.model_based.own_level import OwnLevel
 
 
 def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: ComfortTimes,
@@ -51,9 +52,11 @@ def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: 
     return replay
 
 
-def record_own_controls(cfg, days: int, data: Transitions, mpc, progress: bool) -> dict[str, np.ndarray]:
+def record_own_controls(cfg, days: int, data: Transitions, mpc,
+                        progress: bool) -> tuple[dict[str, np.ndarray], OwnLevel]:  # fmt: skip
     """Record the building's own controls on the run's training weathers (`--init-from-baseline`'s recording)
-    into `data`; returns each weather's normalized actions, for `Explorer` to replay. `cfg`: the TrainConfig."""
+    into `data`; returns each weather's normalized actions, for `Explorer` to replay, and their comfort by date
+    (own_level.py). `cfg`: the TrainConfig."""
     import shutil
 
     from parallel_eplus.buildings.building import load_building
@@ -61,11 +64,17 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc, progress: bool) 
 
     folder = cfg.run_dir / "baseline-record"
     demos = record_baseline(cfg.building, cfg.weathers, days, cfg.workers, folder, progress=progress)
-    comfort = load_building(cfg.building).comfort
-    replay = add_baseline(data, demos, mpc.forecasts, mpc.comfort_times,
-                          lambda t, v: comfort.always or comfort.applies(t, v), 0)  # fmt: skip
+    building = load_building(cfg.building)
+    comfort = building.comfort
+
+    def applies(t, values) -> bool:
+        return comfort.always or comfort.applies(t, values)
+
+    replay = add_baseline(data, demos, mpc.forecasts, mpc.comfort_times, applies, 0)
+    level = OwnLevel.from_record(demos, data.layout.sensors, list(building.temperatures), comfort, applies,
+                                 building.steps_per_day)  # fmt: skip
     shutil.rmtree(folder, ignore_errors=True)
-    return replay
+    return replay, level
 
 
 class Explorer:
