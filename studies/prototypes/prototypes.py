@@ -82,7 +82,7 @@ class Study:
     steps: int = 35_000  # env steps per run
     workers: int = 2
     seeds: tuple[int, ...] = (0,)
-    recipe: str = "january"
+    recipe: str = "level"
 
     def folder(self, name: str) -> Path:
         return self.work / name
@@ -309,13 +309,14 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("command", choices=["prepare", "run", "table", "status"])
     p.add_argument("names", nargs="*", help="short names (default: all 16), e.g. medium-office")
-    p.add_argument("--work", type=Path, default=Path(os.environ.get("WORK", REPO.parent / "prototypes")))
+    p.add_argument("--work", type=Path, help="the runs and evaluations (default: $WORK, else ../prototypes-RECIPE)")
     p.add_argument("--out", type=Path, default=REPO / "results" / "prototypes")
     p.add_argument("--steps", type=int, default=Study.steps)
     p.add_argument("--seeds", default="0", help="comma-separated")
     p.add_argument("--minutes", type=float, default=110.0, help="the chunk: stop (checkpointed) after this long")
-    p.add_argument("--recipe", choices=sorted(RECIPES), default="january", help="the training recipe (RECIPES)")
+    p.add_argument("--recipe", choices=sorted(RECIPES), default="level", help="the training recipe (RECIPES)")
     a = p.parse_args(argv)
+    a.work = a.work or Path(os.environ.get("WORK", REPO.parent / f"prototypes-{a.recipe}"))
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     study = Study(a.work, a.out, a.steps, seeds=tuple(int(s) for s in a.seeds.split(",")), recipe=a.recipe)
     if a.command == "prepare":

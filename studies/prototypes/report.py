@@ -45,8 +45,8 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
     lines = ["# Every DOE reference prototype, scored", "",
              "Made by `python studies/prototypes/prototypes.py table` (the study: studies/prototypes/README.md). Each",
              "row is one model of the EnergyPlus wheel taken as a new user takes it: `building init`, the starter's",
-             "recommended actions, `building check`, the planner's recipe on CA, CO and FL "
-             f"({study.steps:,} steps, seeds {', '.join(map(str, study.seeds))}), then `evaluate` on BOPTEST's four",
+             f"recommended actions, `building check`, the planner's recipe (`--recipe {study.recipe}`) on CA, CO and",
+             f"FL ({study.steps:,} steps, seeds {', '.join(map(str, study.seeds))}), then `evaluate` on BOPTEST's four",
              "scenarios (peak and typical heating and cooling fortnights) on all five weathers (IL and VA held out).",
              "Ratios are the planner's over its own controls' (× built-in, CityLearn's form), summed over the 20",
              "fortnights (peak: the highest 15-minute mean); the bill under the example tariff with demand charges.",
