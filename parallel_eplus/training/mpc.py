@@ -234,8 +234,8 @@ class _Loop:
     # -- the model, the comfort weight ----------------------------------------------------------
     def _record(self) -> None:
         days = self.s.record_days or (365 if self.cfg.random_start else self.cfg.run_days)  # dates to explore around
-        self.replay, level = record_own_controls(self.cfg, days, self.data, self.mpc, progress=not self.bar.disable)
-        self.own_level = level if self.s.comfort_level == "own" else None
+        self.replay, self.own_level = record_own_controls(self.cfg, days, self.data, self.mpc,
+                                                          progress=not self.bar.disable)  # fmt: skip
         log.info("recorded the building's own controls: %d transitions", len(self.data))
 
     def _refit(self, epochs: int) -> None:

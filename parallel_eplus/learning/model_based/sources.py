@@ -53,10 +53,10 @@ def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: 
 
 
 def record_own_controls(cfg, days: int, data: Transitions, mpc,
-                        progress: bool) -> tuple[dict[str, np.ndarray], OwnLevel]:  # fmt: skip
+                        progress: bool) -> tuple[dict[str, np.ndarray], OwnLevel | None]:  # fmt: skip
     """Record the building's own controls on the run's training weathers (`--init-from-baseline`'s recording)
-    into `data`; returns each weather's normalized actions, for `Explorer` to replay, and their comfort by date
-    (own_level.py). `cfg`: the TrainConfig."""
+    into `data`; returns each weather's normalized actions, for `Explorer` to replay, and, with
+    `comfort_level=own`, their comfort by date (own_level.py). `cfg`: the TrainConfig."""
     import shutil
 
     from parallel_eplus.buildings.building import load_building
@@ -71,8 +71,10 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc,
         return comfort.always or comfort.applies(t, values)
 
     replay = add_baseline(data, demos, mpc.forecasts, mpc.comfort_times, applies, 0)
-    level = OwnLevel.from_record(demos, data.layout.sensors, list(building.temperatures), comfort, applies,
-                                 building.steps_per_day)  # fmt: skip
+    level = None
+    if cfg.mpc.comfort_level == "own":
+        level = OwnLevel.from_record(demos, data.layout.sensors, list(building.temperatures), comfort, applies,
+                                     building.steps_per_day)  # fmt: skip
     shutil.rmtree(folder, ignore_errors=True)
     return replay, level
 
