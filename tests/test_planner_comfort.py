@@ -160,5 +160,8 @@ def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(t
     assert level.count("CO", dt.datetime(2017, 1, 1, 12, 0)) is None  # a Sunday: the band did not apply
     assert level.allowed_pct(99.8, out, len(counts) * level.zones) == pytest.approx(share_out)
     assert level.allowed_pct(90.0, out, len(counts) * level.zones) == 10.0  # the target's, where larger
+    # as many zone samples again on steps the record does not know: those count at the target's 0.2 %
+    matched = len(counts) * level.zones
+    assert level.allowed_pct(99.8, out, matched, matched) == pytest.approx((share_out + 0.2) / 2)
     again = OwnLevel.from_state(level.state(tensors=True))  # a checkpoint's round trip
     np.testing.assert_array_equal(again.out["CO"], level.out["CO"])

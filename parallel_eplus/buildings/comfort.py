@@ -122,7 +122,7 @@ class Comfort:
         `train --algorithm mpc` first counted against the bare bounds, where thermostat controls sit: on a
         building scored with 0.2 K of tolerance its multiplier saw more samples out than any evaluation did."""
         tol, pairs = self.tolerance, zip(temps, bounds or self.zone_bands, strict=True)
-        return sum(t < low - tol or t > high + tol for t, (low, high) in pairs)
+        return sum(not low - tol <= t <= high + tol for t, (low, high) in pairs)  # a NaN reading: out
 
     def cost(self, temps: tuple[float, ...], margin_c: float, bounds=None) -> tuple[float, int]:
         """A step's comfort cost where the band applies (learning/lagrangian.py): per zone 0 inside its scored edges
@@ -135,7 +135,7 @@ class Comfort:
         for t, (low, high) in zip(temps, bounds or self.zone_bands, strict=True):
             d = max(low - tol + margin_c - t, t - high - tol + margin_c, 0.0) / margin_c
             total += d if d < 1.0 else 1.0
-            out += t < low - tol or t > high + tol
+            out += not low - tol <= t <= high + tol
         return total / len(temps), out
 
     def summarize(self, steps: pd.DataFrame) -> dict[str, float]:

@@ -30,6 +30,7 @@ from tqdm import tqdm
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.errors import EnergyPlusError, Interrupts
 from parallel_eplus.learning.lagrangian import Lagrangian
 from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
@@ -137,7 +138,7 @@ class _Loop:
                             self.cfg.seed + self.steps, self.s.explore_hold,
                             self.building.steps_per_day) if self.replay else None  # fmt: skip
         rng = np.random.default_rng(self.cfg.seed + self.steps)
-        out = zones = own_out = own_zones = 0.0  # zone samples out of band: the planner's; its own controls' then
+        out = zones = own_out = own_zones = unmatched = 0.0  # zone samples out: the planner's; its own controls' then
         while self.steps < self.cfg.timesteps:
             planning = self.steps >= self.s.explore_steps or explorer is None
             dagger = planning and self.s.distill and self.steps >= (1 - self.s.dagger_share) * self.cfg.timesteps
@@ -168,6 +169,8 @@ class _Loop:
                         own = self.own_level.count(after["weather"], after["time"]) if self.own_level else None
                         if own is not None:
                             own_out, own_zones = own_out + own, own_zones + len(temps)
+                        elif self.own_level:
+                            unmatched += len(temps)
                 if dones[i]:
                     a_last[i], step_of[i], episode_of[i] = self.mpc.initial, 0, episode_of[i] + n
                     self.mpc.reset(i)
@@ -182,8 +185,8 @@ class _Loop:
                 cb.update_locals({"infos": new_infos, "dones": dones})
                 cb.on_step()
             if self.steps // self.s.refit_every != (self.steps - n) // self.s.refit_every:
-                self._update_comfort(out, zones, own_out, own_zones)
-                out = zones = own_out = own_zones = 0.0
+                self._update_comfort(out, zones, own_out, own_zones, unmatched)
+                out = zones = own_out = own_zones = unmatched = 0.0
                 self._refit(self.s.refit_epochs)
                 if self.student.fitted:
                     self.student.refit(self.mpc, self.cfg.seed + self.steps)
@@ -237,6 +240,11 @@ class _Loop:
         self.replay, self.own_level = record_own_controls(self.cfg, days, self.data, self.mpc,
                                                           progress=not self.bar.disable)  # fmt: skip
         log.info("recorded the building's own controls: %d transitions", len(self.data))
+        if self.own_level is not None:
+            missing = [w for w in self.cfg.weathers if weather_label(w) not in self.own_level.out]
+            if missing:  # those weathers' batches are held to the target alone (`comfort/own_unmatched_pct`)
+                log.warning("comfort_level=own: the record has no steps on %s; there the target holds",
+                            ", ".join(missing))  # fmt: skip
 
     def _refit(self, epochs: int) -> None:
         t0 = time.perf_counter()
@@ -263,13 +271,16 @@ class _Loop:
         log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,
                  summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
-    def _update_comfort(self, out: float, zones: float, own_out: float, own_zones: float) -> None:
-        """The multiplier from the planner's batch; `own_*`: the own controls' on the batch's dates and weathers."""
+    def _update_comfort(self, out: float, zones: float, own_out: float, own_zones: float, unmatched: float) -> None:
+        """The multiplier from the planner's batch; `own_*`: the own controls' on the batch's dates and weathers,
+        `unmatched`: the batch's zone samples on steps their record does not know."""
         if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student.fitted:
             target = self.lagrangian.settings.target_pct
-            allowed = self.own_level.allowed_pct(target, own_out, own_zones) if self.own_level else None
+            allowed = self.own_level.allowed_pct(target, own_out, own_zones, unmatched) if self.own_level else None
             self.mpc.comfort_weight = self.lagrangian.update(out, zones, allowed)
             self.lagrangian.record(self.logger)
+            if self.own_level and zones:
+                self.logger.record("comfort/own_unmatched_pct", 100.0 * unmatched / zones)
 
     # -- checkpoints ----------------------------------------------------------------------------
     def _save_checkpoint(self) -> Path:

@@ -61,11 +61,14 @@ class OwnLevel:
         value = int(out[self._step(t) % len(out)])
         return None if value == _UNKNOWN else value
 
-    def allowed_pct(self, target_pct: float, own_out: float, own_zones: float) -> float:
-        """The share of zone samples a batch may leave out of band: the target's, or the own controls' over the
-        batch's matched steps where that is larger."""
+    def allowed_pct(self, target_pct: float, own_out: float, own_zones: float, unmatched: float = 0.0) -> float:
+        """The share of zone samples a batch may leave out of band: the target's, or the own controls' where that
+        is larger. `own_out` of `own_zones`: the own controls' on the batch's matched steps; `unmatched`: the
+        batch's zone samples on steps the record does not know, counted at the target's share, so a batch only
+        partly matched is not allowed the matched part's share over all of it."""
         allowed = 100.0 - target_pct
-        return allowed if own_zones <= 0 else max(allowed, 100.0 * own_out / own_zones)
+        zones = own_zones + unmatched
+        return allowed if own_zones <= 0 else max(allowed, 100.0 * (own_out + allowed / 100.0 * unmatched) / zones)
 
     def state(self, tensors: bool = False) -> dict:
         """Plain data; `tensors`: the arrays as torch tensors (a checkpoint loaded with `weights_only`)."""
