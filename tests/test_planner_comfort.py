@@ -131,6 +131,14 @@ def test_the_reference_candidate_makes_up_a_jump_it_cannot_make_at_once():
     assert np.all(inside == 0.0)  # the support's edge, where the target lies beyond it
 
 
+def test_the_own_jump_is_the_morning_setpoint_step_the_calendar_recorded():
+    """The office heats from its 15.6 C setback to 21 C in one step, on a 15-22 C action: 1.54 normalized,
+    beyond the 1.0 its planners were trained with (the warning at training's start); no thermostat, no jump."""
+    office = MPC.load(planner_file(OFFICE))
+    assert office.own_jump() == pytest.approx(2 * (21.0 - 15.6) / (22.0 - 15.0), abs=1e-4)
+    assert MPC.load(planner_file(PLANNER)).own_jump() == 0.0  # the data center: no thermostat action
+
+
 @pytest.mark.slow
 def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(tmp_path, no_leaks):
     """`comfort_level=own`: the share out of band the record gives the multiplier, date by date, is the share

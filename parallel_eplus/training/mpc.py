@@ -245,6 +245,11 @@ class _Loop:
             if missing:  # those weathers' batches are held to the target alone (`comfort/own_unmatched_pct`)
                 log.warning("comfort_level=own: the record has no steps on %s; there the target holds",
                             ", ".join(missing))  # fmt: skip
+        jump = self.mpc.own_jump()
+        if self.s.comfort_reference == "own" and jump > self.s.max_increment:
+            log.warning("comfort_reference=own: the building's own thermostats jump %.2f (normalized) in one step, "
+                        "beyond max_increment=%g: the planner reaches the occupied setpoint a step late and pays "
+                        "nothing for it; --mpc max_increment=2.0 lets it jump as they do", jump, self.s.max_increment)
 
     def _refit(self, epochs: int) -> None:
         t0 = time.perf_counter()

@@ -79,6 +79,21 @@ class MPC:
             log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
                         "they were kept); it uses the weekly majority, which blurs daylight-saving time and holidays")
 
+    def own_jump(self) -> float:
+        """The largest step, in normalized units, of the own thermostats' plan over the dates the calendar
+        recorded (0: none recorded, or no thermostat action). Beyond `max_increment`, no candidate reaches the
+        occupied setpoint at the step the schedule does, and neither does the own plan a candidate is measured
+        against: that step's discomfort is free (the restaurants' mornings, docs/model-based.md)."""
+        c = self.comfort_times
+        known = c.dated_weekday >= 0
+        if not any(self.thermostat_sides) or not known.any():
+            return 0.0
+        widened = c.dated + np.array([-c.tolerance, c.tolerance], np.float32)
+        ref = own_reference(widened, c.tolerance, self.thermostat_sides, self.action_low, self.action_high,
+                            np.zeros(len(self.action_low), np.float32))  # fmt: skip
+        steps = np.abs(np.diff(ref, axis=0))[known[1:] & known[:-1]]
+        return float(steps.max()) if len(steps) else 0.0
+
     def refresh(self) -> None:
         """The planner's forward from the model's current weights (after every fit)."""
         self.planner.forward = OnnxEnsemble(build_graph(self.model.arrays()))

@@ -36,7 +36,9 @@ class MPCSettings(FromText):
     iterations: int = 3
     elites: int = 32
     shrink: float = 1.0  # each CEM iteration after the first tries this share of the last one's candidates (elites)
-    max_increment: float = 0.15  # per control step, normalized action units
+    # per control step, normalized action units (2: the whole range). A thermostat's setback-to-occupied jump spans
+    # 1.5-1.7 of a prototype's range: below that the planner reaches it a step late (`MPC.own_jump`)
+    max_increment: float = 0.15
     init_std: float = 0.1
     # The planner's actions stay within the range of each action in the data widened by this
     # much (normalized units): a model knows nothing beyond its data, and a planner fitted on the building's own
