@@ -100,6 +100,22 @@ class DemandTracker:
         self.quarter: int | None = None  # the open quarter hour (minutes since the epoch // 15), its pieces' kW
         self.kw: list[float] = []
         self.peaks: dict[tuple[int, int, int], float] = {}  # (charge, year, month) -> running peak, kW
+        self.last_end: dt.datetime | None = None  # when the last step `observe` was given ended
+
+    def observe(self, end: dt.datetime, power_w: float) -> None:
+        """A reading of the step that ended at `end`, as a planner or its client sees the meter: each step once
+        however often it is read, and an episode's first reading (the end of its warm-up, no step of its own: the
+        reward's peaks start at 0 too) only marks the time."""
+        if self.last_end is not None and end > self.last_end:
+            self.step(end - dt.timedelta(minutes=self.step_minutes), power_w)
+        if self.last_end is None or end > self.last_end:
+            self.last_end = end
+
+    def month_peaks(self, names: Sequence[str], when: dt.datetime) -> dict[str, float]:
+        """The running peaks of the month of `when` by charge name (`names`: the tariff's charges in order), kW:
+        what a served planner's request carries (`demand_peaks_kw`)."""
+        return {n: self.peaks[(c, when.year, when.month)] for c, n in enumerate(names)
+                if (c, when.year, when.month) in self.peaks}  # fmt: skip
 
     def step(self, start: dt.datetime, power_w: float) -> float:
         """The demand charges ($) the quarter hours completed by this step (which began at `start`) add."""

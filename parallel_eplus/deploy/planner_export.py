@@ -119,6 +119,10 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         },
         "plan": {"required": False, "meaning": "the last answer's `plan` (the rest of its plan, normalized "
                  "increments), sent back to warm-start the search; without it the search starts from holding"},
+        "demand_peaks_kw": None if mpc.demand is None else {
+            "required": False, "charges": mpc.demand.names,
+            "meaning": "each demand charge's highest 15-minute facility demand so far this month within its window, "
+                       "kW, by charge name; a charge not given has none yet (its whole demand is a new peak)"},
         "planner": {
             "settings": {k: settings[k] for k in PLANNER_SETTINGS},
             "margin_c": mpc.margin_c, "power_weight": mpc.power_weight, "comfort_weight": mpc.comfort_weight,
@@ -127,6 +131,8 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
             "comfort_reference": mpc.settings.comfort_reference, "thermostat_sides": mpc.thermostat_sides,
             "schedule": [list(p) for p in mpc.forecasts(weathers[0]).schedule or ()] or None,
             "energy": mpc.energy_weights.entry(_tariff_values(mpc.energy_weights, spec, out_dir)),
+            "demand": None if mpc.demand is None else {"power": mpc.power, "part": mpc.demand.part,
+                                                       "per_dollar": mpc.demand.per_dollar},
         },  # fmt: skip
         "fallback": {"max_input_z": max_input_z, "max_forecast_gap_c": max_forecast_gap_c if outdoor else None,
                      "max_spread_k": max_spread_k, "exogenous": list(EXOGENOUS[: mpc.layout.n_exogenous]) +

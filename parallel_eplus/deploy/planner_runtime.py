@@ -25,6 +25,7 @@ from parallel_eplus.buildings.weather_forecast import WEATHER
 from parallel_eplus.deploy.contract import Contract, InputError
 from parallel_eplus.learning.model_based.calendar import Calendar, own_reference
 from parallel_eplus.learning.model_based.dataset import Layout
+from parallel_eplus.learning.model_based.demand import DemandCharges, DemandOutlook
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble
 from parallel_eplus.learning.model_based.features import WEATHER_SCALE, exogenous, step_times
@@ -60,6 +61,9 @@ class PlannerRuntime:
         self.support = (arrays["support_low"], arrays["support_high"])
         parts = self.layout.n_state - len(self.layout.temperatures)
         self.energy = EnergyWeights.from_entry(p.get("energy"), parts, Path(directory))  # the objective's prices
+        d = p.get("demand")  # the demand charges: contracts written before them, or without any, have none
+        self.demand = None if not d else DemandCharges(self.energy.tariffs["Electricity"], self.step_minutes,
+                                                       d["part"], d["per_dollar"])  # fmt: skip
         self.calendar = Calendar.from_arrays(p["calendar"], {k: v for k, v in arrays.items() if k in _CALENDAR})
         self.reference = p.get("comfort_reference", "bound")  # "own": discomfort beyond the own thermostats' is paid
         self.sides = [tuple(x) if x is not None else None for x in p.get("thermostat_sides", [])]
@@ -88,8 +92,16 @@ class PlannerRuntime:
         reference = None
         if self.reference == "own":
             reference = own_reference(bounds, self.calendar.tolerance, self.sides, self.low, self.high, a_last)[None]
+        demand = None
+        if self.demand is not None:  # the month's running peaks come with the request (the server keeps no state)
+            try:
+                peaks = self.demand.peaks_of(body.get("demand_peaks_kw") or {}, when)
+            except ValueError as e:
+                raise InputError("demand_peaks_kw", str(e).removeprefix("demand_peaks_kw: ")) from None
+            prices, running = self.demand.outlook([when, *times[:-1]], peaks)
+            demand = DemandOutlook(prices[None], running[None], self.demand.part, self.demand.per_dollar)
         plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], bounds[None], self.comfort_weight,
-                                 self.support, warm[None], [seed], weights, reference)  # fmt: skip
+                                 self.support, warm[None], [seed], weights, reference, demand)  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),

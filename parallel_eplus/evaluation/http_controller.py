@@ -17,6 +17,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
+from parallel_eplus.buildings.bill import DemandTracker
 from parallel_eplus.buildings.building import load_building, weather_path
 from parallel_eplus.buildings.model import DEFAULT
 from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
@@ -41,6 +42,12 @@ class HttpController:
             self.last = {o["name"]: float(o["initial"]) for o in self.contract["outputs"]}
             self.plan = None
             self.forecasts: dict[str, PerfectForecast] = {}
+        self.demand: DemandTracker | None = None  # a planner that prices demand charges: the month's peaks
+        if self.planner and self.contract.get("demand_peaks_kw"):
+            tariff = load_building(self.building()).comfort.kpis.tariffs["Electricity"]
+            self.demand = DemandTracker(tariff, self.contract["control_step_s"] / 60)
+            self.charges = self.contract["demand_peaks_kw"]["charges"]
+            self.meter = self.contract["planner"]["demand"]["power"]
 
     def _request(self, method: str, path: str, body: dict | None = None) -> dict:
         payload = None if body is None else json.dumps(body).encode()
@@ -80,6 +87,9 @@ class HttpController:
         body = {"time": info["time"].isoformat(), "sensors": sensors}
         if self.planner:
             body |= {"last_setpoints": self.last, "forecast": self._forecast(info), "plan": self.plan}
+        if self.demand is not None:  # the building's meter: the month's running peaks so far, as its BMS keeps them
+            self.demand.observe(info["time"], sensors[self.meter])
+            body["demand_peaks_kw"] = self.demand.month_peaks(self.charges, info["time"])
         answer = self._request("POST", "/act", body)
         physical = np.array([answer["setpoints"][n]["value"] for n in self.outputs])
         if not all(map(math.isfinite, physical)):

@@ -23,6 +23,7 @@ from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.weather_forecast import FORECASTS
 from parallel_eplus.learning.model_based.calendar import THERMOSTAT, ComfortTimes, own_reference
 from parallel_eplus.learning.model_based.dataset import Layout
+from parallel_eplus.learning.model_based.demand import DemandCharges, DemandOutlook
 from parallel_eplus.learning.model_based.dynamics import Ensemble
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
@@ -50,6 +51,12 @@ class MPC:
         self.model = model or Ensemble(self.layout, settings, seed)
         self.comfort_times = ComfortTimes(building, self.step_minutes, settings.comfort_hours == "occupied")
         self.energy_weights = EnergyWeights.of_building(self.layout, b, objective)  # the run's objective's
+        kpis = b.comfort.kpis
+        self.demand = None if kpis is None else DemandCharges.of(
+            self.layout, b.comfort.power, self.energy_weights.objective, kpis.tariffs.get("Electricity"),
+            kpis.reference_price, self.step_minutes)  # fmt: skip
+        self.power = b.comfort.power
+        self.trackers = [self.demand.tracker() for _ in range(workers)] if self.demand else []
         self.margin_c, self.power_weight = margin_c, power_weight
         self.seed = seed
         self.planner = Planner(None, settings.members, len(self.layout.temperatures), settings, margin_c, power_weight)
@@ -107,8 +114,10 @@ class MPC:
             self.support = (np.maximum(lo - m, -1.0).astype(np.float32), np.minimum(hi + m, 1.0).astype(np.float32))
 
     def reset(self, worker: int) -> None:
-        """A new episode for `worker`: forget its warm start."""
+        """A new episode for `worker`: forget its warm start and its demand peaks."""
         self.warm[worker] = 0.0
+        if self.trackers:
+            self.trackers[worker].reset()
 
     def future(self, infos: list[dict]) -> tuple[np.ndarray, ...]:
         """(exogenous inputs [W, H, X], whether the band applies [W, H], each zone's bounds [W, H, K, 2], the
@@ -128,6 +137,7 @@ class MPC:
         exo, applies, bounds, weights = self.future(infos)
         s = self.layout.state(np.asarray(obs)[:, : len(self.layout.sensors)])
         a_last = np.asarray(a_last, np.float32)
+        demand = self.demand_outlook(np.asarray(obs), infos)
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
         reference = None
         if self.settings.comfort_reference == "own":
@@ -135,9 +145,23 @@ class MPC:
             reference = np.stack([own_reference(bounds[i], tol, self.thermostat_sides, self.action_low,
                                                 self.action_high, a_last[i]) for i in range(len(s))])  # fmt: skip
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
-                                      self.warm[: len(s)], seeds, weights, reference)  # fmt: skip
+                                      self.warm[: len(s)], seeds, weights, reference, demand)  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         return self.last.action
+
+    def demand_outlook(self, obs: np.ndarray, infos: list[dict]) -> DemandOutlook | None:
+        """The demand charges over each worker's horizon, after feeding each tracker the step that just ended."""
+        if self.demand is None:
+            return None
+        column = self.layout.sensors.index(self.power)
+        prices, running = [], []
+        for i, info in enumerate(infos):
+            self.trackers[i].observe(info["time"], float(obs[i, column]))
+            starts = [info["time"], *step_times(info["time"], self.step_minutes, self.settings.horizon)[:-1]]
+            p, r = self.demand.outlook(starts, self.trackers[i].peaks)
+            prices.append(p)
+            running.append(r)
+        return DemandOutlook(np.stack(prices), np.stack(running), self.demand.part, self.demand.per_dollar)
 
     # -- saving: a planner checkpoint -----------------------------------------------------------
     def state(self) -> dict:

@@ -5,8 +5,8 @@ or the spec's energy terms where it has no HVAC parts). The reward's energy sign
 objective: every part (`energy`); the HVAC parts (`hvac`); each HVAC part times its fuel's price when the step
 begins over electricity's mean price (`cost`); or times its fuel's emission factor over electricity's
 (`emissions`). The planner weighs its predicted parts the same way at each step of its horizon, so under a
-time-of-use tariff it sees the coming peak price and can move cooling ahead of it. Demand charges are not in the
-planner's cost (it does not know the month's running peak); the reward's surrogate of them (bill.py) is.
+time-of-use tariff it sees the coming peak price and can move cooling ahead of it. Demand charges are priced apart,
+against each month's running peak (demand.py).
 
 Where the model has no HVAC parts (an HVAC meter the agent does not observe), `cost` prices every energy term at
 electricity's price and `hvac` and `emissions` count them all: the closest the predicted terms allow.

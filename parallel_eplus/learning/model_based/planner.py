@@ -27,8 +27,12 @@ import hashlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from parallel_eplus.learning.model_based.demand import DemandOutlook
 
 Forward = Callable[[np.ndarray], np.ndarray]  # [members, batch, inputs] -> [members, batch, targets], physical
 
@@ -76,12 +80,13 @@ class Planner:
     def plan(self, s: np.ndarray, a_last: np.ndarray, exo: np.ndarray, applies: np.ndarray, bounds: np.ndarray,
              comfort_weight: float, support: tuple[np.ndarray, np.ndarray], warm: np.ndarray,
              seeds: list[int], energy_weights: np.ndarray | None = None,
-             reference: np.ndarray | None = None) -> Plan:  # fmt: skip
+             reference: np.ndarray | None = None, demand: DemandOutlook | None = None) -> Plan:  # fmt: skip
         """s [W, n_state], a_last [W, A], exo [W, H, X], applies [W, H], each zone's bounds [W, H, K, 2], the
         actions' support (low [A], high [A]), the warm start [W, H, A], one sampler seed per worker, the
         weights of the predicted energy parts [W, H, P] (None: each counts once), and the actions [W, H, A] whose
         predicted discomfort is free (`comfort_reference = "own"`; None: every K beyond the bounds costs); the
-        reference is itself a candidate, so the search can always fall back on it."""
+        reference is itself a candidate, so the search can always fall back on it; `demand`: the demand charges
+        over the horizon (demand.py), None: none priced."""
         t0 = time.perf_counter()
         c = self.settings
         w, h, a_n = len(s), c.horizon, a_last.shape[1]
@@ -103,7 +108,7 @@ class Planner:
             np.clip(delta, -c.max_increment, c.max_increment, out=delta)
             actions = np.clip(a_last[:, None, None, :] + np.cumsum(delta, axis=2), low, high)
             cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight, energy_weights,
-                                      reference)  # fmt: skip
+                                      reference, demand)  # fmt: skip
             elite = np.argpartition(cost, elites - 1, axis=1)[:, :elites]
             chosen = np.take_along_axis(delta, elite[:, :, None, None], axis=1)
             mean, std = chosen.mean(1), np.maximum(chosen.std(1, ddof=1), 0.01)
@@ -116,11 +121,13 @@ class Planner:
         return Plan(plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms)
 
     def _cost(self, s, a_last, actions, exo, applies, bounds, comfort_weight: float,
-              energy_weights: np.ndarray | None, reference=None) -> tuple[np.ndarray, ...]:  # fmt: skip
+              energy_weights: np.ndarray | None, reference=None, demand=None) -> tuple[np.ndarray, ...]:  # fmt: skip
         """Each candidate's cost over the horizon and its members' largest temperature spread: ([W, N], [W, N]),
         from actions [W, N, H, A]. (Sums, not means, over the members: numpy's mean costs more per call.) A
         `reference` [W, H, A] rides along as one more candidate, each member's discomfort on it subtracted from
-        that member's on every candidate."""
+        that member's on every candidate. With `demand`, each demand charge pays its price times the rise of the
+        members' mean predicted facility demand above the month's running peak, at its highest in the charge's
+        window over the horizon."""
         if reference is not None:
             actions = np.concatenate([actions, reference[:, None]], axis=1)
         w, n, h, a_n = actions.shape
@@ -137,6 +144,10 @@ class Planner:
         worst_case = self.settings.comfort_risk == "worst"
         weights = None if energy_weights is None else np.repeat(np.asarray(energy_weights, np.float32), n, axis=0)
         energy_scale, spread_scale = self.power_weight / e, self.settings.disagreement_weight
+        if demand is not None:  # [W*N, H, C]; the rise above the running peak so far, kW [W*N, C]
+            d_prices, d_running = (np.repeat(np.asarray(v, np.float32), n, axis=0) for v in (demand.prices,
+                                                                                             demand.running))
+            rise = np.zeros((b, d_prices.shape[2]), np.float32)
         for step in range(h):
             inputs[..., ns + a_n : x0] = actions[:, :, step]
             inputs[..., x0:] = exo[None, :, None, step]
@@ -146,6 +157,10 @@ class Planner:
                 total += out[:, :, k:].sum(axis=(0, 2)) * energy_scale
             else:  # [W*N, P] this step's weights
                 total += (out[:, :, k:].sum(0) * weights[:, step]).sum(-1) * energy_scale
+            if demand is not None:
+                kw = out[:, :, k + demand.part].sum(0) * (1 / e / 1000)  # [W*N]
+                above = np.where(d_prices[:, step] > 0, kw[:, None] - d_running[:, step], 0.0)
+                np.maximum(rise, above, out=rise)
             over = np.maximum(lo[:, step] - temps, temps - hi[:, step])
             np.maximum(over, 0, out=over)
             if reference is not None:  # beyond the reference's, per member and zone (no credit for beating it)
@@ -163,6 +178,8 @@ class Planner:
                 flat[:, :, :k] = temps
                 flat[:, :, k:ns] = out[:, :, k:]
                 inputs[..., ns : ns + a_n] = actions[:, :, step]
+        if demand is not None:
+            total += (rise * d_prices.max(axis=1)).sum(-1) * (demand.per_dollar * self.power_weight)
         if reference is not None:
             return total.reshape(w, n)[:, :-1], worst.reshape(w, n)[:, :-1]
         return total.reshape(w, n), worst.reshape(w, n)
