@@ -173,3 +173,36 @@ def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(t
     assert level.allowed_pct(99.8, out, matched, matched) == pytest.approx((share_out + 0.2) / 2)
     again = OwnLevel.from_state(level.state(tensors=True))  # a checkpoint's round trip
     np.testing.assert_array_equal(again.out["CO"], level.out["CO"])
+
+
+def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_prefers_its_plan():
+    """Each member's cost (`members=True`) averages to the planner's; with `consensus`, the action is the own plan's
+    unless every member predicts the plan the search chose costs less; without it, the search's best plan acts
+    where some member prefers the own plan (April and July nights here)."""
+    from parallel_eplus.learning.model_based.planner import _follow
+
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    outcomes = {}
+    for consensus in ("false", "true"):
+        mpc = PlannerOptions.parse(f"comfort_reference=own,consensus={consensus}").apply(MPC.load(planner_file(OFFICE)))
+        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
+            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
+            s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
+            for hour in range(24):
+                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
+                exo, applies, bounds, weights = mpc.future([info])
+                reference = own_reference(bounds[0], mpc.comfort_times.tolerance, mpc.thermostat_sides,
+                                          mpc.action_low, mpc.action_high, a_last[0])[None]  # fmt: skip
+                reference = _follow(a_last, reference, mpc.settings.max_increment, *mpc.support)  # as a candidate can
+                action = mpc.act(obs, [info], a_last)
+                steps = np.concatenate([np.zeros((1, 1, 2)), np.cumsum(mpc.last.increments[:, :-1], axis=1)], axis=1)
+                args = (s, a_last, np.stack([action[:, None] + steps, reference], axis=1).astype(np.float32), exo,
+                        applies, bounds, mpc.comfort_weight, weights, reference)  # fmt: skip
+                per = mpc.planner._cost(*args, members=True)  # [E, W, 2]: the chosen plan's, the own plan's
+                np.testing.assert_allclose(per.mean(0), mpc.planner._cost(*args)[0], rtol=1e-4, atol=1e-4)
+                own = np.allclose(action, reference[:, 0], atol=1e-6)
+                outcomes[consensus, month, hour] = (own, bool(np.all(per[:, 0, 0] < per[:, 0, 1])))
+    with_consensus = [v for k, v in outcomes.items() if k[0] == "true"]
+    assert all(own or preferred for own, preferred in with_consensus)  # left only where every member preferred
+    assert any(not own for own, _ in with_consensus)  # and it did leave it
+    assert any(not own and not preferred for (c, *_), (own, preferred) in outcomes.items() if c == "false")

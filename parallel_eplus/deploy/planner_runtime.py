@@ -42,6 +42,7 @@ class _Settings:
 
     def __init__(self, values: dict):
         self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
+        self.consensus = False
         self.__dict__.update(values)
 
 

@@ -115,19 +115,26 @@ class Planner:
         rows = np.arange(w)
         best = cost.argmin(1)
         plan = actions[rows, best]  # [W, H, A]
+        if reference is not None and getattr(c, "consensus", False):  # the own plan, unless every member prefers
+            pair = np.stack([plan, reference], axis=1)  # [W, 2, H, A]
+            per = self._cost(s, a_last, pair, exo, applies, bounds, comfort_weight, energy_weights, reference,
+                             demand, members=True)  # [E, W, 2]  # fmt: skip
+            keep = ~np.all(per[:, :, 0] < per[:, :, 1], axis=0)
+            plan = np.where(keep[:, None, None], reference, plan)
         steps = np.diff(np.concatenate([a_last[:, None], plan], axis=1), axis=1)
         increments = np.concatenate([steps[:, 1:], np.zeros((w, 1, a_n), np.float32)], axis=1)
         ms = 1000 * (time.perf_counter() - t0)
         return Plan(plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms)
 
     def _cost(self, s, a_last, actions, exo, applies, bounds, comfort_weight: float,
-              energy_weights: np.ndarray | None, reference=None, demand=None) -> tuple[np.ndarray, ...]:  # fmt: skip
+              energy_weights: np.ndarray | None, reference=None, demand=None, members: bool = False):  # fmt: skip
         """Each candidate's cost over the horizon and its members' largest temperature spread: ([W, N], [W, N]),
         from actions [W, N, H, A]. (Sums, not means, over the members: numpy's mean costs more per call.) A
         `reference` [W, H, A] rides along as one more candidate, each member's discomfort on it subtracted from
         that member's on every candidate. With `demand`, each demand charge pays its price times the rise of the
         members' mean predicted facility demand above the month's running peak, at its highest in the charge's
-        window over the horizon."""
+        window over the horizon. `members`: each member's cost instead, [E, W, N] (the spread and demand terms, which
+        are the members' together, added to each)."""
         if reference is not None:
             actions = np.concatenate([actions, reference[:, None]], axis=1)
         w, n, h, a_n = actions.shape
@@ -144,6 +151,7 @@ class Planner:
         worst_case = self.settings.comfort_risk == "worst"
         weights = None if energy_weights is None else np.repeat(np.asarray(energy_weights, np.float32), n, axis=0)
         energy_scale, spread_scale = self.power_weight / e, self.settings.disagreement_weight
+        per = np.zeros((e, b), np.float32) if members else None
         if demand is not None:  # [W*N, H, C]; the rise above the running peak so far, kW [W*N, C]
             d_prices, d_running = (np.repeat(np.asarray(v, np.float32), n, axis=0) for v in (demand.prices,
                                                                                              demand.running))
@@ -157,6 +165,9 @@ class Planner:
                 total += out[:, :, k:].sum(axis=(0, 2)) * energy_scale
             else:  # [W*N, P] this step's weights
                 total += (out[:, :, k:].sum(0) * weights[:, step]).sum(-1) * energy_scale
+            if per is not None:
+                parts = out[:, :, k:] if weights is None else out[:, :, k:] * weights[None, :, step]
+                per += parts.sum(-1) * self.power_weight
             if demand is not None:
                 kw = out[:, :, k + demand.part].sum(0) * (1 / e / 1000)  # [W*N]
                 above = np.where(d_prices[:, step] > 0, kw[:, None] - d_running[:, step], 0.0)
@@ -168,11 +179,15 @@ class Planner:
                 over = np.maximum(rows - rows[:, :, -1:], 0).reshape(e, b, k)
             over = over.sum(-1)  # [E, W*N]
             weight = applied[:, step] * (1 + self.settings.terminal_weight if step == h - 1 else 1)
+            if per is not None:
+                per += over * weight
             total += (over.max(0) if worst_case else over.sum(0) * (1 / e)) * weight
             if e > 1:
                 centred = temps - temps.sum(0) * (1 / e)
                 sd = np.sqrt((centred * centred).sum(0) * (1 / (e - 1)))  # [W*N, K]
                 total += sd.sum(-1) * spread_scale
+                if per is not None:
+                    per += sd.sum(-1) * spread_scale
                 np.maximum(worst, sd.max(-1), out=worst)
             if step + 1 < h:  # the next step's state and last action
                 flat[:, :, :k] = temps
@@ -180,6 +195,10 @@ class Planner:
                 inputs[..., ns : ns + a_n] = actions[:, :, step]
         if demand is not None:
             total += (rise * d_prices.max(axis=1)).sum(-1) * (demand.per_dollar * self.power_weight)
+            if per is not None:
+                per += (rise * d_prices.max(axis=1)).sum(-1) * (demand.per_dollar * self.power_weight)
+        if per is not None:
+            return per.reshape(e, w, n)[:, :, :-1] if reference is not None else per.reshape(e, w, n)
         if reference is not None:
             return total.reshape(w, n)[:, :-1], worst.reshape(w, n)[:, :-1]
         return total.reshape(w, n), worst.reshape(w, n)
