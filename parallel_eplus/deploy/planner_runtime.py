@@ -96,9 +96,10 @@ class PlannerRuntime:
         demand = None
         if self.demand is not None:  # the month's running peaks come with the request (the server keeps no state)
             try:
-                peaks = self.demand.peaks_of(body.get("demand_peaks_kw") or {}, when)
+                peaks = self.demand.peaks_of(body.get("demand_peaks_kw"), when)
             except ValueError as e:
-                raise InputError("demand_peaks_kw", str(e).removeprefix("demand_peaks_kw: ")) from None
+                field, _, why = str(e).partition(": ")
+                raise InputError(field, why) from None
             prices, running = self.demand.outlook([when, *times[:-1]], peaks)
             demand = DemandOutlook(prices[None], running[None], self.demand.part, self.demand.per_dollar)
         plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], bounds[None], self.comfort_weight,

@@ -155,6 +155,7 @@ class _Loop:
                     actions = np.where(far[:, None], actions, self.student.actions(obs))
             else:
                 actions = explorer.act(obs, infos, step_of)
+                self.mpc.observe(obs, infos)  # the month's demand peaks, for when the planner takes over
             new_obs, _, dones, new_infos = venv.step(actions)
             for i in range(n):
                 after = new_infos[i].get("final_info", new_infos[i]) if dones[i] else new_infos[i]

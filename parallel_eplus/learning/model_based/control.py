@@ -149,14 +149,21 @@ class MPC:
         self.warm[: len(s)] = self.last.increments
         return self.last.action
 
+    def observe(self, obs: np.ndarray, infos: list[dict]) -> None:
+        """Each worker's meter reading of the step that just ended, for its month's demand peaks (once per step,
+        however often given: `act` gives it too)."""
+        if self.demand is not None:
+            column = self.layout.sensors.index(self.power)
+            for i, info in enumerate(infos):
+                self.trackers[i].observe(info["time"], float(np.asarray(obs)[i, column]))
+
     def demand_outlook(self, obs: np.ndarray, infos: list[dict]) -> DemandOutlook | None:
         """The demand charges over each worker's horizon, after feeding each tracker the step that just ended."""
         if self.demand is None:
             return None
-        column = self.layout.sensors.index(self.power)
+        self.observe(obs, infos)
         prices, running = [], []
         for i, info in enumerate(infos):
-            self.trackers[i].observe(info["time"], float(obs[i, column]))
             starts = [info["time"], *step_times(info["time"], self.step_minutes, self.settings.horizon)[:-1]]
             p, r = self.demand.outlook(starts, self.trackers[i].peaks)
             prices.append(p)

@@ -12,7 +12,8 @@ The running peaks are the facility's own, tracked from each completed step's rea
 (bill.py's `DemandTracker`, one per worker, reset with its episode). The facility's electric demand must be one of
 the model's predicted energy parts (the spec's `power` among its energy terms, as in the offices and every DOE
 prototype's starter); where it is not, the planner leaves demand charges out and says so. The demand of a step is
-its mean (a 15-minute quarter hour's, for steps of 10 minutes: an approximation the bill does not make).
+its mean (a 15-minute quarter hour's, for steps of 10 minutes: an approximation the bill does not make), and a
+horizon across a month's end takes one highest demand over both months' steps (each against its own month's peak).
 
 Numpy only (and bill.py's, tariff.py's): the served planner builds the same from the contract's tariff, with the
 running peaks in the request.
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import datetime as dt
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,16 +78,20 @@ class DemandCharges:
                     running[h, c] = peaks.get((c, t.year, t.month), 0.0)
         return prices, running
 
-    def peaks_of(self, given: dict[str, float], when: dt.datetime) -> dict:
-        """A request's running peaks (charge name -> kW this month, the served planner's) as a tracker's."""
+    def peaks_of(self, given, when: dt.datetime) -> dict:
+        """A request's running peaks (charge name -> kW this month, the served planner's) as a tracker's; a bad one
+        raises ValueError("FIELD: why"), FIELD `demand_peaks_kw` or `demand_peaks_kw.NAME`."""
+        if given is None:
+            return {}
         if not isinstance(given, dict):
             raise ValueError(f"demand_peaks_kw: an object of charge name -> kW, e.g. {{{self.names[0]!r}: 42.0}}")
         unknown = set(given) - set(self.names)
         if unknown:
             raise ValueError(f"demand_peaks_kw: no demand charge named {sorted(unknown)}; the tariff's: {self.names}")
         for name, kw in given.items():
-            if isinstance(kw, bool) or not isinstance(kw, int | float) or not 0 <= kw < float("inf"):
-                raise ValueError(f"demand_peaks_kw[{name!r}]: {kw!r} is not a demand in kW (a finite number >= 0)")
+            ok = isinstance(kw, int | float) and not isinstance(kw, bool) and 0 <= kw < 1e12
+            if not ok or not math.isfinite(float(kw)):
+                raise ValueError(f"demand_peaks_kw.{name}: {kw!r} is not a demand in kW (a finite number >= 0)")
         return {(c, when.year, when.month): float(given[n]) for c, n in enumerate(self.names) if n in given}
 
 
@@ -99,4 +105,3 @@ class DemandOutlook:
     running: np.ndarray
     part: int
     per_dollar: float
-
