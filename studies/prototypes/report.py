@@ -63,13 +63,17 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
                      f"{_x(r.get('bill'))} | {_x(r.get('peak_15min_kw'))} | {kh} | {in_band} | {stage} |")  # fmt: skip
     done = df.dropna(subset=["hvac_energy_kwh"]) if "hvac_energy_kwh" in df else df.iloc[:0]
     if len(done):
-        saves = ((done.hvac_energy_kwh < 1) | (done.get("bill", 1) < 1)).sum()
+        saves = ((done.hvac_energy_kwh < SAVES) | (done.get("bill", 1) < SAVES)).sum()
         holds = (done.occupied_discomfort_kh_learned <= done.occupied_discomfort_kh_own).sum()
-        lines += ["", f"Scored: {len(done)} of {len(df)}. Lower HVAC energy or bill: {saves}; no more occupied",
+        lower = f"HVAC energy or bill at least {100 * (1 - SAVES):.1f} % lower"
+        lines += ["", f"Scored: {len(done)} of {len(df)}. {lower}: {saves}; no more occupied",
                   f"discomfort than its own controls: {holds} (goal: all, savings on 12 of 16)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
         lines += ["", "![savings against discomfort](savings.png)"]
     return "\n".join(lines) + "\n"
+
+
+SAVES = 0.995  # a ratio that counts as a saving: 0.5 % lower, not a rounding's 0.003 % (the warehouse on `jump`)
 
 
 def figure(df: pd.DataFrame, path: Path) -> None:
