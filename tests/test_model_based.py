@@ -161,9 +161,11 @@ def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_
     settings = MPCSettings(explore_steps=48, refit_every=96, epochs=5, candidates=32, comfort_hours="occupied",
                            comfort_reference="own", comfort_level="own")  # fmt: skip
     cfg = mpc_config(tmp_path, "office", building="office-small", weathers=["CA"], run_days=1, timesteps=192,
-                     checkpoint_every=96, mpc=settings, comfort=ComfortConstraint(target_pct=97.5))  # fmt: skip
+                     checkpoint_every=96, mpc=settings, comfort=ComfortConstraint(target_pct=97.5),
+                     objective="cost")  # fmt: skip
     final = train(cfg, progress=False)
     mpc = MPC.load(final.parent / "planner" / "planner.pt")
+    assert mpc.energy_weights.objective == "cost" and mpc.demand  # the bill, demand charges too, was its objective
     assert mpc.settings.comfort_reference == "own" and mpc.comfort_times.occupied_only
     saved = th.load(sorted((final.parent / "checkpoints").glob("mpc_*_steps.pt"))[-1], weights_only=True)
     own = saved["own_level"]["out"]["CA"].numpy()  # the own controls' comfort by date, for the multiplier

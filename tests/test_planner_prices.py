@@ -112,7 +112,7 @@ def _office_under_cost() -> MPC:
 
 def test_the_planner_s_demand_charges_are_the_tariff_s_windows_over_the_month_s_running_peaks():
     mpc = _office_under_cost()
-    d = mpc.demand
+    d = mpc.demand.charges
     assert d.names == ["maximum", "summer peak", "summer part peak", "winter part peak"]
     assert mpc.layout.state_names[len(mpc.layout.temperatures) + d.part] == "power_w"  # the facility's meter
     kpis = load_building("office-small").comfort.kpis
@@ -124,14 +124,14 @@ def test_the_planner_s_demand_charges_are_the_tariff_s_windows_over_the_month_s_
     # E-20's windows written out: summer peak weekdays 12-18 h, part peak 8-12 and 18-21 h, maximum any time
     np.testing.assert_allclose(prices, [[11.98, 16.37, 0, 0], [11.98, 0, 3.56, 0], [11.98, 0, 0, 0], [11.98, 0, 0, 0]])
     np.testing.assert_allclose(running, [[30, 25, 0, 0], [30, 0, 0, 0], [30, 0, 0, 0], [0, 0, 0, 0]])  # August: new
-    assert MPC.from_state(th.load(OFFICE / "planner.pt", weights_only=True)).demand is None  # energy: not priced
+    assert not MPC.from_state(th.load(OFFICE / "planner.pt", weights_only=True)).demand  # energy: not priced
 
 
 def test_a_candidate_pays_each_charge_s_price_for_the_rise_above_the_month_s_peak():
     """One step's plan: the demand term is each charge's price x how far the members' mean predicted facility
     demand rises above the running peak, in the energy term's units; a peak already above it costs nothing."""
     mpc = _office_under_cost()
-    d = mpc.demand
+    d = mpc.demand.charges
     when = dt.datetime(2013, 7, 9, 15, 0)
     info = {"time": when, "weather": "CA"}
     exo, applies, bounds, _ = mpc.future([info])
@@ -166,7 +166,7 @@ def test_the_planner_tracks_each_worker_s_peaks_from_its_readings_as_the_bill_do
     column = mpc.layout.sensors.index("power_w")
     obs = np.array([[30.0, 23.5, 23.5, 23.5, 23.5, 23.5, 0.0, 4000.0, 0.0, 1.0]], np.float32)
     start = dt.datetime(2013, 7, 9, 13, 0)
-    expected = DemandTracker(mpc.demand.tariff, 10)
+    expected = DemandTracker(mpc.demand.charges.tariff, 10)
     for k, watts in enumerate([20000.0, 30000.0, 25000.0, 26000.0]):
         obs[0, column] = watts
         now = start + dt.timedelta(minutes=10 * k)
@@ -174,9 +174,9 @@ def test_the_planner_tracks_each_worker_s_peaks_from_its_readings_as_the_bill_do
         mpc.act(obs, [{"time": now, "weather": "CA"}], np.zeros((1, 2), np.float32))  # asked again: fed once
         if k:  # an episode's first reading ends its warm-up, no step of its own
             expected.step(now - dt.timedelta(minutes=10), watts)
-    assert mpc.trackers[0].peaks == expected.peaks and expected.peaks[(0, 2013, 7)] == pytest.approx(85 / 3)
+    assert mpc.demand.trackers[0].peaks == expected.peaks and expected.peaks[(0, 2013, 7)] == pytest.approx(85 / 3)
     mpc.reset(0)
-    assert mpc.trackers[0].peaks == {}
+    assert mpc.demand.trackers[0].peaks == {}
 
 
 @pytest.fixture(scope="module")

@@ -119,8 +119,8 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         },
         "plan": {"required": False, "meaning": "the last answer's `plan` (the rest of its plan, normalized "
                  "increments), sent back to warm-start the search; without it the search starts from holding"},
-        "demand_peaks_kw": None if mpc.demand is None else {
-            "required": False, "charges": mpc.demand.names,
+        "demand_peaks_kw": None if not mpc.demand else {
+            "required": False, "charges": mpc.demand.charges.names,
             "meaning": "each demand charge's highest 15-minute facility demand so far this month within its window, "
                        "kW, by charge name; a charge not given has none yet (its whole demand is a new peak)"},
         "planner": {
@@ -131,8 +131,8 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
             "comfort_reference": mpc.settings.comfort_reference, "thermostat_sides": mpc.thermostat_sides,
             "schedule": [list(p) for p in mpc.forecasts(weathers[0]).schedule or ()] or None,
             "energy": mpc.energy_weights.entry(_tariff_values(mpc.energy_weights, spec, out_dir)),
-            "demand": None if mpc.demand is None else {"power": mpc.power, "part": mpc.demand.part,
-                                                       "per_dollar": mpc.demand.per_dollar},
+            "demand": None if not mpc.demand else {"power": mpc.power, "part": mpc.demand.charges.part,
+                                                   "per_dollar": mpc.demand.charges.per_dollar},
         },  # fmt: skip
         "fallback": {"max_input_z": max_input_z, "max_forecast_gap_c": max_forecast_gap_c if outdoor else None,
                      "max_spread_k": max_spread_k, "exogenous": list(EXOGENOUS[: mpc.layout.n_exogenous]) +

@@ -23,7 +23,7 @@ from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.weather_forecast import FORECASTS
 from parallel_eplus.learning.model_based.calendar import THERMOSTAT, ComfortTimes, own_reference
 from parallel_eplus.learning.model_based.dataset import Layout
-from parallel_eplus.learning.model_based.demand import DemandCharges, DemandOutlook
+from parallel_eplus.learning.model_based.demand import DemandCharges, DemandWatch
 from parallel_eplus.learning.model_based.dynamics import Ensemble
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
@@ -52,11 +52,11 @@ class MPC:
         self.comfort_times = ComfortTimes(building, self.step_minutes, settings.comfort_hours == "occupied")
         self.energy_weights = EnergyWeights.of_building(self.layout, b, objective)  # the run's objective's
         kpis = b.comfort.kpis
-        self.demand = None if kpis is None else DemandCharges.of(
+        charges = None if kpis is None else DemandCharges.of(
             self.layout, b.comfort.power, self.energy_weights.objective, kpis.tariffs.get("Electricity"),
             kpis.reference_price, self.step_minutes)  # fmt: skip
         self.power = b.comfort.power
-        self.trackers = [self.demand.tracker() for _ in range(workers)] if self.demand else []
+        self.demand = charges and DemandWatch(charges, self.layout.sensors.index(self.power), workers)
         self.margin_c, self.power_weight = margin_c, power_weight
         self.seed = seed
         self.planner = Planner(None, settings.members, len(self.layout.temperatures), settings, margin_c, power_weight)
@@ -116,8 +116,8 @@ class MPC:
     def reset(self, worker: int) -> None:
         """A new episode for `worker`: forget its warm start and its demand peaks."""
         self.warm[worker] = 0.0
-        if self.trackers:
-            self.trackers[worker].reset()
+        if self.demand:
+            self.demand.reset(worker)
 
     def future(self, infos: list[dict]) -> tuple[np.ndarray, ...]:
         """(exogenous inputs [W, H, X], whether the band applies [W, H], each zone's bounds [W, H, K, 2], the
@@ -137,7 +137,7 @@ class MPC:
         exo, applies, bounds, weights = self.future(infos)
         s = self.layout.state(np.asarray(obs)[:, : len(self.layout.sensors)])
         a_last = np.asarray(a_last, np.float32)
-        demand = self.demand_outlook(np.asarray(obs), infos)
+        demand = self.demand.outlook(obs, infos, self.settings.horizon) if self.demand else None
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
         reference = None
         if self.settings.comfort_reference == "own":
@@ -150,25 +150,10 @@ class MPC:
         return self.last.action
 
     def observe(self, obs: np.ndarray, infos: list[dict]) -> None:
-        """Each worker's meter reading of the step that just ended, for its month's demand peaks (once per step,
-        however often given: `act` gives it too)."""
-        if self.demand is not None:
-            column = self.layout.sensors.index(self.power)
-            for i, info in enumerate(infos):
-                self.trackers[i].observe(info["time"], float(np.asarray(obs)[i, column]))
-
-    def demand_outlook(self, obs: np.ndarray, infos: list[dict]) -> DemandOutlook | None:
-        """The demand charges over each worker's horizon, after feeding each tracker the step that just ended."""
-        if self.demand is None:
-            return None
-        self.observe(obs, infos)
-        prices, running = [], []
-        for i, info in enumerate(infos):
-            starts = [info["time"], *step_times(info["time"], self.step_minutes, self.settings.horizon)[:-1]]
-            p, r = self.demand.outlook(starts, self.trackers[i].peaks)
-            prices.append(p)
-            running.append(r)
-        return DemandOutlook(np.stack(prices), np.stack(running), self.demand.part, self.demand.per_dollar)
+        """Each worker's meter reading of the step that just ended, for its month's demand peaks (`act` reads it
+        too; the training loop gives it while it explores)."""
+        if self.demand:
+            self.demand.observe(obs, infos)
 
     # -- saving: a planner checkpoint -----------------------------------------------------------
     def state(self) -> dict:

@@ -30,6 +30,7 @@ import numpy as np
 
 from parallel_eplus.buildings.bill import DemandTracker
 from parallel_eplus.buildings.tariff import Tariff
+from parallel_eplus.learning.model_based.features import step_times
 
 log = logging.getLogger(__name__)
 
@@ -105,3 +106,32 @@ class DemandOutlook:
     running: np.ndarray
     part: int
     per_dollar: float
+
+
+class DemandWatch:
+    """The in-process planner's side: each worker's month of peaks, kept from its meter readings (`column`: the
+    facility's demand in the observation), and the charges over its horizon."""
+
+    def __init__(self, charges: DemandCharges, column: int, workers: int):
+        self.charges, self.column = charges, column
+        self.trackers = [charges.tracker() for _ in range(workers)]
+
+    def reset(self, worker: int) -> None:
+        self.trackers[worker].reset()
+
+    def observe(self, obs: np.ndarray, infos: list[dict]) -> None:
+        """Each worker's reading of the step that just ended (once per step, however often given)."""
+        for i, info in enumerate(infos):
+            self.trackers[i].observe(info["time"], float(np.asarray(obs)[i, self.column]))
+
+    def outlook(self, obs: np.ndarray, infos: list[dict], horizon: int) -> DemandOutlook:
+        """The charges over each worker's next `horizon` steps, after this step's readings."""
+        self.observe(obs, infos)
+        prices, running = [], []
+        for i, info in enumerate(infos):
+            starts = [info["time"], *step_times(info["time"], self.charges.step_minutes, horizon)[:-1]]
+            p, r = self.charges.outlook(starts, self.trackers[i].peaks)
+            prices.append(p)
+            running.append(r)
+        c = self.charges
+        return DemandOutlook(np.stack(prices), np.stack(running), c.part, c.per_dollar)
