@@ -121,6 +121,7 @@ class Planner:
                              demand, members=True)  # [E, W, 2]  # fmt: skip
             keep = ~np.all(per[:, :, 0] < per[:, :, 1], axis=0)
             plan = np.where(keep[:, None, None], reference, plan)
+            best = np.where(keep, 1, best)  # its cost and spread reported: candidate 1 is the reference's
         steps = np.diff(np.concatenate([a_last[:, None], plan], axis=1), axis=1)
         increments = np.concatenate([steps[:, 1:], np.zeros((w, 1, a_n), np.float32)], axis=1)
         ms = 1000 * (time.perf_counter() - t0)
