@@ -98,6 +98,11 @@ class Tariff:
     name: str = ""
 
     @property
+    def demand_names(self) -> list[str]:
+        """Each demand charge's name (`charge K` where it has none): how requests and peaks name them."""
+        return [d.name or f"charge {i}" for i, d in enumerate(self.demand)]
+
+    @property
     def fixed(self) -> float | None:
         """The price when it never changes, else None."""
         return self.constant if not self.periods else None

@@ -47,7 +47,7 @@ class HttpController:
             tariff = load_building(self.building()).comfort.kpis.tariffs["Electricity"]
             self.demand = DemandTracker(tariff, self.contract["control_step_s"] / 60)
             self.charges = self.contract["demand_peaks_kw"]["charges"]
-            here = [d.name or f"charge {i}" for i, d in enumerate(tariff.demand)]
+            here = tariff.demand_names
             if here != self.charges:
                 raise ValueError(f"controller at {self.url} prices demand charges {self.charges}; the tariff here has "
                                  f"{here}: the client keeps the peaks with the building's own tariff")

@@ -54,7 +54,7 @@ class MPC:
         kpis = b.comfort.kpis
         charges = None if kpis is None else DemandCharges.of(
             self.layout, b.comfort.power, self.energy_weights.objective, kpis.tariffs.get("Electricity"),
-            kpis.reference_price, self.step_minutes)  # fmt: skip
+            kpis.demand_w(1.0, self.step_minutes), self.step_minutes)  # fmt: skip
         self.power = b.comfort.power
         self.demand = charges and DemandWatch(charges, self.layout.sensors.index(self.power), workers)
         self.margin_c, self.power_weight = margin_c, power_weight

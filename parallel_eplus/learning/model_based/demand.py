@@ -47,13 +47,14 @@ class DemandCharges:
 
     @property
     def names(self) -> list[str]:
-        return [d.name or f"charge {i}" for i, d in enumerate(self.tariff.demand)]
+        return self.tariff.demand_names
 
     @classmethod
-    def of(cls, layout, power: str, objective: str, tariff: Tariff | None, reference_price: float,
+    def of(cls, layout, power: str, objective: str, tariff: Tariff | None, per_dollar: float,
            step_minutes: float) -> DemandCharges | None:  # fmt: skip
         """Under `objective` "cost" with an electricity `tariff` that has demand charges and the facility's demand
-        `power` among `layout`'s predicted energy parts; None otherwise."""
+        `power` among `layout`'s predicted energy parts; None otherwise. `per_dollar`: the reward's W-equivalents
+        of a dollar (kpis.py's `demand_w`)."""
         if objective != "cost" or tariff is None or not tariff.demand:
             return None
         parts = list(layout.state_names[len(layout.temperatures) :])
@@ -61,7 +62,7 @@ class DemandCharges:
             log.warning("demand charges: the model does not predict the facility's demand %r (its energy parts: "
                         "%s); the planner's cost leaves them out", power, ", ".join(parts))  # fmt: skip
             return None
-        return cls(tariff, step_minutes, parts.index(power), 1000.0 / (reference_price * step_minutes / 60))
+        return cls(tariff, step_minutes, parts.index(power), per_dollar)
 
     def tracker(self) -> DemandTracker:
         return DemandTracker(self.tariff, self.step_minutes)
