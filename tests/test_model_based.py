@@ -22,8 +22,9 @@ from parallel_eplus.buildings.resources import builtin_specs
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.control import MPC, planner_controller
+from parallel_eplus.learning.model_based.control import MPC
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
+from parallel_eplus.learning.model_based.saved_planner import planner_controller
 from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ComfortConstraint, TrainConfig

@@ -12,7 +12,8 @@ import pytest
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.learning.model_based.calendar import own_reference
-from parallel_eplus.learning.model_based.control import MPC, PlannerOptions, planner_file, thermostat_sides
+from parallel_eplus.learning.model_based.control import MPC, thermostat_sides
+from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_file
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANNER = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0/best/planner"
@@ -147,7 +148,7 @@ def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(t
     from parallel_eplus.evaluation.controllers import Controller
     from parallel_eplus.evaluation.sweep import run_sweep
     from parallel_eplus.learning.imitation import record_baseline
-    from parallel_eplus.learning.model_based.own_level import OwnLevel
+    from parallel_eplus.learning.model_based.own_level import BatchComfort, OwnLevel
 
     office = load_building("office-small")
     comfort = office.comfort
@@ -171,6 +172,13 @@ def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(t
     # as many zone samples again on steps the record does not know: those count at the target's 0.2 %
     matched = len(counts) * level.zones
     assert level.allowed_pct(99.8, out, matched, matched) == pytest.approx((share_out + 0.2) / 2)
+    batch = BatchComfort()  # the Dyna loop's tally, step by step: the same share
+    for c in counts:
+        batch.add(0, level.zones, c, level)
+    for _ in counts:
+        batch.add(0, level.zones, None, level)
+    assert batch.allowed_pct(99.8, level) == pytest.approx((share_out + 0.2) / 2)
+    assert batch.allowed_pct(99.8, None) is None
     again = OwnLevel.from_state(level.state(tensors=True))  # a checkpoint's round trip
     np.testing.assert_array_equal(again.out["CO"], level.out["CO"])
 

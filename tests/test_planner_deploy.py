@@ -20,8 +20,9 @@ from parallel_eplus.deploy.contract import Contract
 from parallel_eplus.deploy.export import export
 from parallel_eplus.evaluation.controllers import http_controller
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.control import MPC, planner_controller
+from parallel_eplus.learning.model_based.control import MPC
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
+from parallel_eplus.learning.model_based.saved_planner import planner_controller
 
 from .serving import get, serving
 

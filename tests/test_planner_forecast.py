@@ -13,8 +13,8 @@ import pytest
 from parallel_eplus.buildings.building import weather_path
 from parallel_eplus.buildings.weather_forecast import ErroredForecast, GivenForecast, PerfectForecast
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.control import PlannerOptions, planner_controller
 from parallel_eplus.learning.model_based.features import exogenous, step_times
+from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_controller
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANNER = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0/best/planner"

@@ -24,10 +24,11 @@ from parallel_eplus.deploy.export import export
 from parallel_eplus.deploy.planner_runtime import PlannerRuntime
 from parallel_eplus.evaluation.controllers import http_controller
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.control import MPC, planner_controller
+from parallel_eplus.learning.model_based.control import MPC
 from parallel_eplus.learning.model_based.dataset import Layout
 from parallel_eplus.learning.model_based.demand import DemandOutlook
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
+from parallel_eplus.learning.model_based.saved_planner import planner_controller
 
 from .serving import serving
 

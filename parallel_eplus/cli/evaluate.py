@@ -44,7 +44,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(RBC_LABEL, "rbc"))
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    from parallel_eplus.learning.model_based.control import planner_controller
+    from parallel_eplus.learning.model_based.saved_planner import planner_controller
 
     for path in args.policy or []:  # a model-based run's planner, else a policy or a folder of runs (seeds)
         planner = planner_controller(path, args.planner)

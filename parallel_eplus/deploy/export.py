@@ -241,7 +241,7 @@ def export(run_or_model: Path, out_dir: Path, **planner_options) -> Path:
     import onnx
 
     from parallel_eplus.deploy.planner_export import export_planner
-    from parallel_eplus.learning.model_based.control import planner_source
+    from parallel_eplus.learning.model_based.saved_planner import planner_source
 
     planner = planner_source(run_or_model)
     if planner is not None:

@@ -34,10 +34,11 @@ from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.errors import EnergyPlusError, Interrupts
 from parallel_eplus.learning.lagrangian import Lagrangian
 from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
-from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE, planner_controller
+from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.dynamics import summary
-from parallel_eplus.learning.model_based.own_level import OwnLevel
+from parallel_eplus.learning.model_based.own_level import BatchComfort, OwnLevel
+from parallel_eplus.learning.model_based.saved_planner import planner_controller
 from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
 from parallel_eplus.runs.run_files import BEST_DIR
 from parallel_eplus.runs.run_status import RunStatus
@@ -138,7 +139,7 @@ class _Loop:
                             self.cfg.seed + self.steps, self.s.explore_hold,
                             self.building.steps_per_day) if self.replay else None  # fmt: skip
         rng = np.random.default_rng(self.cfg.seed + self.steps)
-        out = zones = own_out = own_zones = unmatched = 0.0  # zone samples out: the planner's; its own controls' then
+        batch = BatchComfort()
         while self.steps < self.cfg.timesteps:
             planning = self.steps >= self.s.explore_steps or explorer is None
             dagger = planning and self.s.distill and self.steps >= (1 - self.s.dagger_share) * self.cfg.timesteps
@@ -165,13 +166,8 @@ class _Loop:
                     temps = [after[t] for t in self.building.temperatures]
                     if after.get("comfort_applies", True):
                         bounds = self.building.comfort.bounds(after)  # the thermostat's, where they move
-                        out += self.building.comfort.outside(tuple(temps), bounds)
-                        zones += len(temps)
                         own = self.own_level.count(after["weather"], after["time"]) if self.own_level else None
-                        if own is not None:
-                            own_out, own_zones = own_out + own, own_zones + len(temps)
-                        elif self.own_level:
-                            unmatched += len(temps)
+                        batch.add(self.building.comfort.outside(tuple(temps), bounds), len(temps), own, self.own_level)
                 if dones[i]:
                     a_last[i], step_of[i], episode_of[i] = self.mpc.initial, 0, episode_of[i] + n
                     self.mpc.reset(i)
@@ -186,8 +182,8 @@ class _Loop:
                 cb.update_locals({"infos": new_infos, "dones": dones})
                 cb.on_step()
             if self.steps // self.s.refit_every != (self.steps - n) // self.s.refit_every:
-                self._update_comfort(out, zones, own_out, own_zones, unmatched)
-                out = zones = own_out = own_zones = unmatched = 0.0
+                self._update_comfort(batch)
+                batch = BatchComfort()
                 self._refit(self.s.refit_epochs)
                 if self.student.fitted:
                     self.student.refit(self.mpc, self.cfg.seed + self.steps)
@@ -277,16 +273,14 @@ class _Loop:
         log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,
                  summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
-    def _update_comfort(self, out: float, zones: float, own_out: float, own_zones: float, unmatched: float) -> None:
-        """The multiplier from the planner's batch; `own_*`: the own controls' on the batch's dates and weathers,
-        `unmatched`: the batch's zone samples on steps their record does not know."""
+    def _update_comfort(self, batch: BatchComfort) -> None:
+        """The multiplier from the planner's batch, held to the own controls' level on its dates where asked."""
         if self.lagrangian is not None and self.steps > self.s.explore_steps and not self.student.fitted:
-            target = self.lagrangian.settings.target_pct
-            allowed = self.own_level.allowed_pct(target, own_out, own_zones, unmatched) if self.own_level else None
-            self.mpc.comfort_weight = self.lagrangian.update(out, zones, allowed)
+            allowed = batch.allowed_pct(self.lagrangian.settings.target_pct, self.own_level)
+            self.mpc.comfort_weight = self.lagrangian.update(batch.out, batch.zones, allowed)
             self.lagrangian.record(self.logger)
-            if self.own_level and zones:
-                self.logger.record("comfort/own_unmatched_pct", 100.0 * unmatched / zones)
+            if self.own_level and batch.zones:
+                self.logger.record("comfort/own_unmatched_pct", 100.0 * batch.unmatched / batch.zones)
 
     # -- checkpoints ----------------------------------------------------------------------------
     def _save_checkpoint(self) -> Path:

@@ -84,3 +84,27 @@ class OwnLevel:
     def from_state(cls, state: dict) -> OwnLevel:
         return cls(int(state["step_minutes"]), int(state["zones"]),
                    {w: np.asarray(a, dtype=np.int8) for w, a in state["out"].items()})  # fmt: skip
+
+
+@dataclass
+class BatchComfort:
+    """The zone samples out of band in one Dyna batch (the planner's, and the own controls' on the same steps), from
+    which the multiplier is updated at each refit."""
+
+    out: float = 0.0  # the planner's zone samples out of band
+    zones: float = 0.0  # the planner's zone samples where the band applied
+    own_out: float = 0.0  # the own controls' zone samples out on the matched steps
+    own_zones: float = 0.0
+    unmatched: float = 0.0  # the planner's zone samples on steps the own record does not know
+
+    def add(self, out: int, zones: int, own: int | None, level: OwnLevel | None) -> None:
+        """One step where the band applied: `out` of `zones` out of band; `own`: the own controls' count there."""
+        self.out, self.zones = self.out + out, self.zones + zones
+        if own is not None:
+            self.own_out, self.own_zones = self.own_out + own, self.own_zones + zones
+        elif level is not None:
+            self.unmatched += zones
+
+    def allowed_pct(self, target_pct: float, level: OwnLevel | None) -> float | None:
+        """The batch's allowed share out of band (`OwnLevel.allowed_pct`); None without an own level."""
+        return level.allowed_pct(target_pct, self.own_out, self.own_zones, self.unmatched) if level else None
