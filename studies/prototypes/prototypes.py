@@ -1,24 +1,9 @@
 """Every DOE reference prototype in the EnergyPlus wheel, taken the way a new user takes a building (issue 52, part 4).
 
-Per building, each stage a command a user runs, its output kept under WORK/<name>/ so the study resumes:
-
-1. `building init MODEL.idf` writes the starter; the starter's recommended actions are uncommented: the
-   thermostats together (cooling, heating; one knob per setpoint schedule its zones follow) and, where the model has
-   air loops reset for several zones, their supply air together (single-zone units follow their own thermostats:
-   `building init` leaves them out of that knob). The starter's example time-of-use tariff with demand charges is
-   uncommented too, so the bill is scored.
-2. `building check` on that spec (it proves each node action reaches its node).
-3. `train --algorithm mpc`, the recipe for a building nobody tuned (the planner: docs/model-based.md), on CA, CO
-   and FL, in chunks: a run is stopped with SIGINT at the chunk's end (it checkpoints) and resumed the next time.
-4. `evaluate` against the building's own controls on BOPTEST's four scenarios (peak and typical heating and
-   cooling fortnights, after a week of warm-up) on all five weathers (IL and VA held out).
-5. `table`: one row per building (every one, with the stage it failed at and why), ratios to its own controls,
-   and one figure (savings against discomfort), into results/prototypes/.
-
-    python studies/prototypes/prototypes.py prepare              # stages 1-2 for all 16 (minutes)
-    python studies/prototypes/prototypes.py run --minutes 110    # stages 3-4, resumed, until the chunk ends
-    python studies/prototypes/prototypes.py table                # stage 5
-    python studies/prototypes/prototypes.py status
+Per building, each stage is the command a user runs (`building init` and the starter's recommended actions, `building
+check`, `train --algorithm mpc` with a recipe from recipes.py, `evaluate` on BOPTEST's four scenarios), its output
+kept under WORK/<name>/ so the study resumes; `table` writes results/prototypes/. The path and the commands:
+README.md beside this file.
 """
 
 from __future__ import annotations
@@ -37,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+from recipes import RECIPES
 from report import SCENARIOS, figure, markdown, ratios
 
 REPO = Path(__file__).resolve().parents[2]
@@ -44,47 +30,6 @@ LOG = logging.getLogger("prototypes")
 TRAIN_WEATHERS = "CA,CO,FL"
 EVAL_WEATHERS = "CA,CO,FL,IL,VA"
 TARIFF_LINE = '# tariff = { Electricity = { file = "commercial-tou-demand.toml" } }'
-# The recipe for a building nobody tuned (the office's, docs/model-based.md): comfort held at its own controls'
-# level in its own bounds, HVAC energy the objective, the clock observed, the morning's setpoint jump in one step.
-# The planner is the controller scored: no policy distilled from it.
-PLANNER = "max_increment=1.0,horizon=12,distill=false"
-# A thermostat's jump from setback to occupied can span most of its action's range (the restaurants' heating:
-# 15.6 -> 21 C of 15-21.5, 1.66 in normalized units): `max_increment=2.0` lets any candidate, and the own plan the
-# planner pays beyond, make it in one step, as the building's own controls do.
-JUMP = "max_increment=2.0,horizon=12,distill=false"
-COMMON = ["--algorithm", "mpc", "--objective", "hvac", "--time-features", "--comfort-target", "99.8",
-          "--checkpoint-every", "5000"]  # fmt: skip
-RECIPES = {
-    # the first: year-long episodes from January 1 (35k steps: about four months of each training weather), a
-    # margin of 0.1 K inside the bounds
-    "january": ["--run-days", "365", "--comfort-margin", "0.1", "--mpc", PLANNER, *COMMON],
-    # the warehouse's diagnosis (docs/model-based.md): fortnights from random days (every season, where the first
-    # never saw summer) and a twentieth of a kelvin's margin (its own controls sit on the bounds: 0.1 K cost heating)
-    "seasons": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05", "--mpc", PLANNER, *COMMON],
-    # and the thermostat's bounds paid for in occupied hours only (`comfort_hours=occupied`, the hours its share in
-    # own bounds and occupied K.h count): at every step, the warehouse's planner heated against night setbacks
-    "occupied": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05",
-                 "--mpc", f"{PLANNER},comfort_hours=occupied", *COMMON],
-    # and only the discomfort beyond its own thermostats' plan paid for, that plan always a candidate
-    # (`comfort_reference=own`): the warehouse's planner cooled the storage for a zone with no cooling
-    "own": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05",
-            "--mpc", f"{PLANNER},comfort_hours=occupied,comfort_reference=own", *COMMON],
-    # and the multiplier holding it to its own controls' share in band where that is below the target, date by
-    # date (`comfort_level=own`): the warehouse's own controls keep 78 % in summer, and against 99.8 % its
-    # multiplier sat at its cap
-    "level": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05",
-              "--mpc", f"{PLANNER},comfort_hours=occupied,comfort_reference=own,comfort_level=own", *COMMON],
-    # and the morning's jump in one step (JUMP): at 1.0 a step, the restaurants' planners reached the occupied
-    # setpoint a step late, and so did the own plan it pays beyond, so the first occupied step's discomfort was
-    # free: the quick-service restaurant's first occupied hour held 170 of its 227 zone K.h (docs/model-based.md)
-    "jump": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05",
-             "--mpc", f"{JUMP},comfort_hours=occupied,comfort_reference=own,comfort_level=own", *COMMON],
-    # and the own plan unless every member of the ensemble prefers the search's (`consensus`): the quick-service
-    # restaurant's jump planner, evaluated so, went from HVAC x1.014-1.017 to x1.001-1.006 (docs/model-based.md)
-    "consensus": ["--run-days", "14", "--random-start", "--comfort-margin", "0.05", "--mpc",
-                  f"{JUMP},comfort_hours=occupied,comfort_reference=own,comfort_level=own,consensus=true", *COMMON],
-}
-
 
 @dataclass(frozen=True)
 class Study:
