@@ -13,6 +13,7 @@ import pytest
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.learning.model_based.calendar import own_reference
 from parallel_eplus.learning.model_based.control import MPC, thermostat_sides
+from parallel_eplus.learning.model_based.planner import _follow
 from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_file
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -122,8 +123,6 @@ def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_a
 def test_the_reference_candidate_makes_up_a_jump_it_cannot_make_at_once():
     """From a setback at the top of the range to an occupied setpoint 1.5 away, 0.15 a step: there in ten steps
     and held (clipping each step's increment alone left it 0.15 from the start for the whole horizon)."""
-    from parallel_eplus.learning.model_based.planner import _follow
-
     target = np.full((1, 12, 1), -0.5, np.float32)
     path = _follow(np.ones((1, 1), np.float32), target, 0.15, np.full(1, -1.0), np.full(1, 1.0))
     np.testing.assert_allclose(path[0, :, 0], [0.85, 0.7, 0.55, 0.4, 0.25, 0.1, -0.05, -0.2, -0.35, -0.5, -0.5, -0.5],
@@ -187,8 +186,6 @@ def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_
     """Each member's cost (`members=True`) averages to the planner's; with `consensus`, the action is the own plan's
     unless every member predicts the plan the search chose costs less; without it, the search's best plan acts
     where some member prefers the own plan (April and July nights here)."""
-    from parallel_eplus.learning.model_based.planner import _follow
-
     a_last = np.array([[0.5, -0.5]], np.float32)
     outcomes = {}
     for consensus in ("false", "true"):
@@ -214,3 +211,60 @@ def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_
     assert all(own or preferred for own, preferred in with_consensus)  # left only where every member preferred
     assert any(not own for own, _ in with_consensus)  # and it did leave it
     assert any(not own and not preferred for (c, *_), (own, preferred) in outcomes.items() if c == "false")
+
+
+def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_much_less_predicted_cost():
+    """`min_saving`: the own plan's action unless the plan the search chose is predicted to cost at least that share
+    less than it over the horizon; a larger share leaves it less often, and 0 as before. Refused without the own
+    plan to weigh against."""
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    left = {}
+    for share in (0.0, 0.02, 0.5):
+        mpc = PlannerOptions.parse(f"comfort_reference=own,min_saving={share}").apply(MPC.load(planner_file(OFFICE)))
+        left[share] = 0
+        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
+            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
+            for hour in range(24):
+                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
+                exo, applies, bounds, weights = mpc.future([info])
+                reference = own_reference(bounds[0], mpc.comfort_times.tolerance, mpc.thermostat_sides,
+                                          mpc.action_low, mpc.action_high, a_last[0])  # fmt: skip
+                reference = _follow(a_last, reference[None], mpc.settings.max_increment, *mpc.support)
+                action = mpc.act(obs, [info], a_last)
+                s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
+                own_cost = mpc.planner._cost(s, a_last, reference[:, None], exo, applies, bounds, mpc.comfort_weight,
+                                             weights, reference)[0][0, 0]  # fmt: skip
+                if not np.allclose(action, reference[:, 0], atol=1e-6):
+                    left[share] += 1
+                    assert own_cost - mpc.last.cost[0] >= share * abs(own_cost) - 1e-3  # it paid for leaving
+    assert left[0.0] > left[0.02] >= left[0.5] and left[0.0] > 0
+    with pytest.raises(ValueError, match="comfort_reference=own"):
+        PlannerOptions.parse("comfort_reference=bound,min_saving=0.02").apply(MPC.load(planner_file(OFFICE)))
+    with pytest.raises(ValueError, match="min_saving"):
+        PlannerOptions.parse("min_saving=1.5")
+
+
+def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan():
+    """`own_radius`: every thermostat action within that much (normalized) of the own plan's at the step it acts,
+    where without it the search strays further; refused without the own plan."""
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    furthest = {}
+    for radius in ("", ",own_radius=0.1"):
+        mpc = PlannerOptions.parse(f"comfort_reference=own{radius}").apply(MPC.load(planner_file(OFFICE)))
+        assert mpc.follows.all()  # the office's two actions are its thermostats
+        furthest[radius] = 0.0
+        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
+            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
+            for hour in range(24):
+                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
+                bounds = mpc.future([info])[2]
+                reference = own_reference(bounds[0], mpc.comfort_times.tolerance, mpc.thermostat_sides,
+                                          mpc.action_low, mpc.action_high, a_last[0])  # fmt: skip
+                reference = _follow(a_last, reference[None], mpc.settings.max_increment, *mpc.support)
+                action = mpc.act(obs, [info], a_last)
+                furthest[radius] = max(furthest[radius], float(np.abs(action - reference[:, 0]).max()))
+    assert furthest[",own_radius=0.1"] <= 0.1 + 1e-5 < furthest[""]
+    with pytest.raises(ValueError, match="comfort_reference=own"):
+        PlannerOptions.parse("own_radius=0.1").apply(MPC.load(planner_file(OFFICE)))
+    with pytest.raises(ValueError, match="own_radius"):
+        PlannerOptions.parse("comfort_reference=own,own_radius=3")

@@ -36,7 +36,8 @@ log = logging.getLogger(__name__)
 PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (format 1) refuse it
 SAMPLED_DECISIONS = 48
 PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
-                    "disagreement_weight", "comfort_risk", "terminal_weight", "consensus")  # what a served plan needs
+                    "disagreement_weight", "comfort_risk", "terminal_weight", "consensus",
+                    "min_saving", "own_radius")  # what a served plan needs
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 

@@ -42,7 +42,7 @@ class _Settings:
 
     def __init__(self, values: dict):
         self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
-        self.consensus = False
+        self.consensus, self.min_saving, self.own_radius = False, 0.0, None
         self.__dict__.update(values)
 
 
@@ -103,7 +103,8 @@ class PlannerRuntime:
             prices, running = self.demand.outlook([when, *times[:-1]], peaks)
             demand = DemandOutlook(prices[None], running[None], self.demand.part, self.demand.per_dollar)
         plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], bounds[None], self.comfort_weight,
-                                 self.support, warm[None], [seed], weights, reference, demand)  # fmt: skip
+                                 self.support, warm[None], [seed], weights, reference, demand,
+                                 np.array([side is not None for side in self.sides]))  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),

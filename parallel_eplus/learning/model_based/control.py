@@ -68,6 +68,7 @@ class MPC:
         self.action_low = np.array([a.low for a in b.actions], float)  # as the served planner reads them
         self.action_high = np.array([a.high for a in b.actions], float)
         self.thermostat_sides = thermostat_sides(b)
+        self.follows = np.array([side is not None for side in self.thermostat_sides])  # the own plan sets these
         self.check_reference()
 
     def check_reference(self) -> None:
@@ -79,6 +80,10 @@ class MPC:
             raise ValueError(f"comfort_reference=own: {self.building or 'the building'} has no thermostat action "
                              "(a zone's heating or cooling setpoint) that follows a schedule its comfort bounds "
                              "read (`band = \"thermostat\"`)")
+        s = self.settings
+        if (s.consensus or s.min_saving or s.own_radius is not None) and s.comfort_reference != "own":
+            raise ValueError("--mpc consensus, min_saving and own_radius weigh the search's plan against the own "
+                             "thermostats' plan: add comfort_reference=own")
         dated = self.comfort_times.dated_applies
         if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
             log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
@@ -143,7 +148,8 @@ class MPC:
             reference = np.stack([own_reference(bounds[i], tol, self.thermostat_sides, self.action_low,
                                                 self.action_high, a_last[i]) for i in range(len(s))])  # fmt: skip
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
-                                      self.warm[: len(s)], seeds, weights, reference, demand)  # fmt: skip
+                                      self.warm[: len(s)], seeds, weights, reference, demand,
+                                      self.follows)  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         return self.last.action
 

@@ -80,13 +80,15 @@ class Planner:
     def plan(self, s: np.ndarray, a_last: np.ndarray, exo: np.ndarray, applies: np.ndarray, bounds: np.ndarray,
              comfort_weight: float, support: tuple[np.ndarray, np.ndarray], warm: np.ndarray,
              seeds: list[int], energy_weights: np.ndarray | None = None,
-             reference: np.ndarray | None = None, demand: DemandOutlook | None = None) -> Plan:  # fmt: skip
+             reference: np.ndarray | None = None, demand: DemandOutlook | None = None,
+             follows: np.ndarray | None = None) -> Plan:  # fmt: skip
         """s [W, n_state], a_last [W, A], exo [W, H, X], applies [W, H], each zone's bounds [W, H, K, 2], the
         actions' support (low [A], high [A]), the warm start [W, H, A], one sampler seed per worker, the
         weights of the predicted energy parts [W, H, P] (None: each counts once), and the actions [W, H, A] whose
         predicted discomfort is free (`comfort_reference = "own"`; None: every K beyond the bounds costs); the
         reference is itself a candidate, so the search can always fall back on it; `demand`: the demand charges
-        over the horizon (demand.py), None: none priced."""
+        over the horizon (demand.py), None: none priced; `follows` [A]: the actions the reference sets (the
+        thermostats), which `own_radius` keeps near it."""
         t0 = time.perf_counter()
         c = self.settings
         w, h, a_n = len(s), c.horizon, a_last.shape[1]
@@ -94,6 +96,11 @@ class Planner:
         low, high = (np.asarray(b, np.float32) for b in support)
         if reference is not None:  # as a candidate can follow it: within the support, ±max_increment a step
             reference = _follow(a_last, np.asarray(reference, np.float32), c.max_increment, low, high)
+        near = None
+        radius = getattr(c, "own_radius", None)
+        if reference is not None and radius is not None and follows is not None:  # [W, 1, H, A] each side
+            r = np.where(np.asarray(follows, bool), np.float32(radius), np.float32(np.inf))
+            near = (reference[:, None] - r, reference[:, None] + r)
         rngs = [np.random.default_rng(seed) for seed in seeds]
         mean, std = np.asarray(warm, np.float32).copy(), np.full((w, h, a_n), c.init_std, np.float32)
         for i in range(c.iterations):
@@ -107,6 +114,8 @@ class Planner:
                 delta[:, 1] = np.diff(np.concatenate([a_last[:, None], reference], axis=1), axis=1)
             np.clip(delta, -c.max_increment, c.max_increment, out=delta)
             actions = np.clip(a_last[:, None, None, :] + np.cumsum(delta, axis=2), low, high)
+            if near is not None:
+                np.clip(actions, *near, out=actions)
             cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight, energy_weights,
                                       reference, demand)  # fmt: skip
             elite = np.argpartition(cost, elites - 1, axis=1)[:, :elites]
@@ -115,6 +124,10 @@ class Planner:
         rows = np.arange(w)
         best = cost.argmin(1)
         plan = actions[rows, best]  # [W, H, A]
+        if reference is not None and getattr(c, "min_saving", 0.0) > 0:  # candidate 1 is the reference
+            keep = cost[rows, 1] - cost[rows, best] < c.min_saving * np.abs(cost[rows, 1])
+            plan = np.where(keep[:, None, None], reference, plan)
+            best = np.where(keep, 1, best)
         if reference is not None and getattr(c, "consensus", False):  # the own plan, unless every member prefers
             pair = np.stack([plan, reference], axis=1)  # [W, 2, H, A]
             per = self._cost(s, a_last, pair, exo, applies, bounds, comfort_weight, energy_weights, reference,
