@@ -118,6 +118,17 @@ def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_a
     bound = PlannerOptions.parse("comfort_reference=bound").apply(mpc).act(obs, [info], a_last)[0]
     assert not np.allclose(own, bound)  # the reference reached the plan
     np.testing.assert_allclose(served, mpc.action_low + (own + 1) / 2 * (mpc.action_high - mpc.action_low), atol=1e-4)
+    # held near the own plan, and off it only for a 2 % saving: served as planned in process
+    options = "comfort_reference=own,comfort_hours=occupied,own_radius=0.1,min_saving=0.02"
+    mpc = PlannerOptions.parse(options).apply(MPC.load(planner_file(OFFICE)))
+    mpc.save(folder / "planner.pt")
+    export(folder, tmp_path / "served-near", record_days=1)
+    assert Contract.read(tmp_path / "served-near").data["planner"]["settings"]["own_radius"] == 0.1
+    runtime = PlannerRuntime(tmp_path / "served-near", Contract.read(tmp_path / "served-near"))
+    answer = runtime.act(body)["setpoints"]
+    served = np.array([answer[n]["value"] for n in ("cooling_setpoint_c", "heating_setpoint_c")])
+    near = mpc.act(obs, [info], a_last)[0]
+    np.testing.assert_allclose(served, mpc.action_low + (near + 1) / 2 * (mpc.action_high - mpc.action_low), atol=1e-4)
 
 
 def test_the_reference_candidate_makes_up_a_jump_it_cannot_make_at_once():

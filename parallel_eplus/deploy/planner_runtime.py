@@ -68,6 +68,7 @@ class PlannerRuntime:
         self.calendar = Calendar.from_arrays(p["calendar"], {k: v for k, v in arrays.items() if k in _CALENDAR})
         self.reference = p.get("comfort_reference", "bound")  # "own": discomfort beyond the own thermostats' is paid
         self.sides = [tuple(x) if x is not None else None for x in p.get("thermostat_sides", [])]
+        self.follows = np.array([side is not None for side in self.sides])  # the own plan sets these (own_radius)
         self.own = arrays["own_controls"]  # [12, 24, A] physical: the building's own setpoints by month and hour
         self.x_mean, self.x_std = arrays["x_mean"], arrays["x_std"]
         self.low = np.array([o["low"] for o in contract.outputs])
@@ -104,7 +105,7 @@ class PlannerRuntime:
             demand = DemandOutlook(prices[None], running[None], self.demand.part, self.demand.per_dollar)
         plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], bounds[None], self.comfort_weight,
                                  self.support, warm[None], [seed], weights, reference, demand,
-                                 np.array([side is not None for side in self.sides]))  # fmt: skip
+                                 self.follows)  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),
