@@ -40,7 +40,7 @@ class Study:
     steps: int = 35_000  # env steps per run
     workers: int = 2
     seeds: tuple[int, ...] = (0,)
-    recipe: str = "jump"
+    recipe: str = "hedged"
 
     def folder(self, name: str) -> Path:
         return self.work / name
@@ -272,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=Study.steps)
     p.add_argument("--seeds", default="0", help="comma-separated")
     p.add_argument("--minutes", type=float, default=110.0, help="the chunk: stop (checkpointed) after this long")
-    p.add_argument("--recipe", choices=sorted(RECIPES), default="jump", help="the training recipe (RECIPES)")
+    p.add_argument("--recipe", choices=sorted(RECIPES), default="hedged", help="the training recipe (RECIPES)")
     a = p.parse_args(argv)
     a.work = a.work or Path(os.environ.get("WORK", REPO.parent / f"prototypes-{a.recipe}"))
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
