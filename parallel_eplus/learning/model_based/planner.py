@@ -15,7 +15,10 @@ plus `disagreement_weight` times the members' spread of each zone temperature (K
 model knows the building. Each member follows its own trajectory (PETS's "TS-inf"); the comfort term is the
 members' mean, or with `comfort_risk = "worst"` the worst member's (a chance constraint: the band held by every
 member's prediction, not by their average); `terminal_weight` weighs the horizon's last step's comfort more (a
-plan must not end at the band's edge, where the next plan has no room).
+plan must not end at the band's edge, where the next plan has no room). Measured against the building's own plan
+(`reference`), `own_radius` keeps its thermostats near that plan and `min_saving` plays it unless the search's plan
+is predicted to save that share: the model knows the building only near what it has seen, and the best of hundreds
+of candidates is the one its errors favour most.
 
 Numpy and onnxruntime only, and a function of its arguments: the sampler is seeded per decision from what the
 decision sees (`decision_seed`), so a served planner answers a request exactly as the in-process one acts.
