@@ -198,6 +198,7 @@ def test_an_exported_planner_prices_demand_from_the_request_s_peaks(office_cost,
     contract = Contract.read(office_cost[1])
     assert contract.data["planner"]["demand"]["power"] == "power_w"
     assert contract.data["demand_peaks_kw"]["charges"][0] == "maximum"
+    assert contract.data["export_check"]["decisions_with_demand_peaks"] > 24  # checked with peaks, not only without
     runtime = PlannerRuntime(office_cost[1], contract)
     body = {"time": "2013-07-09T15:00:00", "last_setpoints": {"cooling_setpoint_c": 24.0, "heating_setpoint_c": 21.0},
             "sensors": {"outdoor_temp_c": 30.0, "core_temp_c": 23.5, "perimeter_1_temp_c": 23.5,

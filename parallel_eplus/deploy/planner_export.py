@@ -35,6 +35,7 @@ log = logging.getLogger(__name__)
 
 PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (format 1) refuse it
 SAMPLED_DECISIONS = 48
+PEAK_HISTORY = 96  # the steps before a sampled decision whose readings make the month's peaks it is checked with
 PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
                     "disagreement_weight", "comfort_risk", "terminal_weight", "consensus",
                     "min_saving", "own_radius")  # what a served plan needs
@@ -147,11 +148,12 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
                    "weathers": saved.get("weathers"), "timesteps": saved.get("timesteps"), "building": building_name},
         "exported": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }  # fmt: skip
-    spreads, diff = _check(out_dir, contract, mpc, demos)
+    spreads, diff, peaked = _check(out_dir, contract, mpc, demos)
     if contract["fallback"]["max_spread_k"] is None:  # 3 x the largest spread on the building's own days, >= 0.5 K
         contract["fallback"]["max_spread_k"] = round(max(0.5, 3 * float(np.max(spreads))), 3)
     contract["export_check"] = {"decisions": len(spreads), "max_abs_diff": diff, "spread_k_median":
-                                round(float(np.median(spreads)), 4), "spread_k_max": round(float(np.max(spreads)), 4)}
+                                round(float(np.median(spreads)), 4), "spread_k_max": round(float(np.max(spreads)), 4),
+                                "decisions_with_demand_peaks": peaked}
     path = out_dir / CONTRACT_FILE
     io.write_text(path, json.dumps(contract, indent=2) + "\n")
     log.info("exported the planner %s -> %s (%d sampled decisions equal in process; fallback beyond %.2f K spread)",
@@ -175,16 +177,18 @@ def _tariff_values(weights, spec, out_dir: Path) -> dict[str, object]:
     return values
 
 
-def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float]:
+def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float, int]:
     """Served vs in-process on decisions sampled from the own-controls run: (each decision's spread, the largest
-    setpoint difference, physical units). Any difference is refused."""
+    setpoint difference, physical units, how many carried demand peaks). Any difference is refused. Under demand
+    charges each decision carries the month's running peaks from the readings of the day before it, in process and
+    in its request."""
     draft = dict(contract, fallback=dict(contract["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"),
                                          max_forecast_gap_c=None))  # fmt: skip
     runtime = PlannerRuntime(out_dir, Contract(draft))
     rows = np.linspace(1, len(demos) - 1, SAMPLED_DECISIONS).astype(int)
     names = [o["name"] for o in contract["outputs"]]
     sensors = [i["name"] for i in contract["inputs"]]
-    spreads, diff = [], 0.0
+    spreads, diff, peaked = [], 0.0, 0
     for r in rows:
         t, weather, obs = demos.times[r], demos.weathers[r], demos.observations[r]
         info = {"time": t, "weather": weather}
@@ -195,8 +199,14 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
             "last_setpoints": dict(zip(names, map(float, demos.physical[r - 1]), strict=True)),
             "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)},
         }  # fmt: skip
-        answer = runtime.act(body)
         mpc.reset(0)
+        if mpc.demand:  # the month's peaks so far, kept in process and sent as a client keeps them
+            history = [q for q in range(max(0, r - PEAK_HISTORY), r + 1) if demos.weathers[q] == weather]
+            for q in history:
+                mpc.observe(demos.observations[q][None], [{"time": demos.times[q], "weather": weather}])
+            body["demand_peaks_kw"] = mpc.demand.trackers[0].month_peaks(mpc.demand.charges.names, t)
+            peaked += bool(body["demand_peaks_kw"])
+        answer = runtime.act(body)
         a_last = np.array([2 * (demos.physical[r - 1] - demos.low) / (demos.high - demos.low) - 1], np.float32)
         expected = demos.to_physical(mpc.act(obs[None], [info], a_last)[0])
         served = np.array([answer["setpoints"][n]["value"] for n in names])
@@ -204,4 +214,4 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
         spreads.append(answer["spread_k"])
     if diff > PARITY_TOLERANCE:
         raise ValueError(f"the served planner's setpoints differ from the in-process planner's by {diff:g}")
-    return np.array(spreads), diff
+    return np.array(spreads), diff, peaked
