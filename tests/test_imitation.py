@@ -11,6 +11,7 @@ import pytest
 import torch as th
 
 from parallel_eplus.buildings import resources
+from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.check import check_spec
 from parallel_eplus.buildings.spec import load_spec
 from parallel_eplus.learning.imitation import clone, readbacks, record_baseline
@@ -122,3 +123,18 @@ def test_train_init_from_baseline_saves_the_cloned_policy_first(tmp_path, no_lea
     obs = np.array([[12.0, 23.0, 24.0, 120e3, 110e3, 10e3]], dtype=np.float32)
     assert act(obs).shape == (1, 4)
     assert not (run / "baseline-record").exists()  # the recorded years' CSVs are not kept
+
+
+@pytest.mark.slow
+def test_the_medium_office_s_own_controls_are_read_back_at_every_step_among_its_own_detailed_outputs(tmp_path,
+                                                                                                     no_leaks):
+    """The DOE medium office reports some of its own outputs at the HVAC's `Detailed` frequency, which adds rows to
+    eplusout.csv between the steps: the read-backs are the steps', one per observation, the thermostats on their
+    schedules and the supply air on its manager's setpoint."""
+    office = load_building("office-medium")
+    demos = record_baseline("office-medium", ["CA"], 1, 1, tmp_path / "record", progress=False)
+    assert len(demos) == office.steps_per_day and not np.isnan(demos.physical).any()
+    names = [a.name for a in office.actions]
+    heating = demos.physical[:, names.index("heating_setpoint_c")]
+    supply = demos.physical[:, names.index("supply_air_c")]
+    assert set(np.round(heating, 1)) <= {15.6, 21.0} and 10.0 <= supply.min() <= supply.max() <= 16.0

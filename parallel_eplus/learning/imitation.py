@@ -79,7 +79,9 @@ def readbacks(building: str | None) -> list[tuple[str, str]]:
 
 
 def _read_back(csv: Path, wanted: list[tuple[str, str]]) -> np.ndarray:
-    """The read-back columns of an episode's eplusout.csv, in the order of `wanted` (matched case-insensitively)."""
+    """The read-back columns of an episode's eplusout.csv, in the order of `wanted` (matched case-insensitively), at
+    the steps they were reported: a model's own outputs at the HVAC's `Detailed` frequency add rows between them
+    (the medium office's: 65,925 rows for 52,560 steps), where the read-backs are blank."""
     table = pd.read_csv(csv)
     columns = {c.split(" [")[0].split(" (")[0].strip().upper(): c for c in table.columns}
     picked = []
@@ -88,7 +90,8 @@ def _read_back(csv: Path, wanted: list[tuple[str, str]]) -> np.ndarray:
         if name not in columns:
             raise ValueError(f"{csv}: no column for {key} / {variable} (EnergyPlus reported: {list(columns)[:8]}...)")
         picked.append(table[columns[name]].to_numpy(float))
-    return np.stack(picked, axis=1)
+    values = np.stack(picked, axis=1)
+    return values[~np.isnan(values).all(axis=1)]
 
 
 def record_baseline(
