@@ -194,6 +194,19 @@ def test_a_scenario_period_lies_where_its_definition_says(tmp_path, no_leaks):
 
 
 @pytest.mark.slow
+def test_the_loads_are_read_at_every_step_of_a_model_with_its_own_detailed_outputs(tmp_path, no_leaks):
+    """The DOE medium office reports some of its own outputs at the HVAC's `Detailed` frequency, which adds rows to
+    eplusout.csv between the steps: the loads the scenarios are found from are the steps' own, one per step."""
+    from parallel_eplus.evaluation.scenarios import LOADS, loads
+
+    base = [Controller(BASELINE_LABEL, "baseline")]
+    df = run_sweep(base, ["CA"], 2, 1, tmp_path / "loads", None, False, "office-medium", extra_outputs=LOADS)
+    heat, cool = loads(Path(df["episode_dir"][0]))
+    assert len(heat) == len(cool) == 2 * 144 and not heat.isna().any() and not cool.isna().any()
+    assert heat.index.is_monotonic_increasing and (heat > 0).any()  # January: the zones are heated
+
+
+@pytest.mark.slow
 def test_the_objective_sets_what_the_reward_pays_for(tmp_path, no_leaks):
     """`objective = "cost"`: the reward's energy term is each fuel's HVAC watts priced relative to electricity (here
     day 0.30, night 0.10: a mean of 0.2375), so the night's electricity costs less than the day's."""

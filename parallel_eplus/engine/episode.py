@@ -86,6 +86,13 @@ class StepRecorder:
         return df
 
 
+def reported_rows(table: pd.DataFrame, columns: Sequence[str]) -> pd.DataFrame:
+    """The rows of an eplusout.csv `table` where any of `columns` (outputs reported every step) was reported: a
+    model's own outputs at the HVAC's `Detailed` frequency add rows between the steps, where the step's outputs
+    are blank (the DOE medium office: 65,925 rows for 52,560 steps)."""
+    return table[table[list(columns)].notna().any(axis=1)].reset_index(drop=True)
+
+
 def read_steps(episode_dir: str | Path) -> pd.DataFrame:
     """An episode's step table, as written at its end."""
     return pd.read_parquet(Path(episode_dir) / STEPS_FILE)

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from parallel_eplus.engine.episode import reported_rows
+
 log = logging.getLogger(__name__)
 
 SCENARIOS = ("year", "peak_heat", "typical_heat", "peak_cool", "typical_cool")
@@ -77,13 +79,14 @@ def loads(episode_dir: Path, partial: bool = False) -> tuple[pd.Series, pd.Serie
     """The zones' summed heating and cooling loads (W) of a year run with `LOADS` reported, on its step times;
     `partial`: a run that failed, up to its last step."""
     table = pd.read_csv(episode_dir / "eplusout.csv")
+    pick = lambda name: [c for c in table.columns if name.upper() in c.upper()]  # noqa: E731
+    table = reported_rows(table, pick(LOADS[0][1]) + pick(LOADS[1][1]))
     steps = pd.read_parquet(episode_dir / "steps.parquet", columns=["time"])
     if len(table) != len(steps) and not partial:
         raise ValueError(f"{episode_dir}: {len(table)} rows in eplusout.csv for {len(steps)} steps")
     n = min(len(table), len(steps))  # a failed run: its steps up to the failure
     table, steps = table.iloc[:n], steps.iloc[:n]
     index = pd.DatetimeIndex(steps["time"]) - pd.Timedelta(seconds=1)  # each step's load in its own day
-    pick = lambda name: [c for c in table.columns if name.upper() in c.upper()]  # noqa: E731
     heat = table[pick(LOADS[0][1])].sum(axis=1).to_numpy(float)
     cool = table[pick(LOADS[1][1])].sum(axis=1).to_numpy(float)
     return pd.Series(heat, index=index), pd.Series(cool, index=index)

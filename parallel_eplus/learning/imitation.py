@@ -36,6 +36,7 @@ from tqdm import tqdm
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import reported_rows
 from parallel_eplus.learning.settings import ImitationSettings
 
 log = logging.getLogger(__name__)
@@ -80,8 +81,7 @@ def readbacks(building: str | None) -> list[tuple[str, str]]:
 
 def _read_back(csv: Path, wanted: list[tuple[str, str]]) -> np.ndarray:
     """The read-back columns of an episode's eplusout.csv, in the order of `wanted` (matched case-insensitively), at
-    the steps they were reported: a model's own outputs at the HVAC's `Detailed` frequency add rows between them
-    (the medium office's: 65,925 rows for 52,560 steps), where the read-backs are blank."""
+    the steps they were reported (`reported_rows`)."""
     table = pd.read_csv(csv)
     columns = {c.split(" [")[0].split(" (")[0].strip().upper(): c for c in table.columns}
     picked = []
@@ -89,9 +89,8 @@ def _read_back(csv: Path, wanted: list[tuple[str, str]]) -> np.ndarray:
         name = f"{key}:{variable}".upper()
         if name not in columns:
             raise ValueError(f"{csv}: no column for {key} / {variable} (EnergyPlus reported: {list(columns)[:8]}...)")
-        picked.append(table[columns[name]].to_numpy(float))
-    values = np.stack(picked, axis=1)
-    return values[~np.isnan(values).all(axis=1)]
+        picked.append(columns[name])
+    return reported_rows(table, picked)[picked].to_numpy(float)
 
 
 def record_baseline(
