@@ -35,7 +35,6 @@ log = logging.getLogger(__name__)
 
 PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (format 1) refuse it
 SAMPLED_DECISIONS = 48
-PEAK_HISTORY = 96  # the steps before a sampled decision whose readings make the month's peaks it is checked with
 PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
                     "disagreement_weight", "comfort_risk", "terminal_weight", "consensus",
                     "min_saving", "own_radius")  # what a served plan needs
@@ -201,7 +200,8 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
         }  # fmt: skip
         mpc.reset(0)
         if mpc.demand:  # the month's peaks so far, kept in process and sent as a client keeps them
-            history = [q for q in range(max(0, r - PEAK_HISTORY), r + 1) if demos.weathers[q] == weather]
+            day = int(round(24 * 60 / mpc.step_minutes))
+            history = [q for q in range(max(0, r - day), r + 1) if demos.weathers[q] == weather]
             for q in history:
                 mpc.observe(demos.observations[q][None], [{"time": demos.times[q], "weather": weather}])
             body["demand_peaks_kw"] = mpc.demand.trackers[0].month_peaks(mpc.demand.charges.names, t)
