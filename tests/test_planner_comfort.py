@@ -11,10 +11,16 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.learning.model_based.calendar import own_reference
+from parallel_eplus.deploy.planner_runtime import calendar_arrays
+from parallel_eplus.learning.imitation import record_baseline
+from parallel_eplus.learning.model_based.calendar import Calendar, own_reference
 from parallel_eplus.learning.model_based.control import MPC, thermostat_sides
+from parallel_eplus.learning.model_based.dataset import Transitions
+from parallel_eplus.learning.model_based.features import step_times
 from parallel_eplus.learning.model_based.planner import _follow
 from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_file
+from parallel_eplus.learning.model_based.settings import MPCSettings
+from parallel_eplus.learning.model_based.sources import add_baseline
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANNER = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0/best/planner"
@@ -45,6 +51,36 @@ def test_the_own_reference_sets_each_thermostat_to_its_zone_s_own_setpoint():
     np.testing.assert_allclose(physical, np.broadcast_to([26.7, 15.6], (3, 2)), atol=1e-5)
     held = own_reference(bounds, 0.2, [None, (0, 0)], low, high, np.array([0.3, 0.0], np.float32))
     assert np.all(held[:, 0] == np.float32(0.3))  # not a thermostat: held where it is
+    recorded = np.array([[0.5, 0.9], [np.nan, 0.9], [-0.2, 0.9]], np.float32)  # what the own controls set then
+    dated = own_reference(bounds, 0.2, [None, (0, 0)], low, high, np.array([0.3, 0.0], np.float32), recorded)
+    np.testing.assert_array_equal(dated[:, 0], np.float32([0.5, 0.3, -0.2]))  # as recorded, held where not
+    np.testing.assert_array_equal(dated[:, 1], held[:, 1])  # a thermostat follows its zone's schedule
+
+
+@pytest.mark.slow
+def test_a_supply_air_node_s_own_plan_is_what_its_manager_set_that_day(tmp_path, no_leaks):
+    """The medium office's supply air follows no thermostat schedule: its own plan is what the model's own manager
+    set on that date, recorded with the building's own controls. The calendar keeps it by date (and the served
+    planner's arrays the same), and `own_radius` keeps the planner's supply air that near it, as the thermostats."""
+    mpc = MPC("office-medium", MPCSettings(comfort_reference="own", own_radius=0.1), 0.5, 1e-5, 1)
+    assert mpc.follows.tolist() == [True, True, False]  # before the record: the thermostats only
+    demos = record_baseline("office-medium", ["CA"], 1, 1, tmp_path / "record", progress=False)
+    own = np.array([side is None for side in mpc.thermostat_sides])
+    add_baseline(Transitions(mpc.layout), demos, mpc.forecasts, mpc.comfort_times, lambda t, v: True, 0, own)
+    assert mpc.follows.all()
+    row, h = 40, mpc.settings.horizon
+    info = {"time": demos.times[row], "weather": "CA"}
+    a_last = demos.actions[row - 1 : row].copy()
+    a_last[0, 2] = 0.5  # the supply air where the planner left it: 16.5 C
+    plan = mpc.own_plan([info], mpc.future([info])[2], a_last)[0]
+    np.testing.assert_allclose(plan[:, 2], demos.actions[row : row + h, 2])  # each step: what the manager set
+    assert np.all(np.abs(plan[:, 2] - 0.5) > 0.5)  # (12.8 C in January), not where it was left
+    times = step_times(info["time"], mpc.step_minutes, h)
+    served = Calendar.from_arrays(mpc.comfort_times.settings(), calendar_arrays(mpc.comfort_times))
+    np.testing.assert_array_equal(served.own_actions(times), mpc.comfort_times.own_actions(times))
+    action = mpc.act(demos.observations[row : row + 1], [info], a_last)
+    reference = _follow(a_last, plan[None], mpc.settings.max_increment, *mpc.support)
+    assert abs(action[0, 2] - reference[0, 0, 2]) <= 0.1 + 1e-5
 
 
 def test_a_candidate_that_plays_the_reference_pays_for_no_discomfort():
@@ -207,8 +243,7 @@ def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_
             for hour in range(24):
                 info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
                 exo, applies, bounds, weights = mpc.future([info])
-                reference = own_reference(bounds[0], mpc.comfort_times.tolerance, mpc.thermostat_sides,
-                                          mpc.action_low, mpc.action_high, a_last[0])[None]  # fmt: skip
+                reference = mpc.own_plan([info], bounds, a_last)
                 reference = _follow(a_last, reference, mpc.settings.max_increment, *mpc.support)  # as a candidate can
                 action = mpc.act(obs, [info], a_last)
                 steps = np.concatenate([np.zeros((1, 1, 2)), np.cumsum(mpc.last.increments[:, :-1], axis=1)], axis=1)
@@ -238,9 +273,8 @@ def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_muc
             for hour in range(24):
                 info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
                 exo, applies, bounds, weights = mpc.future([info])
-                reference = own_reference(bounds[0], mpc.comfort_times.tolerance, mpc.thermostat_sides,
-                                          mpc.action_low, mpc.action_high, a_last[0])  # fmt: skip
-                reference = _follow(a_last, reference[None], mpc.settings.max_increment, *mpc.support)
+                reference = _follow(a_last, mpc.own_plan([info], bounds, a_last), mpc.settings.max_increment,
+                                    *mpc.support)  # fmt: skip
                 action = mpc.act(obs, [info], a_last)
                 s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
                 own_cost = mpc.planner._cost(s, a_last, reference[:, None], exo, applies, bounds, mpc.comfort_weight,
@@ -269,9 +303,8 @@ def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan():
             for hour in range(24):
                 info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
                 bounds = mpc.future([info])[2]
-                reference = own_reference(bounds[0], mpc.comfort_times.tolerance, mpc.thermostat_sides,
-                                          mpc.action_low, mpc.action_high, a_last[0])  # fmt: skip
-                reference = _follow(a_last, reference[None], mpc.settings.max_increment, *mpc.support)
+                reference = _follow(a_last, mpc.own_plan([info], bounds, a_last), mpc.settings.max_increment,
+                                    *mpc.support)  # fmt: skip
                 action = mpc.act(obs, [info], a_last)
                 furthest[radius] = max(furthest[radius], float(np.abs(action - reference[:, 0]).max()))
     assert furthest[",own_radius=0.1"] <= 0.1 + 1e-5 < furthest[""]

@@ -68,7 +68,8 @@ class PlannerRuntime:
         self.calendar = Calendar.from_arrays(p["calendar"], {k: v for k, v in arrays.items() if k in _CALENDAR})
         self.reference = p.get("comfort_reference", "bound")  # "own": discomfort beyond the own thermostats' is paid
         self.sides = [tuple(x) if x is not None else None for x in p.get("thermostat_sides", [])]
-        self.follows = np.array([side is not None for side in self.sides])  # the own plan sets these (own_radius)
+        sides = np.array([side is not None for side in self.sides], bool)  # the own plan sets these (own_radius)
+        self.follows = sides | self.calendar.own_known(len(sides))
         self.own = arrays["own_controls"]  # [12, 24, A] physical: the building's own setpoints by month and hour
         self.x_mean, self.x_std = arrays["x_mean"], arrays["x_std"]
         self.low = np.array([o["low"] for o in contract.outputs])
@@ -93,7 +94,8 @@ class PlannerRuntime:
         bounds = self.calendar.bounds(times)
         reference = None
         if self.reference == "own":
-            reference = own_reference(bounds, self.calendar.tolerance, self.sides, self.low, self.high, a_last)[None]
+            reference = own_reference(bounds, self.calendar.tolerance, self.sides, self.low, self.high, a_last,
+                                      self.calendar.own_actions(times))[None]  # fmt: skip
         demand = None
         if self.demand is not None:  # the month's running peaks come with the request (the server keeps no state)
             try:
@@ -200,7 +202,7 @@ class PlannerRuntime:
 
 
 _CALENDAR = ("comfort_seen", "comfort_applied", "bound_sum", "bound_seen", "dated_runs", "dated_bounds",
-             "dated_weekday", "dated_applies")  # fmt: skip
+             "dated_weekday", "dated_applies", "own_runs", "own_actions")  # fmt: skip
 
 
 def calendar_arrays(calendar: Calendar) -> dict[str, np.ndarray]:

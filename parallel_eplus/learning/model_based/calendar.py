@@ -13,7 +13,9 @@ clock; by weekday and time alone, the hours at either end of its day were a blen
 zones go an hour early (2026-11-27). With `occupied_only` (the planner's `comfort_hours = "occupied"`) the
 thermostat's bounds count only where the band applies (its occupied hours, as recorded on that date, else by
 majority at that weekday and time): what the share in own bounds and occupied K.h score. Every step's setback
-bound cost the warehouse's planner heat at night that no score counted (docs/model-based.md).
+bound cost the warehouse's planner heat at night that no score counted (docs/model-based.md). By date too, what
+the building's own controls set for each action (`learn_own`, from their record): the own plan of an action no
+thermostat schedule gives (a supply-air node), for `comfort_reference = "own"`.
 Numpy only: the server imports this.
 """
 
@@ -45,6 +47,8 @@ class Calendar:
         self.dated = np.zeros((dated, *self.fixed.shape), np.float32)
         self.dated_weekday = np.full(dated, -1, np.int8)
         self.dated_applies = np.full(dated, -1, np.int8)  # -1: not recorded (a planner saved before it was kept)
+        # [dated, A]: what the building's own controls set (normalized) for the step ending there, NaN: not recorded
+        self.dated_own = np.zeros((dated, 0), np.float32)
 
     def _slot(self, t: dt.datetime) -> int:
         return int((t.weekday() * 24 * 60 + t.hour * 60 + t.minute) // self.step_minutes) % self.slots
@@ -80,6 +84,21 @@ class Calendar:
         known = (self.dated_weekday[dates] == [t.weekday() for t in times])[:, None, None]
         return (np.where(known, self.dated[dates], mean) + widen).astype(np.float32)
 
+    def own_actions(self, times: list[dt.datetime]) -> np.ndarray | None:
+        """What the building's own controls set for the steps ending at `times`, [T, A] normalized (NaN where that
+        date was not recorded, or fell on another weekday), or None (no record)."""
+        if not self.dated_own.shape[1]:
+            return None
+        dates = [self._date_slot(t) for t in times]
+        known = (self.dated_weekday[dates] == [t.weekday() for t in times])[:, None]
+        return np.where(known, self.dated_own[dates], np.nan).astype(np.float32)
+
+    def own_known(self, n_actions: int) -> np.ndarray:
+        """[A]: the actions whose own controls' setpoints were recorded by date."""
+        if self.dated_own.shape[1] != n_actions:
+            return np.zeros(n_actions, bool)
+        return np.isfinite(self.dated_own).any(axis=0)
+
     # -- as arrays ------------------------------------------------------------------------------
     def state(self) -> dict[str, np.ndarray]:
         """The weekly slots' counts and sums; the dated bounds as runs (each entry holds until the next: a
@@ -93,6 +112,12 @@ class Calendar:
             at = np.flatnonzero(starts)
             out |= {"dated_runs": at.astype(np.int32), "dated_bounds": self.dated[at], "dated_weekday": day[at],
                     "dated_applies": on[at]}  # fmt: skip
+        if self.dated_own.shape[1]:  # as runs too: a supply-air reset changes a few times a day at most
+            own = self.dated_own
+            same = (own[1:] == own[:-1]) | (np.isnan(own[1:]) & np.isnan(own[:-1]))
+            starts = np.concatenate([[True], ~same.all(axis=1)])
+            at = np.flatnonzero(starts)
+            out |= {"own_runs": at.astype(np.int32), "own_actions": own[at]}
         return out
 
     def load(self, state: dict) -> None:
@@ -102,6 +127,9 @@ class Calendar:
         if "bound_sum" in state:
             self.bound_sum = np.asarray(state["bound_sum"], float)
             self.bound_seen = np.asarray(state["bound_seen"], float)
+        if len(self.dated) and "own_runs" in state:  # planners saved before the own record was kept have none
+            run = np.searchsorted(np.asarray(state["own_runs"], int), np.arange(len(self.dated)), side="right") - 1
+            self.dated_own = np.asarray(state["own_actions"], np.float32)[run]
         if not len(self.dated) or "dated_bounds" not in state:
             return
         bounds, day = np.asarray(state["dated_bounds"], np.float32), np.asarray(state["dated_weekday"], np.int8)
@@ -157,6 +185,17 @@ class ComfortTimes(Calendar):
                 d = self._date_slot(t)
                 self.dated[d], self.dated_weekday[d], self.dated_applies[d] = bounds[i], t.weekday(), bool(a)
 
+    def learn_own(self, times: list[dt.datetime], actions: np.ndarray) -> None:
+        """What the building's own controls set (normalized [T, A]) for the steps ending at `times`, by date: the own
+        plan of the actions no thermostat schedule gives (a supply-air node: whatever its manager's reset set).
+        `learn` records the same dates' weekdays."""
+        if not len(self.dated) or not len(times):
+            return
+        actions = np.asarray(actions, np.float32)
+        if self.dated_own.shape[1] != actions.shape[1]:
+            self.dated_own = np.full((len(self.dated), actions.shape[1]), np.nan, np.float32)
+        self.dated_own[[self._date_slot(t) for t in times]] = actions
+
     def bounds_of(self, values: dict) -> np.ndarray | None:
         """[1, K, 2]: a step's per-zone thermostat bounds from its sensor values (info), or None."""
         if self.mode != THERMOSTAT:
@@ -165,13 +204,17 @@ class ComfortTimes(Calendar):
 
 
 def own_reference(bounds: np.ndarray, tolerance: float, sides: list, low: np.ndarray, high: np.ndarray,
-                  a_last: np.ndarray) -> np.ndarray:  # fmt: skip
-    """What the building's own thermostats would set over a horizon, normalized [H, A]: each thermostat action at
+                  a_last: np.ndarray, own: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """What the building's own controls would set over a horizon, normalized [H, A]: each thermostat action at
     its zone's own setpoint (the bounds `bounds` [H, K, 2], less the tolerance they were widened by), every other
-    action held at `a_last` [A]. `sides`: per action, (zone, 0 heating or 1 cooling), or None (not a thermostat).
-    The planner's `comfort_reference = "own"` plays it through the model: a candidate pays only for discomfort
-    beyond what these would have from the same state."""
+    action at what the own controls set on that date (`own` [H, A], `Calendar.own_actions`: a supply-air node's
+    reset), else held at `a_last` [A]. `sides`: per action, (zone, 0 heating or 1 cooling), or None (not a
+    thermostat). The planner's `comfort_reference = "own"` plays it through the model: a candidate pays only for
+    discomfort beyond what these would have from the same state."""
     ref = np.repeat(np.asarray(a_last, np.float32)[None], len(bounds), axis=0)
+    if own is not None:
+        recorded = np.isfinite(own) & np.array([side is None for side in sides])[None]
+        ref = np.where(recorded, own, ref).astype(np.float32)
     for i, side in enumerate(sides):
         if side is not None:
             zone, edge = side

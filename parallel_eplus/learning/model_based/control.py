@@ -68,7 +68,6 @@ class MPC:
         self.action_low = np.array([a.low for a in b.actions], float)  # as the served planner reads them
         self.action_high = np.array([a.high for a in b.actions], float)
         self.thermostat_sides = thermostat_sides(b)
-        self.follows = np.array([side is not None for side in self.thermostat_sides])  # the own plan sets these
         self.check_reference()
 
     def check_reference(self) -> None:
@@ -88,6 +87,13 @@ class MPC:
         if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
             log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
                         "they were kept); it uses the weekly majority, which blurs daylight-saving time and holidays")
+
+    @property
+    def follows(self) -> np.ndarray:
+        """[A]: the actions the own plan sets (`own_radius`): the thermostats, and those whose own setpoints the
+        calendar recorded by date."""
+        sides = np.array([side is not None for side in self.thermostat_sides])
+        return sides | self.comfort_times.own_known(len(sides))
 
     def own_jump(self) -> float:
         """The largest step, in normalized units, of the own thermostats' plan over the dates the calendar
@@ -142,16 +148,20 @@ class MPC:
         a_last = np.asarray(a_last, np.float32)
         demand = self.demand.outlook(obs, infos, self.settings.horizon) if self.demand else None
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
-        reference = None
-        if self.settings.comfort_reference == "own":
-            tol = self.comfort_times.tolerance
-            reference = np.stack([own_reference(bounds[i], tol, self.thermostat_sides, self.action_low,
-                                                self.action_high, a_last[i]) for i in range(len(s))])  # fmt: skip
+        reference = self.own_plan(infos, bounds, a_last) if self.settings.comfort_reference == "own" else None
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
                                       self.warm[: len(s)], seeds, weights, reference, demand,
                                       self.follows)  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         return self.last.action
+
+    def own_plan(self, infos: list[dict], bounds: np.ndarray, a_last: np.ndarray) -> np.ndarray:
+        """[W, H, A]: what the building's own controls would set over each worker's horizon (`own_reference`), from
+        `future`'s bounds and the own setpoints the calendar recorded on those dates."""
+        c, h = self.comfort_times, self.settings.horizon
+        return np.stack([own_reference(bounds[i], c.tolerance, self.thermostat_sides, self.action_low, self.action_high,
+                                       a_last[i], c.own_actions(step_times(info["time"], self.step_minutes, h)))
+                         for i, info in enumerate(infos)])  # fmt: skip
 
     def observe(self, obs: np.ndarray, infos: list[dict]) -> None:
         """Each worker's meter reading of the step that just ended, for its month's demand peaks (`act` reads it

@@ -27,10 +27,11 @@ from parallel_eplus.learning.model_based.own_level import OwnLevel
 
 
 def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: ComfortTimes,
-                 applies_of, first_episode: int) -> dict[str, np.ndarray]:  # fmt: skip
+                 applies_of, first_episode: int, own: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """The record's transitions into `data` (one episode per weather); returns each weather's normalized actions.
 
-    `applies_of(time, sensor values)`: whether the band applied to the step ending then (buildings/comfort.py)."""
+    `applies_of(time, sensor values)`: whether the band applied to the step ending then (buildings/comfort.py).
+    `own` [A]: the actions whose own setpoints the calendar keeps by date (`Calendar.learn_own`), the others NaN."""
     layout = data.layout
     labels = np.array(demos.weathers)
     replay = {}
@@ -45,6 +46,8 @@ def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: 
         sensed = [dict(zip(layout.sensors, o[: len(layout.sensors)].tolist(), strict=True)) for o in obs]
         applies = np.array([applies_of(t, v) for t, v in zip(times, sensed, strict=True)], np.float32)
         comfort_times.learn(times[1:], applies[1:], None if demos.bounds is None else demos.bounds[rows][1:])
+        if own is not None and own.any():
+            comfort_times.learn_own(times[1:], np.where(own[None], actions[:-1], np.nan))
         a_prev = np.concatenate([actions[:1], actions[:-2]])
         data.add(s=s[:-1], a_prev=a_prev, a=actions[:-1], x=forecasts(weather).at(times[1:]), s_next=s[1:],
                  applies=applies[1:], episode=first_episode + j, step=np.arange(len(rows) - 1),
@@ -70,7 +73,9 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc,
     def applies(t, values) -> bool:
         return comfort.always or comfort.applies(t, values)
 
-    replay = add_baseline(data, demos, mpc.forecasts, mpc.comfort_times, applies, 0)
+    # the own plan of the actions no thermostat schedule gives (a supply-air node), for `comfort_reference=own`
+    own = None if cfg.mpc.comfort_reference != "own" else np.array([s is None for s in mpc.thermostat_sides])
+    replay = add_baseline(data, demos, mpc.forecasts, mpc.comfort_times, applies, 0, own)
     level = None
     if cfg.mpc.comfort_level == "own":
         level = OwnLevel.from_record(demos, data.layout.sensors, list(building.temperatures), comfort, applies,
