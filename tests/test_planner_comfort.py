@@ -66,7 +66,7 @@ def test_a_supply_air_node_s_own_plan_is_what_its_manager_set_that_day(tmp_path,
     assert mpc.follows.tolist() == [True, True, False]  # before the record: the thermostats only
     demos = record_baseline("office-medium", ["CA"], 1, 1, tmp_path / "record", progress=False)
     own = np.array([side is None for side in mpc.thermostat_sides])
-    add_baseline(Transitions(mpc.layout), demos, mpc.forecasts, mpc.comfort_times, lambda t, v: True, 0, own)
+    add_baseline(Transitions(mpc.layout), demos, mpc, lambda t, v: True, 0, own)
     assert mpc.follows.all()
     row, h = 40, mpc.settings.horizon
     info = {"time": demos.times[row], "weather": "CA"}

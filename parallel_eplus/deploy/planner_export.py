@@ -29,7 +29,7 @@ from parallel_eplus.buildings.weather_forecast import WEATHER, WEATHER_UNITS
 from parallel_eplus.deploy.contract import CONTRACT_FILE, Contract, output_entries, sensor_entries
 from parallel_eplus.deploy.planner_runtime import ENSEMBLE_FILE, PLANNER_ARRAYS, PlannerRuntime, calendar_arrays
 from parallel_eplus.learning.model_based.ensemble_graph import INPUT, OUTPUT
-from parallel_eplus.learning.model_based.features import EXOGENOUS, step_times
+from parallel_eplus.learning.model_based.features import step_times
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +37,7 @@ PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (for
 SAMPLED_DECISIONS = 48
 PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
                     "disagreement_weight", "comfort_risk", "terminal_weight", "consensus",
-                    "min_saving", "own_radius")  # what a served plan needs
+                    "min_saving", "own_radius", "occupancy_input")  # what a served plan needs
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 
@@ -136,8 +136,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
                                                    "per_dollar": mpc.demand.charges.per_dollar},
         },  # fmt: skip
         "fallback": {"max_input_z": max_input_z, "max_forecast_gap_c": max_forecast_gap_c if outdoor else None,
-                     "max_spread_k": max_spread_k, "exogenous": list(EXOGENOUS[: mpc.layout.n_exogenous]) +
-                     ["it_load"] * (mpc.layout.n_exogenous - len(EXOGENOUS)),
+                     "max_spread_k": max_spread_k, "exogenous": mpc.exogenous_names,
                      "own_controls": f"{PLANNER_ARRAYS}: own_controls [month, hour, output], the building's own "
                      f"setpoints recorded on {', '.join(weathers)} over {days} days"},  # fmt: skip
         "control_step_s": int(60 * mpc.step_minutes),

@@ -28,7 +28,7 @@ from parallel_eplus.learning.model_based.dataset import Layout
 from parallel_eplus.learning.model_based.demand import DemandCharges, DemandOutlook
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble
-from parallel_eplus.learning.model_based.features import WEATHER_SCALE, exogenous, step_times
+from parallel_eplus.learning.model_based.features import WEATHER_SCALE, exogenous, step_times, with_occupancy
 from parallel_eplus.learning.model_based.planner import Planner, decision_seed
 
 log = logging.getLogger("parallel_eplus.deploy.planner")
@@ -42,7 +42,7 @@ class _Settings:
 
     def __init__(self, values: dict):
         self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
-        self.consensus, self.min_saving, self.own_radius = False, 0.0, None
+        self.consensus, self.min_saving, self.own_radius, self.occupancy_input = False, 0.0, None, False
         self.__dict__.update(values)
 
 
@@ -88,7 +88,10 @@ class PlannerRuntime:
         weather, source = self._forecast(body.get("forecast"), body.get("sensors", {}))
         warm = self._warm(body.get("plan"))
         s = self.layout.state(obs[None, : len(self.layout.sensors)])
-        exo = exogenous(weather, times, self.schedule)[None]
+        exo = exogenous(weather, times, self.schedule)
+        if self.settings.occupancy_input:  # whether the building is occupied then, as the calendar recorded it
+            exo = with_occupancy(exo, self.calendar.occupied(times))
+        exo = exo[None]
         seed = decision_seed(self.seed, when.isoformat(), s[0])
         weights = None if self.energy.objective == "energy" else self.energy.at([when, *times[:-1]])[None]
         bounds = self.calendar.bounds(times)

@@ -222,10 +222,10 @@ class _Loop:
 
     def _add(self, obs, nxt, a_prev, a, after: dict, episode: int, step: int, planning: bool) -> None:
         layout = self.mpc.layout
-        x = self.mpc.forecasts.of(after).at([after["time"]])
         applies = float(after.get("comfort_applies", True))
         times = self.mpc.comfort_times
         times.learn([after["time"]], [applies], times.bounds_of(after))
+        x = self.mpc.exogenous_seen(self.mpc.forecasts.of(after), [after["time"]])
         sensors = len(layout.sensors)
         self.data.add(s=layout.state(obs[None, :sensors]), a_prev=a_prev[None], a=a[None], x=x,
                       s_next=layout.state(np.asarray(nxt)[None, :sensors]), applies=[applies], episode=[episode],

@@ -59,7 +59,14 @@ class Calendar:
 
     def __call__(self, times: list[dt.datetime]) -> np.ndarray:
         """Whether the band applies to the steps ending at `times`, [T]."""
-        if self.mode == ALWAYS or (self.mode == THERMOSTAT and not self.occupied_only):
+        if self.mode == THERMOSTAT and not self.occupied_only:
+            return np.ones(len(times), np.float32)
+        return self.occupied(times)
+
+    def occupied(self, times: list[dt.datetime]) -> np.ndarray:
+        """Whether the building is occupied (its band applies) at the steps ending at `times`, [T], whatever
+        `occupied_only`: by date where recorded, else by the clock or the weekly majority."""
+        if self.mode == ALWAYS:
             return np.ones(len(times), np.float32)
         slots = [self._slot(t) for t in times]
         if self.mode == CLOCK:

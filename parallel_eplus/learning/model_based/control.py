@@ -10,6 +10,7 @@ deploy/planner_export.py writes one for `serve`.
 
 from __future__ import annotations
 
+import datetime as dt
 import logging
 from dataclasses import asdict
 from pathlib import Path
@@ -26,7 +27,7 @@ from parallel_eplus.learning.model_based.dynamics import Ensemble
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
 from parallel_eplus.learning.model_based.exogenous import Forecasts
-from parallel_eplus.learning.model_based.features import step_times
+from parallel_eplus.learning.model_based.features import EXOGENOUS, step_times, with_occupancy
 from parallel_eplus.learning.model_based.planner import Plan, Planner, decision_seed
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
@@ -43,7 +44,7 @@ class MPC:
         b = load_building(building)
         self.step_minutes = 60 * 24 / b.steps_per_day
         self.forecasts = Forecasts(building)
-        width = self.forecasts(next(iter(b.spec.weathers), "CA")).width
+        width = self.forecasts(next(iter(b.spec.weathers), "CA")).width + settings.occupancy_input
         self.layout = model.layout if model is not None else Layout.of(b, width)  # a saved model keeps its own
         self.settings = settings
         self.model = model or Ensemble(self.layout, settings, seed)
@@ -110,6 +111,24 @@ class MPC:
         steps = np.abs(np.diff(ref, axis=0))[known[1:] & known[:-1]]
         return float(steps.max()) if len(steps) else 0.0
 
+    def exogenous(self, rows: np.ndarray, times: list[dt.datetime]) -> np.ndarray:
+        """The model's exogenous inputs at `times` from a forecast's (or the weather's) `rows` [T, X]: with
+        `occupancy_input`, whether the building is occupied then (the calendar's, as the served planner reads it)."""
+        if not self.settings.occupancy_input:
+            return rows
+        return with_occupancy(rows, self.comfort_times.occupied(times))
+
+    def exogenous_seen(self, forecast, times: list[dt.datetime]) -> np.ndarray:
+        """The model's exogenous inputs at `times` as they happened (its data: `forecast.at`, exogenous.py)."""
+        return self.exogenous(forecast.at(times), times)
+
+    @property
+    def exogenous_names(self) -> list[str]:
+        """The model's exogenous inputs by name, in order (the export's fallback names them)."""
+        occupancy = int(self.settings.occupancy_input)
+        schedule = self.layout.n_exogenous - len(EXOGENOUS) - occupancy  # the IT load's (the data centers)
+        return list(EXOGENOUS[: self.layout.n_exogenous]) + ["it_load"] * schedule + ["occupied"] * occupancy
+
     def refresh(self) -> None:
         """The planner's forward from the model's current weights (after every fit)."""
         self.planner.forward = OnnxEnsemble(build_graph(self.model.arrays()))
@@ -134,7 +153,7 @@ class MPC:
         exo, applies, bounds, weights = [], [], [], []
         for info in infos:
             times = step_times(info["time"], self.step_minutes, self.settings.horizon)
-            exo.append(self.forecasts.of(info).ahead(info["time"], times))
+            exo.append(self.exogenous(self.forecasts.of(info).ahead(info["time"], times), times))
             applies.append(self.comfort_times(times))
             bounds.append(self.comfort_times.bounds(times))
             if self.energy_weights.objective != "energy":  # priced when each step begins; energy: each part once

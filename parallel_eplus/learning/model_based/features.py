@@ -40,6 +40,12 @@ def exogenous(weather: np.ndarray, times: list[dt.datetime], schedule: Schedule 
     return np.concatenate(parts, axis=1).astype(np.float32)
 
 
+def with_occupancy(exo: np.ndarray, occupied: np.ndarray) -> np.ndarray:
+    """`exo` [..., T, X] with whether the building is occupied at each step's end [..., T] as one more column
+    (`occupancy_input`)."""
+    return np.concatenate([exo, np.asarray(occupied, np.float32)[..., None]], axis=-1).astype(np.float32)
+
+
 def step_times(now: dt.datetime, step_minutes: float, horizon: int) -> list[dt.datetime]:
     """The ends of the `horizon` steps that start at `now`."""
     return [now + dt.timedelta(minutes=step_minutes * (h + 1)) for h in range(horizon)]

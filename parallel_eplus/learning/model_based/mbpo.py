@@ -115,7 +115,7 @@ class ModelRollouts(BaseCallback):
                 continue
             applies = float(info.get("comfort_applies", True))
             self.data.add(s=self.mpc.layout.state(obs[None, i, :sensors]), a_prev=self.prev[None, i],
-                          a=actions[None, i], x=self.mpc.forecasts.of(info).at([info["time"]]),
+                          a=actions[None, i], x=self.mpc.exogenous_seen(self.mpc.forecasts.of(info), [info["time"]]),
                           s_next=self.mpc.layout.state(new[None, i, :sensors]), applies=[applies],
                           episode=[self.episode_of[i]], step=[self.step_of[i]],
                           origin=[ORIGINS.index("policy")])  # fmt: skip

@@ -44,8 +44,7 @@ def record_own_controls(cfg, mpc: MPC, data: Transitions, starts: Starts, progre
                             (cfg.time_features, cfg.schedule_features), progress)  # fmt: skip
     comfort = load_building(cfg.building).comfort
     first = int(data.array("episode").max()) + 1 if len(data) else 0
-    add_baseline(data, demos, mpc.forecasts, mpc.comfort_times, lambda t, v: comfort.always or comfort.applies(t, v),
-                 first)  # fmt: skip
+    add_baseline(data, demos, mpc, lambda t, v: comfort.always or comfort.applies(t, v), first)
     shutil.rmtree(folder, ignore_errors=True)
     labels = np.array(demos.weathers)
     for weather in dict.fromkeys(demos.weathers):

@@ -85,7 +85,12 @@ class PlannerOptions:
 
     def apply(self, mpc: MPC) -> MPC:
         if self.settings:
-            mpc.settings = mpc.planner.settings = MPCSettings.from_text(self.settings, mpc.settings)
+            settings = MPCSettings.from_text(self.settings, mpc.settings)
+            if settings.occupancy_input != mpc.settings.occupancy_input:
+                raise ValueError(f"--planner occupancy_input: the model was trained with occupancy_input="
+                                 f"{str(mpc.settings.occupancy_input).lower()} (one of its inputs); a saved planner "
+                                 "keeps it")  # fmt: skip
+            mpc.settings = mpc.planner.settings = settings
             mpc.warm = np.zeros((len(mpc.warm), mpc.settings.horizon, mpc.layout.n_actions), np.float32)
             if mpc.settings.comfort_weight is not None:  # the weight the planner plans with, not only its setting
                 mpc.comfort_weight = mpc.settings.comfort_weight

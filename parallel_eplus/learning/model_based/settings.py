@@ -85,6 +85,11 @@ class MPCSettings(FromText):
     # starts, the full-service restaurant's dining room fell 5 K in a step, where the model predicted 0.1 K
     # (docs/model-based.md). Off the own plan by a few tenths, the model has seen the building; by 6 K, it has not.
     own_radius: float | None = None
+    # The model also sees whether the building is occupied at each step's end (the band applies: by date as the
+    # calendar recorded it, else the weekly majority). In a restaurant's data a zone's ventilation and heating
+    # start when its setpoint leaves the setback, always together: told only the setpoint, the model put the cold
+    # air's arrival down to the setpoint and predicted 0.1 K for a 5 K fall (docs/model-based.md).
+    occupancy_input: bool = False
     noise: float = 0.0  # exploration added to the planner's action in training (normalized units)
     # Distillation (distill.py): the policy network fitted to the planner's own actions.
     distill: bool = True

@@ -20,18 +20,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from parallel_eplus.learning.model_based.calendar import ComfortTimes
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
-from parallel_eplus.learning.model_based.exogenous import Forecasts
 from parallel_eplus.learning.model_based.own_level import OwnLevel
 
 
-def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: ComfortTimes,
-                 applies_of, first_episode: int, own: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
+def add_baseline(data: Transitions, demos, mpc, applies_of, first_episode: int,
+                 own: np.ndarray | None = None) -> dict[str, np.ndarray]:  # fmt: skip
     """The record's transitions into `data` (one episode per weather); returns each weather's normalized actions.
 
     `applies_of(time, sensor values)`: whether the band applied to the step ending then (buildings/comfort.py).
-    `own` [A]: the actions whose own setpoints the calendar keeps by date (`Calendar.learn_own`), the others NaN."""
+    `own` [A]: the actions whose own setpoints the calendar keeps by date (`Calendar.learn_own`), the others NaN.
+    `mpc`: the planner whose forecasts and calendar (control.py's MPC) the record feeds."""
+    comfort_times = mpc.comfort_times
     layout = data.layout
     labels = np.array(demos.weathers)
     replay = {}
@@ -49,7 +49,8 @@ def add_baseline(data: Transitions, demos, forecasts: Forecasts, comfort_times: 
         if own is not None and own.any():
             comfort_times.learn_own(times[1:], np.where(own[None], actions[:-1], np.nan))
         a_prev = np.concatenate([actions[:1], actions[:-2]])
-        data.add(s=s[:-1], a_prev=a_prev, a=actions[:-1], x=forecasts(weather).at(times[1:]), s_next=s[1:],
+        x = mpc.exogenous_seen(mpc.forecasts(weather), times[1:])
+        data.add(s=s[:-1], a_prev=a_prev, a=actions[:-1], x=x, s_next=s[1:],
                  applies=applies[1:], episode=first_episode + j, step=np.arange(len(rows) - 1),
                  origin=ORIGINS.index("baseline"))  # fmt: skip
     return replay
@@ -75,7 +76,7 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc,
 
     # the own plan of the actions no thermostat schedule gives (a supply-air node), for `comfort_reference=own`
     own = None if cfg.mpc.comfort_reference != "own" else np.array([s is None for s in mpc.thermostat_sides])
-    replay = add_baseline(data, demos, mpc.forecasts, mpc.comfort_times, applies, 0, own)
+    replay = add_baseline(data, demos, mpc, applies, 0, own)
     level = None
     if cfg.mpc.comfort_level == "own":
         level = OwnLevel.from_record(demos, data.layout.sensors, list(building.temperatures), comfort, applies,

@@ -109,7 +109,7 @@ class Rollouts:
             clock.append([self.clock(t) for t in times])
             weights.append(mpc.energy_weights.at([starts.times[r], *times[:-1]]))  # the objective's, as the planner
             forecast = mpc.forecasts(starts.weathers[r])
-            exo.append(forecast.at(times))
+            exo.append(mpc.exogenous_seen(forecast, times))
             outdoor.append(forecast.file.truth(times)[:, 0])
             applies.append(mpc.comfort_times(times))
             bounds.append(mpc.comfort_times.bounds(times))
