@@ -18,10 +18,14 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.own_level import OwnLevel
+
+log = logging.getLogger(__name__)
 
 
 def add_baseline(data: Transitions, demos, mpc, applies_of, first_episode: int,
@@ -77,6 +81,10 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc,
     # the own plan of the actions no thermostat schedule gives (a supply-air node), for `comfort_reference=own`
     own = None if cfg.mpc.comfort_reference != "own" else np.array([s is None for s in mpc.thermostat_sides])
     replay = add_baseline(data, demos, mpc, applies, 0, own)
+    if own is not None and own.any():
+        names = [a.name for a, o in zip(building.actions, own, strict=True) if o]
+        log.info("the own plan of %s: what the building's own controls set on each date of the record",
+                 ", ".join(names))  # fmt: skip
     level = None
     if cfg.mpc.comfort_level == "own":
         level = OwnLevel.from_record(demos, data.layout.sensors, list(building.temperatures), comfort, applies,
