@@ -67,7 +67,9 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
         holds = (done.occupied_discomfort_kh_learned <= done.occupied_discomfort_kh_own).sum()
         lower = f"HVAC energy or bill at least {100 * (1 - SAVES):.1f} % lower"
         lines += ["", f"Scored: {len(done)} of {len(df)}. {lower}: {saves}; no more occupied",
-                  f"discomfort than its own controls: {holds} (goal: all, savings on 12 of 16)."]  # fmt: skip
+                  f"discomfort than its own controls: {holds} (goal: all, savings on 12 of 16).", "",
+                  "Why the planner finds so little, building by building, and what was tried: [docs/model-based.md]"
+                  "(../../docs/model-based.md#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
         lines += ["", "![savings against discomfort](savings.png)"]
     return "\n".join(lines) + "\n"
