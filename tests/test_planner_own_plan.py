@@ -1,0 +1,174 @@
+"""The planner's own plan (`comfort_reference = "own"`): what the building's own controls would set over the
+horizon, and the settings that weigh the search's plan against it (`consensus`, `min_saving`, `own_radius`)."""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from parallel_eplus.buildings.building import load_building
+from parallel_eplus.deploy.planner_runtime import calendar_arrays
+from parallel_eplus.learning.imitation import record_baseline
+from parallel_eplus.learning.model_based.calendar import Calendar, own_reference
+from parallel_eplus.learning.model_based.control import MPC, thermostat_sides
+from parallel_eplus.learning.model_based.dataset import Transitions
+from parallel_eplus.learning.model_based.features import step_times
+from parallel_eplus.learning.model_based.planner import _follow
+from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_file
+from parallel_eplus.learning.model_based.settings import MPCSettings
+from parallel_eplus.learning.model_based.sources import add_baseline
+
+ROOT = Path(__file__).resolve().parents[1]
+PLANNER = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0/best/planner"
+OFFICE = ROOT / "results/model-based/office-small/runs/office-small-mpc-seed0/planner"
+
+
+def test_the_own_reference_sets_each_thermostat_to_its_zone_s_own_setpoint():
+    office = load_building("office-small")
+    sides = thermostat_sides(office)
+    assert sides == [(0, 1), (0, 0)]  # cooling, heating: the core zone's thermostat (all five share its schedules)
+    low, high = (np.array([getattr(a, k) for a in office.actions], np.float32) for k in ("low", "high"))
+    bounds = np.zeros((3, 5, 2), np.float32)
+    bounds[..., 0], bounds[..., 1] = 15.4, 26.9  # the setbacks 15.6 and 26.7, widened by the 0.2 K tolerance
+    ref = own_reference(bounds, 0.2, sides, low, high, np.zeros(2, np.float32))
+    physical = low + (ref + 1) / 2 * (high - low)
+    np.testing.assert_allclose(physical, np.broadcast_to([26.7, 15.6], (3, 2)), atol=1e-5)
+    held = own_reference(bounds, 0.2, [None, (0, 0)], low, high, np.array([0.3, 0.0], np.float32))
+    assert np.all(held[:, 0] == np.float32(0.3))  # not a thermostat: held where it is
+    recorded = np.array([[0.5, 0.9], [np.nan, 0.9], [-0.2, 0.9]], np.float32)  # what the own controls set then
+    dated = own_reference(bounds, 0.2, [None, (0, 0)], low, high, np.array([0.3, 0.0], np.float32), recorded)
+    np.testing.assert_array_equal(dated[:, 0], np.float32([0.5, 0.3, -0.2]))  # as recorded, held where not
+    np.testing.assert_array_equal(dated[:, 1], held[:, 1])  # a thermostat follows its zone's schedule
+
+
+@pytest.mark.slow
+def test_a_supply_air_node_s_own_plan_is_what_its_manager_set_that_day(tmp_path, no_leaks):
+    """The medium office's supply air follows no thermostat schedule: its own plan is what the model's own manager
+    set on that date, recorded with the building's own controls. The calendar keeps it by date (and the served
+    planner's arrays the same), and `own_radius` keeps the planner's supply air that near it, as the thermostats."""
+    mpc = MPC("office-medium", MPCSettings(comfort_reference="own", own_radius=0.1), 0.5, 1e-5, 1)
+    assert mpc.follows.tolist() == [True, True, False]  # before the record: the thermostats only
+    demos = record_baseline("office-medium", ["CA"], 1, 1, tmp_path / "record", progress=False)
+    own = np.array([side is None for side in mpc.thermostat_sides])
+    add_baseline(Transitions(mpc.layout), demos, mpc, lambda t, v: True, 0, own)
+    assert mpc.follows.all()
+    row, h = 40, mpc.settings.horizon
+    info = {"time": demos.times[row], "weather": "CA"}
+    a_last = demos.actions[row - 1 : row].copy()
+    a_last[0, 2] = 0.5  # the supply air where the planner left it: 16.5 C
+    plan = mpc.own_plan([info], mpc.future([info])[2], a_last)[0]
+    np.testing.assert_allclose(plan[:, 2], demos.actions[row : row + h, 2])  # each step: what the manager set
+    assert np.all(np.abs(plan[:, 2] - 0.5) > 0.5)  # (12.8 C in January), not where it was left
+    times = step_times(info["time"], mpc.step_minutes, h)
+    served = Calendar.from_arrays(mpc.comfort_times.settings(), calendar_arrays(mpc.comfort_times))
+    np.testing.assert_array_equal(served.own_actions(times), mpc.comfort_times.own_actions(times))
+    action = mpc.act(demos.observations[row : row + 1], [info], a_last)
+    reference = _follow(a_last, plan[None], mpc.settings.max_increment, *mpc.support)
+    assert abs(action[0, 2] - reference[0, 0, 2]) <= 0.1 + 1e-5
+
+
+def test_the_reference_candidate_makes_up_a_jump_it_cannot_make_at_once():
+    """From a setback at the top of the range to an occupied setpoint 1.5 away, 0.15 a step: there in ten steps
+    and held (clipping each step's increment alone left it 0.15 from the start for the whole horizon)."""
+    target = np.full((1, 12, 1), -0.5, np.float32)
+    path = _follow(np.ones((1, 1), np.float32), target, 0.15, np.full(1, -1.0), np.full(1, 1.0))
+    np.testing.assert_allclose(path[0, :, 0], [0.85, 0.7, 0.55, 0.4, 0.25, 0.1, -0.05, -0.2, -0.35, -0.5, -0.5, -0.5],
+                               atol=1e-6)  # fmt: skip
+    inside = _follow(np.ones((1, 1), np.float32), target, 1.0, np.full(1, 0.0), np.full(1, 1.0))
+    assert np.all(inside == 0.0)  # the support's edge, where the target lies beyond it
+
+
+def test_the_own_jump_is_the_morning_setpoint_step_the_calendar_recorded():
+    """The office heats from its 15.6 C setback to 21 C in one step, on a 15-22 C action: 1.54 normalized,
+    beyond the 1.0 its planners were trained with (the warning at training's start); no thermostat, no jump."""
+    office = MPC.load(planner_file(OFFICE))
+    assert office.own_jump() == pytest.approx(2 * (21.0 - 15.6) / (22.0 - 15.0), abs=1e-4)
+    assert MPC.load(planner_file(PLANNER)).own_jump() == 0.0  # the data center: no thermostat action
+
+
+def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_prefers_its_plan():
+    """Each member's cost (`members=True`) averages to the planner's; with `consensus`, the action is the own plan's
+    unless every member predicts the plan the search chose costs less; without it, the search's best plan acts
+    where some member prefers the own plan (April and July nights here)."""
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    outcomes = {}
+    for consensus in ("false", "true"):
+        mpc = PlannerOptions.parse(f"comfort_reference=own,consensus={consensus}").apply(MPC.load(planner_file(OFFICE)))
+        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
+            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
+            s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
+            for hour in range(24):
+                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
+                exo, applies, bounds, weights = mpc.future([info])
+                reference = mpc.own_plan([info], bounds, a_last)
+                reference = _follow(a_last, reference, mpc.settings.max_increment, *mpc.support)  # as a candidate can
+                action = mpc.act(obs, [info], a_last)
+                steps = np.concatenate([np.zeros((1, 1, 2)), np.cumsum(mpc.last.increments[:, :-1], axis=1)], axis=1)
+                args = (s, a_last, np.stack([action[:, None] + steps, reference], axis=1).astype(np.float32), exo,
+                        applies, bounds, mpc.comfort_weight, weights, reference)  # fmt: skip
+                per = mpc.planner._cost(*args, members=True)  # [E, W, 2]: the chosen plan's, the own plan's
+                np.testing.assert_allclose(per.mean(0), mpc.planner._cost(*args)[0], rtol=1e-4, atol=1e-4)
+                own = np.allclose(action, reference[:, 0], atol=1e-6)
+                outcomes[consensus, month, hour] = (own, bool(np.all(per[:, 0, 0] < per[:, 0, 1])))
+    with_consensus = [v for k, v in outcomes.items() if k[0] == "true"]
+    assert all(own or preferred for own, preferred in with_consensus)  # left only where every member preferred
+    assert any(not own for own, _ in with_consensus)  # and it did leave it
+    assert any(not own and not preferred for (c, *_), (own, preferred) in outcomes.items() if c == "false")
+
+
+def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_much_less_predicted_cost():
+    """`min_saving`: the own plan's action unless the plan the search chose is predicted to cost at least that share
+    less than it over the horizon; a larger share leaves it less often, and 0 as before. Refused without the own
+    plan to weigh against."""
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    left = {}
+    for share in (0.0, 0.02, 0.5):
+        mpc = PlannerOptions.parse(f"comfort_reference=own,min_saving={share}").apply(MPC.load(planner_file(OFFICE)))
+        left[share] = 0
+        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
+            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
+            for hour in range(24):
+                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
+                exo, applies, bounds, weights = mpc.future([info])
+                reference = _follow(a_last, mpc.own_plan([info], bounds, a_last), mpc.settings.max_increment,
+                                    *mpc.support)  # fmt: skip
+                action = mpc.act(obs, [info], a_last)
+                s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
+                own_cost = mpc.planner._cost(s, a_last, reference[:, None], exo, applies, bounds, mpc.comfort_weight,
+                                             weights, reference)[0][0, 0]  # fmt: skip
+                if not np.allclose(action, reference[:, 0], atol=1e-6):
+                    left[share] += 1
+                    assert own_cost - mpc.last.cost[0] >= share * abs(own_cost) - 1e-3  # it paid for leaving
+    assert left[0.0] > left[0.02] >= left[0.5] and left[0.0] > 0
+    with pytest.raises(ValueError, match="comfort_reference=own"):
+        PlannerOptions.parse("comfort_reference=bound,min_saving=0.02").apply(MPC.load(planner_file(OFFICE)))
+    with pytest.raises(ValueError, match="min_saving"):
+        PlannerOptions.parse("min_saving=1.5")
+
+
+def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan():
+    """`own_radius`: every thermostat action within that much (normalized) of the own plan's at the step it acts,
+    where without it the search strays further; refused without the own plan."""
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    furthest = {}
+    for radius in ("", ",own_radius=0.1"):
+        mpc = PlannerOptions.parse(f"comfort_reference=own{radius}").apply(MPC.load(planner_file(OFFICE)))
+        assert mpc.follows.all()  # the office's two actions are its thermostats
+        furthest[radius] = 0.0
+        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
+            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
+            for hour in range(24):
+                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
+                bounds = mpc.future([info])[2]
+                reference = _follow(a_last, mpc.own_plan([info], bounds, a_last), mpc.settings.max_increment,
+                                    *mpc.support)  # fmt: skip
+                action = mpc.act(obs, [info], a_last)
+                furthest[radius] = max(furthest[radius], float(np.abs(action - reference[:, 0]).max()))
+    assert furthest[",own_radius=0.1"] <= 0.1 + 1e-5 < furthest[""]
+    with pytest.raises(ValueError, match="comfort_reference=own"):
+        PlannerOptions.parse("own_radius=0.1").apply(MPC.load(planner_file(OFFICE)))
+    with pytest.raises(ValueError, match="own_radius"):
+        PlannerOptions.parse("comfort_reference=own,own_radius=3")
