@@ -49,6 +49,7 @@ class Calendar:
         self.dated_applies = np.full(dated, -1, np.int8)  # -1: not recorded (a planner saved before it was kept)
         # [dated, A]: what the building's own controls set (normalized) for the step ending there, NaN: not recorded
         self.dated_own = np.zeros((dated, 0), np.float32)
+        self._own_known = np.zeros(0, bool)  # per action: any date recorded (read at every plan: kept, not counted)
 
     def _slot(self, t: dt.datetime) -> int:
         return int((t.weekday() * 24 * 60 + t.hour * 60 + t.minute) // self.step_minutes) % self.slots
@@ -102,9 +103,8 @@ class Calendar:
 
     def own_known(self, n_actions: int) -> np.ndarray:
         """[A]: the actions whose own controls' setpoints were recorded by date."""
-        if self.dated_own.shape[1] != n_actions:
-            return np.zeros(n_actions, bool)
-        return np.isfinite(self.dated_own).any(axis=0)
+        known = self._own_known
+        return known if len(known) == n_actions else np.zeros(n_actions, bool)
 
     # -- as arrays ------------------------------------------------------------------------------
     def state(self) -> dict[str, np.ndarray]:
@@ -137,6 +137,7 @@ class Calendar:
         if len(self.dated) and "own_runs" in state:  # planners saved before the own record was kept have none
             run = np.searchsorted(np.asarray(state["own_runs"], int), np.arange(len(self.dated)), side="right") - 1
             self.dated_own = np.asarray(state["own_actions"], np.float32)[run]
+            self._own_known = np.isfinite(self.dated_own).any(axis=0)
         if not len(self.dated) or "dated_bounds" not in state:
             return
         bounds, day = np.asarray(state["dated_bounds"], np.float32), np.asarray(state["dated_weekday"], np.int8)
@@ -202,6 +203,7 @@ class ComfortTimes(Calendar):
         if self.dated_own.shape[1] != actions.shape[1]:
             self.dated_own = np.full((len(self.dated), actions.shape[1]), np.nan, np.float32)
         self.dated_own[[self._date_slot(t) for t in times]] = actions
+        self._own_known = np.isfinite(self.dated_own).any(axis=0)
 
     def bounds_of(self, values: dict) -> np.ndarray | None:
         """[1, K, 2]: a step's per-zone thermostat bounds from its sensor values (info), or None."""
