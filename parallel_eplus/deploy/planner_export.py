@@ -37,7 +37,8 @@ PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (for
 SAMPLED_DECISIONS = 48
 PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
                     "disagreement_weight", "comfort_risk", "terminal_weight", "consensus",
-                    "min_saving", "own_radius", "occupancy_input")  # what a served plan needs
+                    "min_saving", "own_radius", "occupancy_input", "guard_k", "guard_steps",
+                    "band_thermostats")  # what a served plan needs
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 
@@ -120,6 +121,10 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         },
         "plan": {"required": False, "meaning": "the last answer's `plan` (the rest of its plan, normalized "
                  "increments), sent back to warm-start the search; without it the search starts from holding"},
+        "guard": None if mpc.settings.guard_k is None else {
+            "required": False, "meaning": "the last answer's `guard` (steps it still plays the own plan, steps since "
+            "it last left it, and the discomfort the model predicted for the own plan's step), sent back so the "
+            "planner can test what leaving the own plan cost; without it the guard starts afresh"},
         "demand_peaks_kw": None if not mpc.demand else {
             "required": False, "charges": mpc.demand.charges.names,
             "meaning": "each demand charge's highest 15-minute facility demand so far this month within its window, "

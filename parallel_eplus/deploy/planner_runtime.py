@@ -29,7 +29,8 @@ from parallel_eplus.learning.model_based.demand import DemandCharges, DemandOutl
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble
 from parallel_eplus.learning.model_based.features import WEATHER_SCALE, exogenous, step_times, with_occupancy
-from parallel_eplus.learning.model_based.planner import Planner, decision_seed
+from parallel_eplus.learning.model_based.guard import Guard, GuardState, discomfort
+from parallel_eplus.learning.model_based.planner import Planner, decision_seed, side_array
 
 log = logging.getLogger("parallel_eplus.deploy.planner")
 
@@ -43,6 +44,7 @@ class _Settings:
     def __init__(self, values: dict):
         self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
         self.consensus, self.min_saving, self.own_radius, self.occupancy_input = False, 0.0, None, False
+        self.guard_k, self.guard_steps, self.band_thermostats = None, 12, "free"
         self.__dict__.update(values)
 
 
@@ -108,9 +110,11 @@ class PlannerRuntime:
                 raise InputError(field, why) from None
             prices, running = self.demand.outlook([when, *times[:-1]], peaks)
             demand = DemandOutlook(prices[None], running[None], self.demand.part, self.demand.per_dollar)
-        plan = self.planner.plan(s, a_last[None], exo, self.calendar(times)[None], bounds[None], self.comfort_weight,
-                                 self.support, warm[None], [seed], weights, reference, demand,
-                                 self.follows)  # fmt: skip
+        guard = self._guard(body.get("guard"), s, when) if reference is not None else None
+        applies = self.calendar(times)[None]
+        plan = self.planner.plan(s, a_last[None], exo, applies, bounds[None], self.comfort_weight, self.support,
+                                 warm[None], [seed], weights, reference, demand, self.follows,
+                                 None if guard is None else guard[1], side_array(self.sides))  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),
@@ -118,12 +122,31 @@ class PlannerRuntime:
             "plan": plan.increments[0].tolist(), "spread_k": round(float(plan.spread_k[0]), 4),
             "cost": round(float(plan.cost[0]), 4), "plan_ms": round(plan.ms, 2),
         }  # fmt: skip
+        if guard is not None:  # its state, for the next request to send back (`guard`)
+            guard[0].record(plan.action, plan.own_action, discomfort(plan.own_next, bounds[None, 0], applies[:, 0],
+                                                                       self.calendar.tolerance))
+            answer["guard"] = guard[0].states[0].as_dict()
         reason = self._distrust(s[0], a_last, exo[0], weather, body.get("sensors", {}), float(plan.spread_k[0]))
         if reason:
             log.warning("fallback at %s: %s", body.get("time"), reason)
             own = self.own[when.month - 1, when.hour]
             answer.update(setpoints=self._physical(own), fallback=True, reason=reason, plan=None)
         return answer
+
+    def _guard(self, given, s: np.ndarray, when) -> tuple[Guard, np.ndarray] | None:
+        """`guard_k`'s guard from the request's `guard` (the last answer's), and whether it has this step play the own
+        plan: the zones' discomfort now against what the last answer predicted for the own plan (None: no guard)."""
+        if self.settings.guard_k is None:
+            return None
+        try:
+            state = GuardState.of(given)
+        except ValueError as e:
+            raise InputError("guard", str(e)) from None
+        guard = Guard(1, self.settings.guard_k, self.settings.guard_steps)
+        guard.states[0] = state
+        n = self.planner.n_temps
+        now = discomfort(s[:, :n], self.calendar.bounds([when]), self.calendar([when]), self.calendar.tolerance)
+        return guard, guard.check(now)
 
     def _physical(self, values: np.ndarray) -> dict[str, dict]:
         return self.contract.setpoints(np.clip(values, self.low, self.high))

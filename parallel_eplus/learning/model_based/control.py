@@ -28,7 +28,8 @@ from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
 from parallel_eplus.learning.model_based.exogenous import Forecasts
 from parallel_eplus.learning.model_based.features import EXOGENOUS, step_times, with_occupancy
-from parallel_eplus.learning.model_based.planner import Plan, Planner, decision_seed
+from parallel_eplus.learning.model_based.guard import Guard, discomfort
+from parallel_eplus.learning.model_based.planner import Plan, Planner, decision_seed, side_array
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 PLANNER_FILE = "planner.pt"
@@ -65,6 +66,7 @@ class MPC:
         self.support = (-np.ones(n_actions, np.float32), np.ones(n_actions, np.float32))  # `set_support`
         self.warm = np.zeros((workers, settings.horizon, n_actions), np.float32)
         self.last: Plan | None = None
+        self.guard: Guard | None = None  # `guard_k`'s, made at the first plan (an evaluation's settings may add it)
         self.initial = np.array([2 * (a.initial - a.low) / (a.high - a.low) - 1 for a in b.actions], np.float32)
         self.action_low = np.array([a.low for a in b.actions], float)  # as the served planner reads them
         self.action_high = np.array([a.high for a in b.actions], float)
@@ -81,9 +83,11 @@ class MPC:
                              "(a zone's heating or cooling setpoint) that follows a schedule its comfort bounds "
                              "read (`band = \"thermostat\"`)")
         s = self.settings
-        if (s.consensus or s.min_saving or s.own_radius is not None) and s.comfort_reference != "own":
-            raise ValueError("--mpc consensus, min_saving and own_radius weigh the search's plan against the own "
-                             "thermostats' plan: add comfort_reference=own")
+        if (s.consensus or s.min_saving or s.own_radius is not None or s.guard_k is not None
+                or s.band_thermostats != "free") and \
+                s.comfort_reference != "own":  # fmt: skip
+            raise ValueError("--mpc consensus, min_saving, own_radius, guard_k and band_thermostats weigh the "
+                             "search's plan against the own thermostats' plan: add comfort_reference=own")
         dated = self.comfort_times.dated_applies
         if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
             log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
@@ -144,6 +148,8 @@ class MPC:
     def reset(self, worker: int) -> None:
         """A new episode for `worker`: forget its warm start and its demand peaks."""
         self.warm[worker] = 0.0
+        if self.guard:
+            self.guard.reset(worker)
         if self.demand:
             self.demand.reset(worker)
 
@@ -168,11 +174,29 @@ class MPC:
         demand = self.demand.outlook(obs, infos, self.settings.horizon) if self.demand else None
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
         reference = self.own_plan(infos, bounds, a_last) if self.settings.comfort_reference == "own" else None
+        hold = self._guard_check(s, infos) if reference is not None else None
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
                                       self.warm[: len(s)], seeds, weights, reference, demand,
-                                      self.follows)  # fmt: skip
+                                      self.follows, hold, side_array(self.thermostat_sides))  # fmt: skip
         self.warm[: len(s)] = self.last.increments
+        if hold is not None:
+            self.guard.record(self.last.action, self.last.own_action,
+                              discomfort(self.last.own_next, bounds[:, 0], applies[:, 0],
+                                         self.comfort_times.tolerance))
         return self.last.action
+
+    def _guard_check(self, s: np.ndarray, infos: list[dict]) -> np.ndarray | None:
+        """[W]: the workers `guard_k`'s guard has play the own plan (None: no guard), from the zones' discomfort
+        observed at the end of the step just taken."""
+        c = self.settings
+        if c.guard_k is None:
+            return None
+        if self.guard is None or (self.guard.k, self.guard.steps) != (c.guard_k, c.guard_steps):
+            self.guard = Guard(len(self.warm), c.guard_k, c.guard_steps)
+        now = [info["time"] for info in infos]
+        bounds = self.comfort_times.bounds(now)  # [W, K, 2]: one time per worker
+        temps = s[:, : self.planner.n_temps]
+        return self.guard.check(discomfort(temps, bounds, self.comfort_times(now), self.comfort_times.tolerance))
 
     def own_plan(self, infos: list[dict], bounds: np.ndarray, a_last: np.ndarray) -> np.ndarray:
         """[W, H, A]: what the building's own controls would set over each worker's horizon (`own_reference`), from

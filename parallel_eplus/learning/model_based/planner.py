@@ -50,6 +50,8 @@ class Plan:
     cost: np.ndarray  # [W]
     spread_k: np.ndarray  # [W]
     ms: float
+    own_action: np.ndarray | None = None  # [W, A]: the own plan's first action, as a candidate plays it (with `hold`)
+    own_next: np.ndarray | None = None  # [W, K]: the members' mean zone temperatures after it
 
 
 def decision_seed(seed: int, when: str, state: np.ndarray) -> int:
@@ -59,6 +61,12 @@ def decision_seed(seed: int, when: str, state: np.ndarray) -> int:
     h.update(f"{seed}|{when}".encode())
     h.update(np.ascontiguousarray(state, np.float32).tobytes())
     return int.from_bytes(h.digest(), "little")
+
+
+def side_array(sides: list[tuple[int, int] | None]) -> np.ndarray:
+    """[A]: each action's thermostat side as `Planner.plan` reads it (0 lower, 1 upper, -1 not a thermostat), from
+    `thermostat_sides` (control.py; the served planner's contract)."""
+    return np.array([-1 if side is None else side[1] for side in sides], int)
 
 
 def _follow(a_last: np.ndarray, target: np.ndarray, max_increment: float, low: np.ndarray,
@@ -84,14 +92,18 @@ class Planner:
              comfort_weight: float, support: tuple[np.ndarray, np.ndarray], warm: np.ndarray,
              seeds: list[int], energy_weights: np.ndarray | None = None,
              reference: np.ndarray | None = None, demand: DemandOutlook | None = None,
-             follows: np.ndarray | None = None) -> Plan:  # fmt: skip
+             follows: np.ndarray | None = None, hold: np.ndarray | None = None,
+             sides: np.ndarray | None = None) -> Plan:  # fmt: skip
         """s [W, n_state], a_last [W, A], exo [W, H, X], applies [W, H], each zone's bounds [W, H, K, 2], the
         actions' support (low [A], high [A]), the warm start [W, H, A], one sampler seed per worker, the
         weights of the predicted energy parts [W, H, P] (None: each counts once), and the actions [W, H, A] whose
         predicted discomfort is free (`comfort_reference = "own"`; None: every K beyond the bounds costs); the
         reference is itself a candidate, so the search can always fall back on it; `demand`: the demand charges
         over the horizon (demand.py), None: none priced; `follows` [A]: the actions the reference sets (the
-        thermostats), which `own_radius` keeps near it."""
+        thermostats), which `own_radius` keeps near it; `hold` [W]: the workers that play the reference
+        (guard.py); `sides` [A]: which bound each thermostat action's own setpoint is (0 the lower: heating, 1 the
+        upper: cooling, -1 not a thermostat), which `band_thermostats` holds to the own plan where the band
+        applies."""
         t0 = time.perf_counter()
         c = self.settings
         w, h, a_n = len(s), c.horizon, a_last.shape[1]
@@ -104,6 +116,13 @@ class Planner:
         if reference is not None and radius is not None and follows is not None:  # [W, 1, H, A] each side
             r = np.where(np.asarray(follows, bool), np.float32(radius), np.float32(np.inf))
             near = (reference[:, None] - r, reference[:, None] + r)
+        band = getattr(c, "band_thermostats", "free")
+        if reference is not None and band != "free" and sides is not None:
+            inside = np.asarray(applies)[:, None, :, None] > 0  # [W, 1, H, 1]
+            sides, exact = np.asarray(sides), band == "own"
+            low_ = np.where(inside & ((sides == 0) | exact & (sides >= 0)), reference[:, None], -np.inf)  # heating
+            high_ = np.where(inside & ((sides == 1) | exact & (sides >= 0)), reference[:, None], np.inf)  # cooling
+            near = (low_, high_) if near is None else (np.maximum(near[0], low_), np.minimum(near[1], high_))
         rngs = [np.random.default_rng(seed) for seed in seeds]
         mean, std = np.asarray(warm, np.float32).copy(), np.full((w, h, a_n), c.init_std, np.float32)
         for i in range(c.iterations):
@@ -138,10 +157,23 @@ class Planner:
             keep = ~np.all(per[:, :, 0] < per[:, :, 1], axis=0)
             plan = np.where(keep[:, None, None], reference, plan)
             best = np.where(keep, 1, best)  # its cost and spread reported: candidate 1 is the reference's
+        own_action = own_next = None
+        if reference is not None and hold is not None:
+            own_action = reference[:, 0]
+            plan = np.where(np.asarray(hold, bool)[:, None, None], reference, plan)
+            best = np.where(hold, 1, best)
+            own_next = self._first_step(s, a_last, reference[:, 0], exo[:, 0])
         steps = np.diff(np.concatenate([a_last[:, None], plan], axis=1), axis=1)
         increments = np.concatenate([steps[:, 1:], np.zeros((w, 1, a_n), np.float32)], axis=1)
         ms = 1000 * (time.perf_counter() - t0)
-        return Plan(plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms)
+        return Plan(plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms, own_action,
+                    own_next)
+
+    def _first_step(self, s: np.ndarray, a_last: np.ndarray, action: np.ndarray, exo: np.ndarray) -> np.ndarray:
+        """[W, K]: the members' mean zone temperatures at the end of one step of `action` [W, A] from `s`."""
+        row = np.concatenate([s, a_last, action, exo], axis=1).astype(np.float32)
+        out = self.forward(np.broadcast_to(row, (self.members, *row.shape)).copy())
+        return s[:, : self.n_temps] + out[:, :, : self.n_temps].mean(0)
 
     def _cost(self, s, a_last, actions, exo, applies, bounds, comfort_weight: float,
               energy_weights: np.ndarray | None, reference=None, demand=None, members: bool = False):  # fmt: skip
