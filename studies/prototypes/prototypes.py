@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
-from recipes import RECIPES
+from recipes import PLAYED, RECIPES
 from report import SCENARIOS, figure, markdown, ratios
 
 REPO = Path(__file__).resolve().parents[2]
@@ -40,7 +40,13 @@ class Study:
     steps: int = 35_000  # env steps per run
     workers: int = 2
     seeds: tuple[int, ...] = (0,)
-    recipe: str = "hedged"
+    recipe: str = "hedged"  # what it trains (RECIPES)
+    played: str = ""  # the recipe it scores, where it plays the trained planners with other settings (PLAYED)
+
+    @property
+    def evaluations(self) -> str:
+        """The work folder's subfolder of its evaluations: a played recipe's apart from the trained one's."""
+        return f"eval-{self.played}" if self.played else "eval"
 
     def folder(self, name: str) -> Path:
         return self.work / name
@@ -176,13 +182,15 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
         run = study.run_dir(name, seed)
         planner = run / "best" / "planner" if (run / "best" / "planner").is_dir() else run / "planner"
         planners += ["--policy", f"{planner}=Planner"]
+    if study.played:
+        planners += ["--planner", PLAYED[study.played][1]]
     for scenario in SCENARIOS:
-        out = study.folder(name) / "eval" / scenario
+        out = study.folder(name) / study.evaluations / scenario
         if (study.out / name / f"{scenario}.csv").is_file():
             continue
         if deadline - time.time() < 600:
             return False
-        known = sorted(study.folder(name).glob("eval/*/scenarios.json"))
+        known = sorted(study.folder(name).glob("eval*/*/scenarios.json"))
         if known and not (out / "scenarios.json").is_file():  # each weather's BOPTEST days, found once: reused
             out.mkdir(parents=True, exist_ok=True)
             shutil.copy(known[0], out / "scenarios.json")
@@ -240,8 +248,10 @@ def table(study: Study) -> pd.DataFrame:
         row = {"building": name, "model": model.name, "actions": ", ".join(status.get("actions", [])),
                "supply-air loops": status.get("supply_air_loops", ""), "stage": status.get("stage", "not started"),
                "reason": status.get("error") or ""}  # fmt: skip
-        if status.get("checked") and not status.get("evaluated") and not status.get("error"):
-            row["stage"] = "checked, " + ("training" if study.run_dir(name, 0).exists() else "not trained yet")
+        if status.get("checked") and not scored(study, name) and not status.get("error"):
+            run = study.run_dir(name, 0)
+            row["stage"] = "checked, " + ("trained, not scored yet" if finished(run) else "training" if run.exists()
+                                          else "not trained yet")  # fmt: skip
         if scored(study, name):
             row["stage"], row["reason"] = "scored", ""
         figures = ratios(study.out / name) if scored(study, name) else None
@@ -272,11 +282,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=Study.steps)
     p.add_argument("--seeds", default="0", help="comma-separated")
     p.add_argument("--minutes", type=float, default=110.0, help="the chunk: stop (checkpointed) after this long")
-    p.add_argument("--recipe", choices=sorted(RECIPES), default="hedged", help="the training recipe (RECIPES)")
+    p.add_argument("--recipe", choices=sorted(RECIPES) + sorted(PLAYED), default="banded",
+                   help="the recipe: trained (RECIPES), or a trained one's planners played otherwise (PLAYED)")
     a = p.parse_args(argv)
-    a.work = a.work or Path(os.environ.get("WORK", REPO.parent / f"prototypes-{a.recipe}"))
+    trained, played = (PLAYED[a.recipe][0], a.recipe) if a.recipe in PLAYED else (a.recipe, "")
+    a.work = a.work or Path(os.environ.get("WORK", REPO.parent / f"prototypes-{trained}"))
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
-    study = Study(a.work, a.out, a.steps, seeds=tuple(int(s) for s in a.seeds.split(",")), recipe=a.recipe)
+    study = Study(a.work, a.out, a.steps, seeds=tuple(int(s) for s in a.seeds.split(",")), recipe=trained,
+                  played=played)  # fmt: skip
     if a.command == "prepare":
         for model in models():
             if not a.names or short_name(model) in a.names:

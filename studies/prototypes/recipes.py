@@ -56,3 +56,11 @@ RECIPES = {
                   f"{JUMP},comfort_hours=occupied,comfort_reference=own,comfort_level=own,own_radius=0.2,"
                   "min_saving=0.03,occupancy_input=true", *COMMON],
 }
+
+# Recipes that play another recipe's trained planners with other settings (`evaluate --planner`), no new training:
+# (the trained recipe, its work folder's, and the settings). `banded`: `hedged`'s planners with each thermostat on
+# its own plan wherever its band applies (`band_thermostats=own`): the planner moves the rest (supply air, where it
+# takes it over) and the thermostats outside the occupied hours. The restaurants' and the medium office's discomfort
+# came from moves off the own plan in occupied hours (a cooling setpoint 0.8 K above its own with the zone at the
+# bound); played so, each held its own controls' occupied K.h on the pilots' fortnights (docs/model-based.md).
+PLAYED = {"banded": ("hedged", "band_thermostats=own")}

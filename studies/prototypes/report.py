@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pandas as pd
+from recipes import PLAYED
 
 if TYPE_CHECKING:  # the study (prototypes.py) imports this module
     from prototypes import Study
@@ -45,7 +46,9 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
     lines = ["# Every DOE reference prototype, scored", "",
              "Made by `python studies/prototypes/prototypes.py table` (the study: studies/prototypes/README.md). Each",
              "row is one model of the EnergyPlus wheel taken as a new user takes it: `building init`, the starter's",
-             f"recommended actions, `building check`, the planner's recipe (`--recipe {study.recipe}`) on CA, CO and",
+             f"recommended actions, `building check`, the planner's recipe (`--recipe {study.played or study.recipe}`"
+             + (f": `{study.recipe}`'s planners played with `{PLAYED[study.played][1]}`" if study.played else "")
+             + ") on CA, CO and",
              f"FL ({study.steps:,} steps, seeds {', '.join(map(str, study.seeds))}), then `evaluate` on BOPTEST's four",
              "scenarios (peak and typical heating and cooling fortnights) on all five weathers (IL and VA held out).",
              "Ratios are the planner's over its own controls' (× built-in, CityLearn's form), summed over the 20",
