@@ -17,7 +17,8 @@ SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")
 
 def ratios(folder: Path) -> dict | None:
     """The planner's figures over the four scenarios and five weathers, each as a ratio to the building's own."""
-    frames = [pd.read_csv(folder / f"{s}.csv").assign(scenario=s) for s in SCENARIOS if (folder / f"{s}.csv").is_file()]
+    frames = [pd.read_csv(folder / f"{s}.csv").copy().assign(scenario=s)  # copy: one block, not one per column
+              for s in SCENARIOS if (folder / f"{s}.csv").is_file()]
     if len(frames) < len(SCENARIOS):
         return None
     df = pd.concat(frames)
