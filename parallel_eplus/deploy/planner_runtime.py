@@ -29,7 +29,7 @@ from parallel_eplus.learning.model_based.demand import DemandCharges, DemandOutl
 from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble
 from parallel_eplus.learning.model_based.features import WEATHER_SCALE, exogenous, step_times, with_occupancy
-from parallel_eplus.learning.model_based.guard import Guard, GuardState, discomfort
+from parallel_eplus.learning.model_based.guard import Guard, GuardState
 from parallel_eplus.learning.model_based.planner import Planner, decision_seed, side_array
 
 log = logging.getLogger("parallel_eplus.deploy.planner")
@@ -123,8 +123,7 @@ class PlannerRuntime:
             "cost": round(float(plan.cost[0]), 4), "plan_ms": round(plan.ms, 2),
         }  # fmt: skip
         if guard is not None:  # its state, for the next request to send back (`guard`)
-            guard[0].record(plan.action, plan.own_action, discomfort(plan.own_next, bounds[None, 0], applies[:, 0],
-                                                                       self.calendar.tolerance))
+            guard[0].record(plan, bounds[None, 0], applies[:, 0])
             answer["guard"] = guard[0].states[0].as_dict()
         reason = self._distrust(s[0], a_last, exo[0], weather, body.get("sensors", {}), float(plan.spread_k[0]))
         if reason:
@@ -142,11 +141,9 @@ class PlannerRuntime:
             state = GuardState.of(given)
         except ValueError as e:
             raise InputError("guard", str(e)) from None
-        guard = Guard(1, self.settings.guard_k, self.settings.guard_steps)
+        guard = Guard(1, self.settings.guard_k, self.settings.guard_steps, self.calendar.tolerance)
         guard.states[0] = state
-        n = self.planner.n_temps
-        now = discomfort(s[:, :n], self.calendar.bounds([when]), self.calendar([when]), self.calendar.tolerance)
-        return guard, guard.check(now)
+        return guard, guard.check(s[:, : self.planner.n_temps], self.calendar.bounds([when]), self.calendar([when]))
 
     def _physical(self, values: np.ndarray) -> dict[str, dict]:
         return self.contract.setpoints(np.clip(values, self.low, self.high))

@@ -28,7 +28,7 @@ from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
 from parallel_eplus.learning.model_based.exogenous import Forecasts
 from parallel_eplus.learning.model_based.features import EXOGENOUS, step_times, with_occupancy
-from parallel_eplus.learning.model_based.guard import Guard, discomfort
+from parallel_eplus.learning.model_based.guard import Guard
 from parallel_eplus.learning.model_based.planner import Plan, Planner, decision_seed, side_array
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
@@ -180,9 +180,7 @@ class MPC:
                                       self.follows, hold, side_array(self.thermostat_sides))  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         if hold is not None:
-            self.guard.record(self.last.action, self.last.own_action,
-                              discomfort(self.last.own_next, bounds[:, 0], applies[:, 0],
-                                         self.comfort_times.tolerance))
+            self.guard.record(self.last, bounds[:, 0], applies[:, 0])
         return self.last.action
 
     def _guard_check(self, s: np.ndarray, infos: list[dict]) -> np.ndarray | None:
@@ -192,11 +190,9 @@ class MPC:
         if c.guard_k is None:
             return None
         if self.guard is None or (self.guard.k, self.guard.steps) != (c.guard_k, c.guard_steps):
-            self.guard = Guard(len(self.warm), c.guard_k, c.guard_steps)
-        now = [info["time"] for info in infos]
-        bounds = self.comfort_times.bounds(now)  # [W, K, 2]: one time per worker
-        temps = s[:, : self.planner.n_temps]
-        return self.guard.check(discomfort(temps, bounds, self.comfort_times(now), self.comfort_times.tolerance))
+            self.guard = Guard(len(self.warm), c.guard_k, c.guard_steps, self.comfort_times.tolerance)
+        now = [info["time"] for info in infos]  # one time per worker
+        return self.guard.check(s[:, : self.planner.n_temps], self.comfort_times.bounds(now), self.comfort_times(now))
 
     def own_plan(self, infos: list[dict], bounds: np.ndarray, a_last: np.ndarray) -> np.ndarray:
         """[W, H, A]: what the building's own controls would set over each worker's horizon (`own_reference`), from

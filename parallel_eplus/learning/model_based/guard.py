@@ -16,8 +16,12 @@ planner carries it in the request and the answer (planner_runtime.py), as it car
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from parallel_eplus.learning.model_based.planner import Plan
 
 LEFT = 1e-3  # normalized units: an action this far from the own plan's has left it
 
@@ -60,19 +64,21 @@ class GuardState:
 
 
 class Guard:
-    """Every worker's `GuardState`: `check` before a plan (which workers play the own plan), `record` after it."""
+    """Every worker's `GuardState`: `check` before a plan (which workers play the own plan), `record` after it.
+    `tolerance`: the spec's, by which the calendar's bounds are widened (`discomfort` takes it off)."""
 
-    def __init__(self, workers: int, k: float, steps: int):
-        self.k, self.steps = k, steps
+    def __init__(self, workers: int, k: float, steps: int, tolerance: float):
+        self.k, self.steps, self.tolerance = k, steps, tolerance
         self.states = [GuardState() for _ in range(workers)]
         self.trips = 0
 
     def reset(self, worker: int) -> None:
         self.states[worker] = GuardState()
 
-    def check(self, realised: np.ndarray) -> np.ndarray:
-        """[W] bool: the workers that play the own plan this step, from the discomfort `realised` [W] at the end of
-        the step just taken (`discomfort` of the zone temperatures observed)."""
+    def check(self, temps: np.ndarray, bounds: np.ndarray, applies: np.ndarray) -> np.ndarray:
+        """[W] bool: the workers that play the own plan this step, from the zone temperatures [W, K] observed at the
+        end of the step just taken, and the bounds [W, K, 2] and whether the band applies [W] then."""
+        realised = discomfort(temps, bounds, applies, self.tolerance)
         hold = np.zeros(len(realised), bool)
         for i, g in enumerate(self.states[: len(realised)]):
             if g.expected_k is not None and g.since_left <= self.steps and realised[i] - g.expected_k > self.k:
@@ -81,10 +87,11 @@ class Guard:
             hold[i] = g.hold > 0
         return hold
 
-    def record(self, action: np.ndarray, own: np.ndarray, expected: np.ndarray) -> None:
-        """After the plan: the actions played [W, A], the own plan's [W, A], and the discomfort [W] the model
-        predicts for the own plan's step."""
-        for i, g in enumerate(self.states[: len(action)]):
+    def record(self, plan: Plan, bounds: np.ndarray, applies: np.ndarray) -> None:
+        """After the plan: whether each worker left the own plan, and the discomfort the model predicts for the own
+        plan's step (`plan.own_next`) against the bounds [W, K, 2] and whether the band applies [W] at its end."""
+        expected = discomfort(plan.own_next, bounds, applies, self.tolerance)
+        for i, g in enumerate(self.states[: len(plan.action)]):
             g.hold = max(g.hold - 1, 0)
-            g.since_left = 0 if np.any(np.abs(action[i] - own[i]) > LEFT) else g.since_left + 1
+            g.since_left = 0 if np.any(np.abs(plan.action[i] - plan.own_action[i]) > LEFT) else g.since_left + 1
             g.expected_k = float(expected[i])
