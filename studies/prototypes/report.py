@@ -60,7 +60,7 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
     for _, r in df.iterrows():
         kh = in_band = ""
         if not pd.isna(r.get("hvac_energy_kwh", float("nan"))):
-            kh = f"{r.occupied_discomfort_kh_own:.0f} → {r.occupied_discomfort_kh_learned:.0f}"
+            kh = f"{r.occupied_discomfort_kh_own:.1f} → {r.occupied_discomfort_kh_learned:.1f}"
             in_band = f"{r.in_band_pct_own:.2f} % → {r.in_band_pct:.2f} %"
         stage = r.stage + (f": {r.reason}" if r.reason else "")
         lines.append(f"| {r.building} | {r.actions} | {r['supply-air loops']} | {_x(r.get('hvac_energy_kwh'))} | "
