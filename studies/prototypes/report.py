@@ -3,6 +3,7 @@ and the figure (savings against discomfort, one point per building)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -73,10 +74,15 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
         lines += ["", f"Scored: {len(done)} of {len(df)}. {lower}: {saves}; no more occupied",
                   f"discomfort than its own controls: {holds} (goal: all, savings on 12 of 16).", "",
                   "Why the planner finds so little, building by building, and what was tried: [docs/model-based.md]"
-                  "(../../docs/model-based.md#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
+                  f"({_docs(study.out)}#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
         lines += ["", "![savings against discomfort](savings.png)"]
     return "\n".join(lines) + "\n"
+
+
+def _docs(out: Path) -> str:
+    """docs/model-based.md as the table's folder links it (results/prototypes/, or a recipe's folder below it)."""
+    return os.path.relpath(Path(__file__).resolve().parents[2] / "docs" / "model-based.md", Path(out).resolve())
 
 
 SAVES = 0.995  # a ratio that counts as a saving: 0.5 % lower, not a rounding's 0.003 % (the warehouse on `jump`)
