@@ -71,6 +71,7 @@ class PlannerRuntime:
         self.reference = p.get("comfort_reference", "bound")  # "own": discomfort beyond the own thermostats' is paid
         self.sides = [tuple(x) if x is not None else None for x in p.get("thermostat_sides", [])]
         sides = np.array([side is not None for side in self.sides], bool)  # the own plan sets these (own_radius)
+        self.side_array = side_array(self.sides)  # and which bound each thermostat's is (band_thermostats)
         self.follows = sides | self.calendar.own_known(len(sides))
         self.own = arrays["own_controls"]  # [12, 24, A] physical: the building's own setpoints by month and hour
         self.x_mean, self.x_std = arrays["x_mean"], arrays["x_std"]
@@ -114,7 +115,7 @@ class PlannerRuntime:
         applies = self.calendar(times)[None]
         plan = self.planner.plan(s, a_last[None], exo, applies, bounds[None], self.comfort_weight, self.support,
                                  warm[None], [seed], weights, reference, demand, self.follows,
-                                 None if guard is None else guard[1], side_array(self.sides))  # fmt: skip
+                                 None if guard is None else guard[1], self.side_array)  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),

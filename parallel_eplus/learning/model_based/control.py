@@ -71,6 +71,7 @@ class MPC:
         self.action_low = np.array([a.low for a in b.actions], float)  # as the served planner reads them
         self.action_high = np.array([a.high for a in b.actions], float)
         self.thermostat_sides = thermostat_sides(b)
+        self.sides = side_array(self.thermostat_sides)  # as the planner reads them (`band_thermostats`)
         self.check_reference()
 
     def check_reference(self) -> None:
@@ -177,7 +178,7 @@ class MPC:
         hold = self._guard_check(s, infos) if reference is not None else None
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
                                       self.warm[: len(s)], seeds, weights, reference, demand,
-                                      self.follows, hold, side_array(self.thermostat_sides))  # fmt: skip
+                                      self.follows, hold, self.sides)  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         if hold is not None:
             self.guard.record(self.last, bounds[:, 0], applies[:, 0])
