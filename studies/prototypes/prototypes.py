@@ -43,11 +43,6 @@ class Study:
     recipe: str = "hedged"  # what it trains (RECIPES)
     played: str = ""  # the recipe it scores, where it plays the trained planners with other settings (PLAYED)
 
-    @property
-    def evaluations(self) -> str:
-        """The work folder's subfolder of its evaluations: a played recipe's apart from the trained one's."""
-        return f"eval-{self.played}" if self.played else "eval"
-
     def folder(self, name: str) -> Path:
         return self.work / name
 
@@ -185,7 +180,7 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
     if study.played:
         planners += ["--planner", PLAYED[study.played][1]]
     for scenario in SCENARIOS:
-        out = study.folder(name) / study.evaluations / scenario
+        out = study.folder(name) / (f"eval-{study.played}" if study.played else "eval") / scenario  # apart
         if (study.out / name / f"{scenario}.csv").is_file():
             continue
         if deadline - time.time() < 600:
@@ -254,9 +249,7 @@ def table(study: Study) -> pd.DataFrame:
                                           else "not trained yet")  # fmt: skip
         if scored(study, name):
             row["stage"], row["reason"] = "scored", ""
-        figures = ratios(study.out / name) if scored(study, name) else None
-        if figures:
-            row |= figures
+            row |= ratios(study.out / name) or {}
         rows.append(row)
     df = pd.DataFrame(rows)
     study.out.mkdir(parents=True, exist_ok=True)
