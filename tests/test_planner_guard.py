@@ -137,3 +137,24 @@ def test_the_served_planner_carries_the_guard_in_its_answers_and_acts_as_the_in_
     assert mpc.guard.trips == 1 and guard["since_left"] < 3  # tripped, held, and left the own plan again
     with pytest.raises(InputError, match="guard"):
         runtime.act(dict(body, guard={"hold": "two"}))
+
+
+def test_band_lead_holds_the_thermostats_to_their_own_plan_that_many_steps_before_the_band_starts():
+    """With `band_lead`, each step whose band applies within the next `band_lead` steps follows the own plan, as the
+    band's own steps do; steps before that are the search's (the office's night, before its morning); a negative lead
+    is refused."""
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    lead = 6
+    for option, led in ((f"band_lead={lead}", True), ("band_lead=0", False)):
+        mpc = office(f"comfort_hours=occupied,band_thermostats=own,{option}")
+        ahead_only = []  # the steps before the band with it within the lead: (followed the own plan)
+        for minutes in range(3 * 60, 10 * 60, int(mpc.step_minutes)):
+            info = {"time": JULY.replace(hour=0) + dt.timedelta(minutes=minutes), "weather": "CA"}
+            applies = mpc.future([info])[1][0]
+            if applies[0] == 0 and applies[: lead + 1].any():
+                own = own_first(mpc, info, a_last)
+                ahead_only.append(bool(np.allclose(mpc.act(observation(22.0, 20.0), [info], a_last), own, atol=1e-6)))
+        assert ahead_only, "the office's morning has steps within the lead of its band"
+        assert all(ahead_only) if led else not all(ahead_only)
+    with pytest.raises(ValueError, match="band_lead"):
+        PlannerOptions.parse("band_lead=-1")

@@ -44,7 +44,7 @@ class _Settings:
     def __init__(self, values: dict):
         self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
         self.consensus, self.min_saving, self.own_radius, self.occupancy_input = False, 0.0, None, False
-        self.guard_k, self.guard_steps, self.band_thermostats = None, 12, "free"
+        self.guard_k, self.guard_steps, self.band_thermostats, self.band_lead = None, 12, "free", 0
         self.__dict__.update(values)
 
 

@@ -63,6 +63,14 @@ def decision_seed(seed: int, when: str, state: np.ndarray) -> int:
     return int.from_bytes(h.digest(), "little")
 
 
+def _ahead(applies: np.ndarray, lead: int) -> np.ndarray:
+    """[W, H]: where the band applies within the next `lead` steps (the horizon's end treated as outside)."""
+    if lead <= 0:
+        return applies
+    padded = np.pad(applies, ((0, 0), (0, lead)))
+    return np.lib.stride_tricks.sliding_window_view(padded, lead + 1, axis=1).any(-1)
+
+
 def side_array(sides: list[tuple[int, int] | None]) -> np.ndarray:
     """[A]: each action's thermostat side as `Planner.plan` reads it (0 lower, 1 upper, -1 not a thermostat), from
     `thermostat_sides` (control.py; the served planner's contract)."""
@@ -118,7 +126,7 @@ class Planner:
             near = (reference[:, None] - r, reference[:, None] + r)
         band = getattr(c, "band_thermostats", "free")
         if reference is not None and band != "free" and sides is not None:
-            inside = np.asarray(applies)[:, None, :, None] > 0  # [W, 1, H, 1]
+            inside = _ahead(np.asarray(applies) > 0, getattr(c, "band_lead", 0))[:, None, :, None]  # [W, 1, H, 1]
             sides, exact = np.asarray(sides), band == "own"
             low_ = np.where(inside & ((sides == 0) | exact & (sides >= 0)), reference[:, None], -np.inf)  # heating
             high_ = np.where(inside & ((sides == 1) | exact & (sides >= 0)), reference[:, None], np.inf)  # cooling
