@@ -9,7 +9,6 @@ README.md beside this file.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import re
@@ -18,12 +17,11 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
-import pandas as pd
 from recipes import PLAYED, RECIPES
-from report import SCENARIOS, figure, markdown, ratios
+from report import table
+from study import SCENARIOS, Study, finished, models, read_status, scored, short_name, write_status
 
 REPO = Path(__file__).resolve().parents[2]
 LOG = logging.getLogger("prototypes")
@@ -31,39 +29,8 @@ TRAIN_WEATHERS = "CA,CO,FL"
 EVAL_WEATHERS = "CA,CO,FL,IL,VA"
 TARIFF_LINE = '# tariff = { Electricity = { file = "commercial-tou-demand.toml" } }'
 
-@dataclass(frozen=True)
-class Study:
-    """Where the study works and what each run costs."""
-
-    work: Path
-    out: Path
-    steps: int = 35_000  # env steps per run
-    workers: int = 2
-    seeds: tuple[int, ...] = (0,)
-    recipe: str = "hedged"  # what it trains (RECIPES)
-    played: str = ""  # the recipe it scores, where it plays the trained planners with other settings (PLAYED)
-
-    def folder(self, name: str) -> Path:
-        return self.work / name
-
-    def run_dir(self, name: str, seed: int) -> Path:
-        return self.work / name / "runs" / f"{name}-mpc-seed{seed}"
-
-
 def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "parallel_eplus.cli", *args]
-
-
-def models() -> list[Path]:
-    from parallel_eplus.buildings.resources import model_file
-
-    return sorted(model_file("RefBldgSmallOfficeNew2004_Chicago.idf").parent.glob("RefBldg*.idf"))
-
-
-def short_name(model: Path) -> str:
-    """RefBldgStand-aloneRetailNew2004_Chicago -> stand-alone-retail."""
-    core = model.stem.removeprefix("RefBldg").split("New2004")[0]
-    return re.sub(r"(?<=[a-z])(?=[A-Z])", "-", core).lower()
 
 
 def recommended(starter: str) -> str:
@@ -81,21 +48,6 @@ def recommended(starter: str) -> str:
             line = line[2:]
         out.append(line)
     return "\n".join(out) + "\n"
-
-
-def status_file(study: Study, name: str) -> Path:
-    return study.folder(name) / "status.json"
-
-
-def read_status(study: Study, name: str) -> dict:
-    path = status_file(study, name)
-    return json.loads(path.read_text()) if path.is_file() else {"name": name}
-
-
-def write_status(study: Study, name: str, **fields) -> dict:
-    status = read_status(study, name) | fields
-    status_file(study, name).write_text(json.dumps(status, indent=1) + "\n")
-    return status
 
 
 def failure(result: subprocess.CompletedProcess) -> str:
@@ -130,13 +82,6 @@ def prepare(study: Study, model: Path) -> dict:
         fields |= {"stage": "check", "error": failure(r)}
     LOG.info("%s: %s", name, "checked" if r.returncode == 0 else f"check failed: {fields['error']}")
     return write_status(study, name, **fields)
-
-
-def finished(run: Path) -> bool:
-    try:
-        return json.loads((run / "status.json").read_text()).get("state") == "finished"
-    except (OSError, ValueError):
-        return False
 
 
 def train(study: Study, name: str, seed: int, deadline: float) -> bool:
@@ -228,42 +173,6 @@ def run(study: Study, names: list[str], minutes: float) -> None:
             LOG.info("chunk over: run again to continue")
             return
     LOG.info("every building done or failed: `table` next")
-
-
-def scored(study: Study, name: str) -> bool:
-    return all((study.out / name / f"{s}.csv").is_file() for s in SCENARIOS)
-
-
-def table(study: Study) -> pd.DataFrame:
-    """One row per prototype: what was taken over, how far the path got, the ratios to its own controls."""
-    rows = []
-    for model in models():
-        name = short_name(model)
-        status = read_status(study, name)
-        row = {"building": name, "model": model.name, "actions": ", ".join(status.get("actions", [])),
-               "supply-air loops": status.get("supply_air_loops", ""), "stage": status.get("stage", "not started"),
-               "reason": status.get("error") or ""}  # fmt: skip
-        if status.get("checked") and not scored(study, name) and not status.get("error"):
-            run = study.run_dir(name, 0)
-            row["stage"] = "checked, " + ("trained, not scored yet" if finished(run) else "training" if run.exists()
-                                          else "not trained yet")  # fmt: skip
-        if scored(study, name):
-            row["stage"], row["reason"] = "scored", ""
-            row |= ratios(study.out / name) or {}
-        rows.append(row)
-    df = pd.DataFrame(rows)
-    study.out.mkdir(parents=True, exist_ok=True)
-    for name in df.building:  # each spec as the runs used it, its commented candidates left out
-        spec = study.folder(name) / "spec.toml"
-        if spec.is_file():
-            (study.out / "specs").mkdir(exist_ok=True)
-            kept = [ln for ln in spec.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
-            (study.out / "specs" / f"{name}.toml").write_text("\n".join(kept) + "\n")
-    df.to_csv(study.out / "prototypes.csv", index=False)
-    if "hvac_energy_kwh" in df:
-        figure(df, study.out / "savings.png")
-    (study.out / "README.md").write_text(markdown(df, study))
-    return df
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -5,15 +5,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import pandas as pd
 from recipes import PLAYED
-
-if TYPE_CHECKING:  # the study (prototypes.py) imports this module
-    from prototypes import Study
-
-SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")
+from study import SCENARIOS, Study, finished, models, read_status, scored, short_name
 
 
 def ratios(folder: Path) -> dict | None:
@@ -109,3 +104,35 @@ def figure(df: pd.DataFrame, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def table(study: Study) -> pd.DataFrame:
+    """One row per prototype: what was taken over, how far the path got, the ratios to its own controls."""
+    rows = []
+    for model in models():
+        name = short_name(model)
+        status = read_status(study, name)
+        row = {"building": name, "model": model.name, "actions": ", ".join(status.get("actions", [])),
+               "supply-air loops": status.get("supply_air_loops", ""), "stage": status.get("stage", "not started"),
+               "reason": status.get("error") or ""}  # fmt: skip
+        if status.get("checked") and not scored(study, name) and not status.get("error"):
+            run = study.run_dir(name, 0)
+            row["stage"] = "checked, " + ("trained, not scored yet" if finished(run) else "training" if run.exists()
+                                          else "not trained yet")  # fmt: skip
+        if scored(study, name):
+            row["stage"], row["reason"] = "scored", ""
+            row |= ratios(study.out / name) or {}
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    study.out.mkdir(parents=True, exist_ok=True)
+    for name in df.building:  # each spec as the runs used it, its commented candidates left out
+        spec = study.folder(name) / "spec.toml"
+        if spec.is_file():
+            (study.out / "specs").mkdir(exist_ok=True)
+            kept = [ln for ln in spec.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+            (study.out / "specs" / f"{name}.toml").write_text("\n".join(kept) + "\n")
+    df.to_csv(study.out / "prototypes.csv", index=False)
+    if "hvac_energy_kwh" in df:
+        figure(df, study.out / "savings.png")
+    (study.out / "README.md").write_text(markdown(df, study))
+    return df

@@ -1,0 +1,67 @@
+"""The study's layout: where each building's runs, evaluations and status live, and which prototypes there are."""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")  # BOPTEST's, each evaluated
+
+
+@dataclass(frozen=True)
+class Study:
+    """Where the study works and what each run costs."""
+
+    work: Path
+    out: Path
+    steps: int = 35_000  # env steps per run
+    workers: int = 2
+    seeds: tuple[int, ...] = (0,)
+    recipe: str = "hedged"  # what it trains (RECIPES)
+    played: str = ""  # the recipe it scores, where it plays the trained planners with other settings (PLAYED)
+
+    def folder(self, name: str) -> Path:
+        return self.work / name
+
+    def run_dir(self, name: str, seed: int) -> Path:
+        return self.work / name / "runs" / f"{name}-mpc-seed{seed}"
+
+
+def models() -> list[Path]:
+    from parallel_eplus.buildings.resources import model_file
+
+    return sorted(model_file("RefBldgSmallOfficeNew2004_Chicago.idf").parent.glob("RefBldg*.idf"))
+
+
+def short_name(model: Path) -> str:
+    """RefBldgStand-aloneRetailNew2004_Chicago -> stand-alone-retail."""
+    core = model.stem.removeprefix("RefBldg").split("New2004")[0]
+    return re.sub(r"(?<=[a-z])(?=[A-Z])", "-", core).lower()
+
+
+def status_file(study: Study, name: str) -> Path:
+    return study.folder(name) / "status.json"
+
+
+def read_status(study: Study, name: str) -> dict:
+    path = status_file(study, name)
+    return json.loads(path.read_text()) if path.is_file() else {"name": name}
+
+
+def write_status(study: Study, name: str, **fields) -> dict:
+    status = read_status(study, name) | fields
+    status_file(study, name).write_text(json.dumps(status, indent=1) + "\n")
+    return status
+
+
+def finished(run: Path) -> bool:
+    try:
+        return json.loads((run / "status.json").read_text()).get("state") == "finished"
+    except (OSError, ValueError):
+        return False
+
+
+def scored(study: Study, name: str) -> bool:
+    return all((study.out / name / f"{s}.csv").is_file() for s in SCENARIOS)
