@@ -128,8 +128,9 @@ def main() -> None:
             own = collect(None, weathers, [1, *days], args.days, args.workers, Path(tmp) / "own", None, building)
         power = sum(rw["power_kw"] for rw in rows) / sum(rw["power_kw"] for rw in own) - 1
         band = float(np.mean([rw["in_band_pct"] for rw in rows]))
+        names = [t.removesuffix("_temp_c") for t in building.comfort.temperatures]  # any building's zones
         zones = {z: (round(min(rw[f"{z}_temp_min"] for rw in rows), 2),
-                     round(max(rw[f"{z}_temp_max"] for rw in rows), 2)) for z in ("west", "east")}  # fmt: skip
+                     round(max(rw[f"{z}_temp_max"] for rw in rows), 2)) for z in names}  # fmt: skip
         log.info("round %d: zone temperatures' range %s", r, zones)
         worst = min(rw["in_band_pct"] for rw in rows)
         log.info("round %d (days %s): power %+.1f %% vs own controls, in band %.2f %% (worst episode %.2f %%); "
