@@ -6,7 +6,7 @@ The model-based planner (`mpc`) is not here: it is not an SB3 algorithm (learnin
 from __future__ import annotations
 
 from sb3_contrib import TRPO
-from stable_baselines3 import PPO, SAC
+from stable_baselines3 import PPO
 
 from parallel_eplus.learning.guarded_sac import GuardedSAC
 from parallel_eplus.learning.rollout import NumpyRollouts
@@ -20,5 +20,6 @@ class FastPPO(NumpyRollouts, PPO):
     """Stable-Baselines3's PPO with the numpy rollout loop: the comparison the paper did not run."""
 
 
-# SAC is off-policy: SB3's own step-by-step collect_rollouts feeds its replay buffer.
-ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": SAC, "mbpo": GuardedSAC}
+# SAC is off-policy: SB3's own step-by-step collect_rollouts feeds its replay buffer (GuardedSAC: SB3's SAC with the
+# mbpo rail's guard and a cloned actor's warm-up).
+ALGORITHMS: dict[str, type] = {"trpo": FastTRPO, "ppo": FastPPO, "sac": GuardedSAC, "mbpo": GuardedSAC}

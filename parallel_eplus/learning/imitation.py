@@ -206,7 +206,7 @@ def clone(
     y = th.as_tensor(np.clip(actions, -limit, limit))
     policy = model.policy
     actor = policy.actor if hasattr(policy, "actor") else policy
-    params = [p for name, p in actor.named_parameters() if "value" not in name and name != "log_std"]
+    params = [p for name, p in actor.named_parameters() if "value" not in name and not name.startswith("log_std")]
     optimizer = th.optim.Adam(params, lr=settings.learning_rate)
     generator = th.Generator().manual_seed(seed)
     policy.set_training_mode(True)
@@ -229,6 +229,10 @@ def clone(
                 )
                 spread -= 0.5 * float(th.log((latent**2).sum(dim=1).mean()))
             policy.log_std.fill_(spread)
+    elif hasattr(policy, "actor") and not policy.actor.use_sde:  # SAC: its log-std head flat at the same spread
+        with th.no_grad():  # (before the tanh: at the clone's mean, about the on-policy clone's spread)
+            policy.actor.log_std.weight.zero_()
+            policy.actor.log_std.bias.fill_(settings.log_std)
     with th.no_grad():  # on the record itself
         x = th.as_tensor(env.normalize_obs(demos.observations), dtype=th.float32)
         fitted = demos.to_physical(_actor_mean(policy, x).numpy())

@@ -89,7 +89,8 @@ class SACSettings(FromText):
     net_arch: tuple[int, ...] = (64, 64)
     learning_rate: float = 3e-4
     buffer_size: int = 1_000_000
-    learning_starts: int = 10_000  # env steps of random actions first: a week of every worker's weather
+    learning_starts: int = 10_000  # env steps before the first update (a week of every worker's weather): random
+    # actions, or after --init-from-baseline the cloned actor's own
     batch_size: int = 256
     tau: float = 0.005
     gamma: float = 0.99
@@ -128,7 +129,8 @@ class ImitationSettings:
     epochs: int = 10  # over the record and its re-drawn copies: 40 passes over the record itself
     learning_rate: float = 1e-3
     batch_size: int = 256
-    # The cloned Gaussian's log standard deviation (on-policy): exploration around the built-in behaviour.
+    # The cloned Gaussian's log standard deviation (on-policy; SAC's log-std head starts flat at it, before its
+    # tanh): exploration around the built-in behaviour.
     # -2.0 is 0.135 of each action's half range (the data center's setpoint: ±2 K; its fans: ±0.35 kg/s).
     log_std: float = -2.0
     run_days: int | None = None  # days recorded per training weather; None: the run's episode length

@@ -138,6 +138,8 @@ def _learn(
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
             if cfg.init_from_baseline:
                 _clone_baseline(cfg, model, env, progress)
+        if cfg.off_policy:  # a cloned actor acts its warm-up (guarded_sac.py)
+            model.warmup_policy = cfg.init_from_baseline
         model.lockstep = cfg.lockstep
         model.overlap = cfg.overlap
         model.set_logger(tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name)))

@@ -14,6 +14,9 @@
 # SAC_STEPS/100 steps are random actions anyway), SAC_STEPS (200000) steps, runs named BUILDING-sac-seedN in
 # ../learned-sac, saved beside the model-based runs (results/model-based/BUILDING/runs/), evaluated on full years into
 # results/model-based/BUILDING/sac-year/.
+# RECIPE=sac-clone (issue 51's question: does a clone start pull SAC into the band, where from scratch its multiplier
+# sat at its cap?): the same SAC, its actor first imitating the building's own controls (--init-from-baseline); runs
+# BUILDING-sacclone-seedN in ../learned-sac-clone, evaluated into results/model-based/BUILDING/sac-clone-year/.
 #
 # A run resumes from its newest checkpoint (every 100k steps; a new machine from the checkpoint `save` put in
 # results/learned/), so `start` is safe to repeat after a session ends. Runs use a copy of the package at a fixed
@@ -28,6 +31,9 @@ NICE=${NICE:-0}
 PY=$REPO/.venv/bin/python
 if [ "$RECIPE" = sac ]; then
     TAG=-sac INIT="" WORK=${WORK:-$REPO/../learned-sac} SAVED=$REPO/results/model-based EVAL_OUT=sac-year
+elif [ "$RECIPE" = sac-clone ]; then
+    TAG=-sacclone INIT=--init-from-baseline WORK=${WORK:-$REPO/../learned-sac-clone} SAVED=$REPO/results/model-based
+    EVAL_OUT=sac-clone-year
 else
     TAG="" INIT=--init-from-baseline WORK=${WORK:-$REPO/../learned} SAVED=$REPO/results/learned EVAL_OUT=""
 fi
@@ -37,7 +43,7 @@ fi
 # exploration spread around the clone.
 COMMON="--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2.5"
 recipe() {
-    [ "$RECIPE" = sac ] && { sac_recipe "$1"; return; }
+    [ "${RECIPE#sac}" != "$RECIPE" ] && { sac_recipe "$1"; return; }
     case $1 in
     datacenter-2zone) echo "--batch-size 4096 --gamma 0.95 --gae-lambda 0.9 --log-std-init -2 --algorithm ppo --timesteps 1000000 --comfort-target 99.6 --time-features --schedule-features" ;;
     # The CRAC's model fails in Golden's cold snap of December 18-19 (roof surfaces past 200 C, its own controls
