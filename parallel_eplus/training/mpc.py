@@ -17,6 +17,7 @@ leaves, and what TensorBoard shows: docs/model-based.md.
 
 from __future__ import annotations
 
+import json
 import logging
 import shutil
 import time
@@ -269,7 +270,7 @@ class _Loop:
             self.logger.record(f"planner/support/{name}_low", float(self.mpc.support[0][i]))
             self.logger.record(f"planner/support/{name}_high", float(self.mpc.support[1][i]))
         self.logger.dump(self.steps)
-        io.write_text(self.cfg.run_dir / "model_error.json", __import__("json").dumps(errors, indent=2))
+        io.write_text(self.cfg.run_dir / "model_error.json", json.dumps(errors, indent=2))
         log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,
                  summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
