@@ -64,10 +64,11 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
     done = df.dropna(subset=["hvac_energy_kwh"]) if "hvac_energy_kwh" in df else df.iloc[:0]
     if len(done):
         saves = ((done.hvac_energy_kwh < SAVES) | (done.get("bill", 1) < SAVES)).sum()
-        holds = (done.occupied_discomfort_kh_learned <= done.occupied_discomfort_kh_own).sum()
+        holds = (done.occupied_discomfort_kh_learned <= done.occupied_discomfort_kh_own + SAME_KH).sum()
         lower = f"HVAC energy or bill at least {100 * (1 - SAVES):.1f} % lower"
         lines += ["", f"Scored: {len(done)} of {len(df)}. {lower}: {saves}; no more occupied",
-                  f"discomfort than its own controls: {holds} (goal: all, savings on 12 of 16).", "",
+                  f"discomfort than its own controls: {holds} (to {SAME_KH} K·h; goal: all, savings on 12 of 16).",
+                  "",
                   "Why the planner finds so little, building by building, and what was tried: [docs/model-based.md]"
                   f"({_docs(study.out)}#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
@@ -80,6 +81,9 @@ def _docs(out: Path) -> str:
     return os.path.relpath(Path(__file__).resolve().parents[2] / "docs" / "model-based.md", Path(out).resolve())
 
 
+# Occupied K.h over the 20 fortnights that count as no more than its own: the small hotel's planner, on its own plan
+# at every step, ended 0.0001 K.h above it (its setpoints through float32)
+SAME_KH = 0.01
 SAVES = 0.995  # a ratio that counts as a saving: 0.5 % lower, not a rounding's 0.003 % (the warehouse on `jump`)
 
 
