@@ -47,9 +47,9 @@ RUN = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-see
 
 
 def collect(policy_act, weathers: list[str], starts_days: list[int], days: int, workers: int, folder: Path,
-            starts: Starts | None, building, features: bool = False) -> list[dict]:  # fmt: skip
+            starts: Starts | None, building, spec: str | None, features: bool = False) -> list[dict]:  # fmt: skip
     """The policy (None: the building's own controls) in EnergyPlus on each (weather, start day): its episodes'
-    summaries; its states into `starts`."""
+    summaries; its states into `starts`. `spec`: the planner's building (None: the paper's data center)."""
     last: dict[str, np.ndarray] = {}
     initial = np.array([2 * (a.initial - a.low) / (a.high - a.low) - 1 for a in building.actions], np.float32)
 
@@ -63,8 +63,8 @@ def collect(policy_act, weathers: list[str], starts_days: list[int], days: int, 
 
     controller = Controller("model-gradient", "policy", act=act) if policy_act else Controller("own", "baseline")
     feat = features and policy_act is not None
-    jobs = [(controller, SimulationConfig(weather=w, model=controller.model, run_days=days, start_day=d,
-                                          energyplus_csv=False, output_dir=str(folder / f"{w}-{d}"),
+    jobs = [(controller, SimulationConfig(weather=w, model=controller.model, building=spec, run_days=days,
+                                          start_day=d, energyplus_csv=False, output_dir=str(folder / f"{w}-{d}"),
                                           time_features=feat, schedule_features=feat))
             for w in weathers for d in starts_days]  # fmt: skip
     with tqdm(total=len(jobs) * days * building.steps_per_day, unit="step", desc="collect") as bar:
@@ -124,8 +124,9 @@ def main() -> None:
         days = sorted(rng.choice(np.arange(1, 365 - args.days, 7), size=2, replace=False).tolist())
         with tempfile.TemporaryDirectory(prefix="model-gradient-") as tmp:
             rows = collect(policy_act, weathers, [1, *days], args.days, args.workers, Path(tmp), starts, building,
-                           args.features)
-            own = collect(None, weathers, [1, *days], args.days, args.workers, Path(tmp) / "own", None, building)
+                           mpc.building, args.features)  # fmt: skip
+            own = collect(None, weathers, [1, *days], args.days, args.workers, Path(tmp) / "own", None, building,
+                          mpc.building)  # fmt: skip
         power = sum(rw["power_kw"] for rw in rows) / sum(rw["power_kw"] for rw in own) - 1
         band = float(np.mean([rw["in_band_pct"] for rw in rows]))
         names = [t.removesuffix("_temp_c") for t in building.comfort.temperatures]  # any building's zones
