@@ -9,12 +9,10 @@ Simulation; the vector env drives several, writing every action before reading a
 
 from __future__ import annotations
 
-import atexit
 import logging
 import shutil
 import sys
 import tempfile
-import weakref
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +21,7 @@ from parallel_eplus.buildings.forecast import Forecaster
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine import frames, native
 from parallel_eplus.engine.actions import ActionMap
+from parallel_eplus.engine.at_exit import close_at_exit
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import StepRecorder, err_tail, write_records
 from parallel_eplus.engine.observation import Observer
@@ -88,7 +87,7 @@ class Simulation:
         self._area: float | None = None  # the model's floor area (m²), for the per-m² figures
         self._action = self.initial_action.tolist()
         self._closed = False
-        _LIVE.add(self)
+        close_at_exit(self)
 
     # -- the process (the vector env's `wait_any` watches `sim.process`) ----------------------
     @property
@@ -289,21 +288,6 @@ class Simulation:
     def __del__(self):
         if not getattr(self, "_closed", True) and not sys.is_finalizing():
             self.close()
-
-
-# Simulations still open when the interpreter exits (an uncaught Ctrl-C in a script that never called close()) are
-# closed while the modules they need are alive: from __del__ at shutdown, writing the episode's records failed
-# inside pandas ("'NoneType' object has no attribute 'filters'") and the step table was lost.
-_LIVE: weakref.WeakSet[Simulation] = weakref.WeakSet()
-
-
-@atexit.register
-def _close_live() -> None:
-    for sim in list(_LIVE):
-        try:
-            sim.close()
-        except Exception:  # noqa: BLE001 - one failing close must not keep the others' processes alive
-            logging.getLogger(__name__).exception("closing %s at exit", getattr(sim, "name", "a simulation"))
 
 
 __all__ = ["Simulation", "wait_any"]

@@ -17,7 +17,6 @@ leaves, and what TensorBoard shows: docs/model-based.md.
 
 from __future__ import annotations
 
-import json
 import logging
 import shutil
 import time
@@ -37,7 +36,6 @@ from parallel_eplus.learning.lagrangian import Lagrangian
 from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
 from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
 from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
-from parallel_eplus.learning.model_based.dynamics import summary
 from parallel_eplus.learning.model_based.own_level import BatchComfort, OwnLevel
 from parallel_eplus.learning.model_based.saved_planner import planner_controller
 from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
@@ -45,6 +43,7 @@ from parallel_eplus.runs.run_files import BEST_DIR
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import CallbackHost, EpisodeMetrics, tensorboard_logger
 from parallel_eplus.training.config import TrainConfig
+from parallel_eplus.training.mpc_refit import refit
 from parallel_eplus.training.mpc_student import Student
 
 log = logging.getLogger(__name__)
@@ -250,29 +249,8 @@ class _Loop:
                         "nothing for it; --mpc max_increment=2.0 lets it jump as they do", jump, self.s.max_increment)
 
     def _refit(self, epochs: int) -> None:
-        t0 = time.perf_counter()
-        block = self.building.steps_per_day
-        held = self.data.held_out(block)
-        if held.all() or not held.any():  # too little data for a held-out day: quarter days
-            block = max(block // 4, 1)
-            held = self.data.held_out(block)
-        loss = self.mpc.model.fit(self.data, np.flatnonzero(~held), epochs)
-        self.mpc.refresh()
-        self.mpc.set_support(self.data.array("a"))
-        errors = self.mpc.model.errors(self.data, held, self.s.horizon)
-        for key, value in errors.items():
-            self.logger.record(f"model/{key}", value)
-        self.logger.record("model/train_loss", loss)
-        self.logger.record("model/rows", len(self.data))
-        self.logger.record("model/fit_s", time.perf_counter() - t0)
-        self.logger.record("planner/comfort_weight", self.mpc.comfort_weight)
-        for i, name in enumerate(a.name for a in self.building.actions):
-            self.logger.record(f"planner/support/{name}_low", float(self.mpc.support[0][i]))
-            self.logger.record(f"planner/support/{name}_high", float(self.mpc.support[1][i]))
+        refit(self.mpc, self.data, self.building, self.s.horizon, epochs, self.logger, self.cfg.run_dir)
         self.logger.dump(self.steps)
-        io.write_text(self.cfg.run_dir / "model_error.json", json.dumps(errors, indent=2))
-        log.info("model fitted on %d rows (%.1f s); held-out %s", int((~held).sum()), time.perf_counter() - t0,
-                 summary(errors, self.mpc.layout.state_names, self.s.horizon))  # fmt: skip
 
     def _update_comfort(self, batch: BatchComfort) -> None:
         """The multiplier from the planner's batch, held to the own controls' level on its dates where asked."""
