@@ -95,7 +95,8 @@ def main() -> None:
     th.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
 
-    mpc = MPC.load(args.run / "best" / "planner" / "planner.pt")
+    best = args.run / "best" / "planner" / "planner.pt"  # `--eval-every`'s best, else the run's last
+    mpc = MPC.load(best if best.is_file() else args.run / "planner" / "planner.pt")
     building = load_building(mpc.building)
     source = args.run / "model.zip"
     stats = read_stats(normalization_file(source))
