@@ -36,6 +36,7 @@ from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_local
 from parallel_eplus.learning.algorithms import ALGORITHMS
 from parallel_eplus.learning.model_based.control import MPC
+from parallel_eplus.learning.model_based.exogenous import model_schedule
 from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts, train, widen
 from parallel_eplus.learning.saved_models import load_model
 from parallel_eplus.runs.norm_stats import read_stats
@@ -63,9 +64,10 @@ def collect(policy_act, weathers: list[str], starts_days: list[int], days: int, 
 
     controller = Controller("model-gradient", "policy", act=act) if policy_act else Controller("own", "baseline")
     feat = features and policy_act is not None
+    schedule = feat and model_schedule(spec) is not None  # the data centers' IT load; the offices have none
     jobs = [(controller, SimulationConfig(weather=w, model=controller.model, building=spec, run_days=days,
                                           start_day=d, energyplus_csv=False, output_dir=str(folder / f"{w}-{d}"),
-                                          time_features=feat, schedule_features=feat))
+                                          time_features=feat, schedule_features=schedule))
             for w in weathers for d in starts_days]  # fmt: skip
     with tqdm(total=len(jobs) * days * building.steps_per_day, unit="step", desc="collect") as bar:
         rows, failures = run_local(jobs, workers, bar, keep_going=True)
@@ -104,8 +106,6 @@ def main() -> None:
     policy = model.policy
     clock = None
     if args.features:
-        from parallel_eplus.learning.model_based.exogenous import model_schedule
-
         clock = Clock(True, model_schedule(mpc.building))
         model, stats = widen(model, stats, clock, building)
         policy = model.policy
@@ -144,7 +144,7 @@ def main() -> None:
         model.save(out / "model.zip")
         stats.save(stats_target(out / "model.zip"))
         config = json.loads((args.run / "config.json").read_text())
-        config.update(time_features=args.features, schedule_features=args.features)
+        config.update(time_features=args.features, schedule_features=bool(clock and clock.schedule is not None))
         (out / "config.json").write_text(json.dumps(config, indent=1))
         if r == args.rounds:
             break
