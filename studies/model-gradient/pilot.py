@@ -48,9 +48,10 @@ RUN = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-see
 
 
 def collect(policy_act, weathers: list[str], starts_days: list[int], days: int, workers: int, folder: Path,
-            starts: Starts | None, building, spec: str | None, features: bool = False) -> list[dict]:  # fmt: skip
+            starts: Starts | None, building, spec: str | None, clock: Clock | None = None) -> list[dict]:  # fmt: skip
     """The policy (None: the building's own controls) in EnergyPlus on each (weather, start day): its episodes'
-    summaries; its states into `starts`. `spec`: the planner's building (None: the paper's data center)."""
+    summaries; its states into `starts`. `spec`: the planner's building (None: the paper's data center); `clock`: the
+    features the policy sees after the sensors."""
     last: dict[str, np.ndarray] = {}
     initial = np.array([2 * (a.initial - a.low) / (a.high - a.low) - 1 for a in building.actions], np.float32)
 
@@ -63,11 +64,11 @@ def collect(policy_act, weathers: list[str], starts_days: list[int], days: int, 
         return action
 
     controller = Controller("model-gradient", "policy", act=act) if policy_act else Controller("own", "baseline")
-    feat = features and policy_act is not None
-    schedule = feat and model_schedule(spec) is not None  # the data centers' IT load; the offices have none
+    clock = clock if policy_act is not None else None
     jobs = [(controller, SimulationConfig(weather=w, model=controller.model, building=spec, run_days=days,
                                           start_day=d, energyplus_csv=False, output_dir=str(folder / f"{w}-{d}"),
-                                          time_features=feat, schedule_features=schedule))
+                                          time_features=bool(clock and clock.time),
+                                          schedule_features=bool(clock and clock.schedule)))
             for w in weathers for d in starts_days]  # fmt: skip
     with tqdm(total=len(jobs) * days * building.steps_per_day, unit="step", desc="collect") as bar:
         rows, failures = run_local(jobs, workers, bar, keep_going=True)
@@ -104,9 +105,13 @@ def main() -> None:
     stats = read_stats(normalization_file(source))
     model = load_model(ALGORITHMS["trpo"], source, device="cpu")
     policy = model.policy
-    clock = None
-    if args.features:
-        clock = Clock(True, model_schedule(mpc.building))
+    config = json.loads((args.run / "config.json").read_text())
+    schedule = model_schedule(mpc.building)  # the data centers' IT load; the offices have none
+    seen = Clock(config.get("time_features", False), schedule if config.get("schedule_features") else None)
+    clock = Clock(True, schedule) if args.features else seen
+    if clock != seen:  # the run's policy sees the sensors alone: widened to see the clock too
+        if seen.width:
+            raise SystemExit(f"{args.run}: its policy already sees the clock's features; leave --features out")
         model, stats = widen(model, stats, clock, building)
         policy = model.policy
     rollouts = Rollouts(mpc, building, stats, policy, clock, args.margin)
@@ -125,7 +130,7 @@ def main() -> None:
         days = sorted(rng.choice(np.arange(1, 365 - args.days, 7), size=2, replace=False).tolist())
         with tempfile.TemporaryDirectory(prefix="model-gradient-") as tmp:
             rows = collect(policy_act, weathers, [1, *days], args.days, args.workers, Path(tmp), starts, building,
-                           mpc.building, args.features)  # fmt: skip
+                           mpc.building, clock)  # fmt: skip
             own = collect(None, weathers, [1, *days], args.days, args.workers, Path(tmp) / "own", None, building,
                           mpc.building)  # fmt: skip
         power = sum(rw["power_kw"] for rw in rows) / sum(rw["power_kw"] for rw in own) - 1
@@ -143,8 +148,7 @@ def main() -> None:
         out.mkdir(parents=True, exist_ok=True)
         model.save(out / "model.zip")
         stats.save(stats_target(out / "model.zip"))
-        config = json.loads((args.run / "config.json").read_text())
-        config.update(time_features=args.features, schedule_features=bool(clock and clock.schedule is not None))
+        config.update(time_features=clock.time, schedule_features=clock.schedule is not None)
         (out / "config.json").write_text(json.dumps(config, indent=1))
         if r == args.rounds:
             break

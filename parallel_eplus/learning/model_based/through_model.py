@@ -220,7 +220,7 @@ def train(rollouts: Rollouts, starts: Starts, optimizer, updates: int, batch: in
             th.nn.utils.clip_grad_norm_(params, 1.0)
             optimizer.step()
             if report is not None:
-                report(u, float(loss), parts)
+                report(u, loss.item(), parts)
     return parts
 
 
