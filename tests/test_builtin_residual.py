@@ -62,3 +62,27 @@ def test_only_a_buildings_thermostats_can_be_corrected():
         EnergyPlusEnv(building="datacenter-crac", residual_scale=0.2, residual_space="builtin")
     with pytest.raises(ValueError, match="pass --building"):
         EnergyPlusEnv(residual_scale=0.2, residual_space="builtin")
+
+
+@pytest.mark.slow
+def test_a_heating_setpoint_above_its_zones_cooling_setpoint_is_lowered_to_it(tmp_path, no_leaks):
+    # Overlapping bounds (as a starter's operating rooms have) let an action cross a dual-setpoint thermostat, which
+    # stops EnergyPlus ("Effective heating set-point higher than effective cooling set-point"); lowered to the cooling
+    # setpoint, the episode runs and its record shows what EnergyPlus got.
+    from parallel_eplus.buildings.resources import spec_file
+
+    text = spec_file("office-small").read_text()
+    spec = tmp_path / "office-overlap.toml"
+    spec.write_text(text.replace("low = 15.0\nhigh = 22.0", "low = 15.0\nhigh = 26.0", 1))
+    env = EnergyPlusEnv(building=str(spec), weather="CA", run_days=1, output_dir=tmp_path / "out")
+    try:
+        env.reset(seed=0)
+        crossed = np.array([-1.0, 1.0], np.float32)  # cooling 23 C, heating 26 C (the spec's order)
+        terminated = False
+        while not terminated:
+            _, _, terminated, _, info = env.step(crossed)
+        df = pd.read_parquet(Path(info["episode_dir"]) / "steps.parquet")
+    finally:
+        env.close()
+    assert len(df) == 144 and (df.cooling_setpoint_c == 23.0).all()  # a day of 10-minute steps
+    assert (df.heating_setpoint_c == 23.0).all()

@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from parallel_eplus.buildings.model import thermostat_pairs
+
 if TYPE_CHECKING:
     from parallel_eplus.engine.setup import WorkerSetup
 
@@ -60,6 +62,7 @@ class ActionMap:
         self._setup = setup
         self._release = setup.config.relinquish  # NaN: that element released to the building's own control
         self.base = None  # the rule-based controller a residual action corrects (`start`)
+        self._pairs = thermostat_pairs(elements)  # a zone's heating setpoint kept at or below its cooling one
 
     def start(self) -> None:
         """A new episode: a fresh rule-based controller (its integral state) where a residual corrects one."""
@@ -70,13 +73,21 @@ class ActionMap:
         if self._own is not None:
             return [v * k for v, k in zip(check_action(action, self.policy_names), self._own_step, strict=True)]
         if self._release:
-            return released(action, self.low, self.high, self.names)
+            return self._uncrossed(released(action, self.low, self.high, self.names))
         if self.base is None:
-            return scale_action(action, self.low, self.high, self.names)
+            return self._uncrossed(scale_action(action, self.low, self.high, self.names))
         correction = self.scale * np.array(check_action(action, self.policy_names))
         if self._demand:  # one correction per zone, to the controller's split-range flow demand
             return scale_action(self.base(None, info, demand_correction=correction), self.low, self.high, self.names)
         return scale_action(self.base(None, info) + correction, self.low, self.high, self.names)
+
+    def _uncrossed(self, values: list[float]) -> list[float]:
+        """A heating setpoint above its zone's cooling setpoint lowered to it (the step's record shows what was
+        sent), where EnergyPlus would stop the run."""
+        for h, c in self._pairs:
+            if values[h] > values[c]:  # False where either is NaN (released to the building's own control)
+                values[h] = values[c]
+        return values
 
     def applied(self, sent: list[float], info: dict) -> list[float]:
         """What the step applied, for its record: the values sent, or (builtin) each action's schedule in that step
