@@ -252,3 +252,34 @@ def test_export_command_writes_both_files_and_refuses_what_it_cannot_export(tmp_
     assert r.returncode == 2 and "no trained policy" in r.stderr
     r = cli("serve", str(tmp_path / "nothing"))
     assert r.returncode == 2 and "controller.json not found" in r.stderr
+
+
+@pytest.mark.slow
+def test_a_policy_whose_thermostats_cross_is_exported_and_served_uncrossed(tmp_path, no_leaks):
+    """Bounds that overlap (heating 24-26 C, cooling 20-24 C) make an untrained policy's heating setpoint sit above
+    its cooling one; the env lowers it to the cooling setpoint, and the exported graph and the served answer must
+    too: the contract names the pair, and the graph replays the recorded (uncrossed) setpoints within 1e-5."""
+    from parallel_eplus.buildings.resources import spec_file
+    from parallel_eplus.deploy.server import load_runtime
+
+    text = spec_file("office-small").read_text()
+    text = text.replace("low = 23.0\nhigh = 30.0\ninitial = 24.0", "low = 20.0\nhigh = 24.0\ninitial = 24.0", 1)
+    text = text.replace("low = 15.0\nhigh = 22.0\ninitial = 21.0", "low = 24.0\nhigh = 26.0\ninitial = 24.0", 1)
+    spec = tmp_path / "office-crossed.toml"
+    spec.write_text(text)
+    cfg = TrainConfig(workers=1, weathers=["CA"], run_days=1, timesteps=144, batch_size=144, building=str(spec),
+                      run_name="crossed", runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"))
+    model = train(cfg, progress=False)
+    out = tmp_path / "controller"
+    export(model.parent, out)
+    contract = Contract.read(out)
+    assert [o.get("at_most") for o in contract.outputs] == [None, ["cooling_setpoint_c"]]
+    df = run_sweep([policy_controller(str(model))], ["CA"], 1, 1, tmp_path / "eval", progress=False, building=str(spec))
+    steps = pd.read_parquet(Path(df.episode_dir[0]) / "steps.parquet")
+    assert (steps.heating_setpoint_c == steps.cooling_setpoint_c).mean() > 0.5  # the policy crosses them, mostly
+    result = replay(out, steps)
+    assert result["steps"] == 143 and max(result["max_abs_diff"].values()) <= 1e-5, result
+    row = steps.iloc[50]
+    readings = {s["name"]: float(row[s["name"]]) for s in contract.sensors}
+    answer = load_runtime(out).act({"sensors": readings, "time": pd.Timestamp(row["time"]).isoformat()})
+    assert answer["setpoints"]["heating_setpoint_c"]["value"] <= answer["setpoints"]["cooling_setpoint_c"]["value"]

@@ -82,6 +82,15 @@ def thermostat_pairs(elements: tuple[ActionElement, ...]) -> tuple[tuple[int, in
                  if zones(eh, "heating setpoint") & zones(ec, "cooling setpoint"))  # fmt: skip
 
 
+def uncrossed(values, pairs: tuple[tuple[int, int], ...]):
+    """`values` (physical setpoints, a list or array row) with each heating setpoint above its paired cooling
+    setpoint lowered to it: one rule for the simulated loop, the exported graph's check and the served answer."""
+    for h, c in pairs:
+        if values[h] > values[c]:  # False where either is NaN (released to the building's own control)
+            values[h] = values[c]
+    return values
+
+
 # Observation in the paper's order and units (Section 4.2.1), read from the building spec.
 SENSORS: tuple[Sensor, ...] = tuple(
     Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high) for o in DEFAULT.observations

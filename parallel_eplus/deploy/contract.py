@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.clock import SCHEDULE_FEATURES, TIME_FEATURES, schedule_features, time_features
+from parallel_eplus.buildings.model import thermostat_pairs, uncrossed
 
 FORMAT = 1  # a policy's contract; a planner's is 2 (planner_export.py)
 READS = 2  # the newest format this version reads
@@ -55,12 +56,16 @@ def sensor_entries(building) -> list[dict]:
 
 
 def output_entries(building) -> list[dict]:
-    """The contract's setpoints: each action with its unit, bounds and the actuators it drives."""
-    return [
+    """The contract's setpoints: each action with its unit, bounds and the actuators it drives; a zone's heating
+    setpoint names the cooling setpoint it is kept at or below (`at_most`), as EnergyPlus requires."""
+    entries = [
         {"name": a.name, "unit": unit_of(a.name, a.unit), "low": a.low, "high": a.high,
          "actuators": [{"component": x.component_type, "control": x.control_type, "key": x.key} for x in a.actuators]}
         for a in building.actions
     ]  # fmt: skip
+    for h, c in thermostat_pairs(tuple(building.actions)):
+        entries[h].setdefault("at_most", []).append(entries[c]["name"])
+    return entries
 
 
 @dataclass
@@ -152,7 +157,14 @@ class Contract:
             raise InputError("time", f"{text[:40]!r} is not an ISO 8601 date and time") from None
         return when.replace(tzinfo=None)
 
+    @property
+    def pairs(self) -> tuple[tuple[int, int], ...]:
+        """(heating, cooling) output indices from the outputs' `at_most` (none in contracts written before it)."""
+        index = {o["name"]: i for i, o in enumerate(self.outputs)}
+        return tuple((h, index[c]) for h, o in enumerate(self.outputs) for c in o.get("at_most", ()))
+
     def setpoints(self, row: np.ndarray) -> dict[str, dict]:
+        row = uncrossed(np.array(row, dtype=float), self.pairs)
         return {o["name"]: {"value": float(v), "unit": o["unit"]} for o, v in zip(self.outputs, row, strict=True)}
 
 

@@ -17,7 +17,13 @@ import numpy as np
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES, it_load_schedule
+from parallel_eplus.buildings.model import (
+    SCHEDULE_FEATURES,
+    TIME_FEATURES,
+    it_load_schedule,
+    thermostat_pairs,
+    uncrossed,
+)
 from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.deploy.contract import CONTRACT_FILE, FORMAT, ONNX_FILE, output_entries, sensor_entries
 from parallel_eplus.deploy.graph import INPUT, OPSET, OUTPUT, Layer, PolicyArrays, build_model
@@ -169,6 +175,7 @@ def build(model_zip: Path) -> tuple[PolicyArrays, dict]:
         np.sqrt(stats.obs_var + stats.epsilon) if stats.norm_obs else None,
         float(stats.clip_obs), layers, squash,
         np.array([a.low for a in building.actions], float), np.array([a.high for a in building.actions], float),
+        thermostat_pairs(tuple(building.actions)),
     )  # fmt: skip
     if len(obs_low) != n_obs:
         raise ValueError(f"{model_zip} observes {n_obs} values; its building and features make {len(obs_low)}")
@@ -214,7 +221,8 @@ def reference_actions(model_zip: Path, observations: np.ndarray) -> np.ndarray:
     saved = run_settings(model_zip)
     actions = load_building(saved_building(saved)).actions
     low, high, names = [a.low for a in actions], [a.high for a in actions], tuple(a.name for a in actions)
-    return np.array([scale_action(act(o[None, :])[0], low, high, names) for o in observations])
+    pairs = thermostat_pairs(tuple(actions))
+    return np.array([uncrossed(scale_action(act(o[None, :])[0], low, high, names), pairs) for o in observations])
 
 
 def sample_observations(arrays: PolicyArrays, n: int = 512, seed: int = 0) -> np.ndarray:

@@ -4,7 +4,8 @@ Why not `torch.onnx.export`: its default exporter needs onnxscript and changes w
 policy is a handful of dense layers. Building them here keeps every step the in-process policy takes, in its
 order and precision (float64, with the casts to float32 where `evaluate` makes them), so onnxruntime gives the
 same setpoints to the last bits: sensor clipping to the spec's bounds, VecNormalize's scaling and clip, the MLP,
-the action clip (or SAC's tanh squash), and the scaling to each actuator's physical range.
+the action clip (or SAC's tanh squash), the scaling to each actuator's physical range, and a zone's heating
+setpoint kept at or below its cooling one.
 """
 
 from __future__ import annotations
@@ -43,6 +44,18 @@ class PolicyArrays:
     squash: bool  # SAC: tanh on the network's mean; TRPO/PPO: a clip to [-1, 1]
     act_low: np.ndarray  # each action element's physical range
     act_high: np.ndarray
+    pairs: tuple[tuple[int, int], ...] = ()  # (heating, cooling) outputs: heating kept at or below (model.py)
+
+
+def _rounds(pairs: tuple[tuple[int, int], ...]) -> list[list[tuple[int, int]]]:
+    """The pairs in rounds where each heating output appears once (one Gather each)."""
+    rounds: list[list[tuple[int, int]]] = []
+    for h, c in pairs:
+        free = next((r for r in rounds if all(h != g for g, _ in r)), None)
+        if free is None:
+            rounds.append(free := [])
+        free.append((h, c))
+    return rounds
 
 
 class _Builder:
@@ -102,7 +115,15 @@ def build_model(p: PolicyArrays, doc: str = "") -> onnx.ModelProto:
     # scale_action: lo + (v + 1) * 0.5 * (hi - lo), in that order
     span = b.const("act_span", p.act_high - p.act_low)
     half = b.op("Mul", [b.op("Add", [x, one]), b.const("half", 0.5)])
-    b.op("Add", [b.const("act_low", p.act_low), b.op("Mul", [half, span])], out=OUTPUT)
+    x = b.op("Add", [b.const("act_low", p.act_low), b.op("Mul", [half, span])])
+    for i, pairs in enumerate(_rounds(p.pairs)):  # uncrossed: heating = min(heating, its cooling), as the env does
+        index = np.arange(len(p.act_low))
+        for h, c in pairs:
+            index[h] = c
+        index_name = f"paired{i}"
+        b.inits.append(numpy_helper.from_array(index.astype(np.int64), index_name))
+        x = b.op("Min", [x, b.op("Gather", [x, index_name], axis=1)])
+    b.op("Identity", [x], out=OUTPUT)
     n_obs, n_act = len(p.obs_low), len(p.act_low)
     graph = helper.make_graph(
         b.nodes,

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from parallel_eplus.buildings.model import thermostat_pairs
+from parallel_eplus.buildings.model import thermostat_pairs, uncrossed
 
 if TYPE_CHECKING:
     from parallel_eplus.engine.setup import WorkerSetup
@@ -82,12 +82,8 @@ class ActionMap:
         return scale_action(self.base(None, info) + correction, self.low, self.high, self.names)
 
     def _uncrossed(self, values: list[float]) -> list[float]:
-        """A heating setpoint above its zone's cooling setpoint lowered to it (the step's record shows what was
-        sent), where EnergyPlus would stop the run."""
-        for h, c in self._pairs:
-            if values[h] > values[c]:  # False where either is NaN (released to the building's own control)
-                values[h] = values[c]
-        return values
+        """Crossed thermostats uncrossed (the step's record shows what was sent), where EnergyPlus would stop."""
+        return uncrossed(values, self._pairs)
 
     def applied(self, sent: list[float], info: dict) -> list[float]:
         """What the step applied, for its record: the values sent, or (builtin) each action's schedule in that step
