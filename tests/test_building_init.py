@@ -88,6 +88,24 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
 
 
 @pytest.mark.slow
+def test_air_loops_on_different_own_plans_get_one_supply_air_knob_each(tmp_path, monkeypatch):
+    """The DOE out-patient clinic: AHU-1 holds 11.1 C, AHU-2 12.8 C. One shared value would keep one of them off its
+    own plan at every step (its trained planner spent 3 % more HVAC energy), so each own plan gets its knob."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    out = tmp_path / "clinic.toml"
+    init_spec(Path(dataset.ref_models["outpatient"]), "CO", out)
+    text = out.read_text()
+    assert "the 2 air loops' own supply air differs (seen 11.1..11.1 C, 12.8..12.8 C)" in text
+    assert "# all 2 air loops' supply air together" not in text
+    out.write_text(uncomment_actions(text, r"^# the one air loop's supply air on its own plan"))
+    knobs = {a.name: ([x.key for x in a.actuators], a.low, a.high, a.initial) for a in load_spec(out).actions}
+    assert knobs == {
+        "supply_air_ahu_1_c": (["AHU-1 Supply Equipment Outlet Node"], 11.0, 18.0, 11.1),
+        "supply_air_ahu_2_c": (["AHU-2 Supply Equipment Outlet Node"], 12.0, 18.0, 12.8),
+    }
+
+
+@pytest.mark.slow
 def test_init_offers_the_air_loops_supply_air_ready_to_uncomment_and_check_proves_it(tmp_path, monkeypatch, no_leaks):
     """The DOE medium office as it ships: its three air loops' supply air, each set by a SetpointManager:Scheduled
     that each run's copy replaces, offered with the loop, the manager and the range; uncommented, `check` passes and

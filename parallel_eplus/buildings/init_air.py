@@ -28,6 +28,7 @@ SPANS = {  # C: the least range offered, widened to what the short run saw
 }  # widened below (a January day's tower water, following the wet bulb, is no lower bound for July)
 WATER_MARGIN_K = 3.0  # other water loops: the range seen, this much each way
 SETPOINT = "System Node Setpoint Temperature"
+SAME_PLAN_K = 0.5  # K: air loops whose supply air the short run saw this close share one knob
 AIR_DENSITY = 1.2  # kg/m3, sea level: sized flows (m3/s) as mass flows
 
 
@@ -43,6 +44,21 @@ def _bounds(loop, v: tuple[float, float]) -> tuple[float, float]:
         return math.floor(v[0] - WATER_MARGIN_K), math.ceil(v[1] + WATER_MARGIN_K)
     low = SPANS[kind][0] if kind == "condenser" else min(math.floor(v[0]), SPANS[kind][0])
     return low, max(math.ceil(v[1]), SPANS[kind][1])
+
+
+def _same_plan(air: list[str], seen: dict) -> list[list[str]]:
+    """The multi-zone air loops gathered by their own plan as the short run saw it: loops whose supply air it saw
+    within SAME_PLAN_K at both ends of its range share a knob (the large hotel's two DOAS on an outdoor-air reset,
+    18.7-22 C in the run, apart from its 13 C VAV loop; the out-patient's 11.1 C AHU apart from its 12.8 C one)."""
+    groups: list[list[str]] = []
+    for k in air:
+        same = (g for g in groups if all(abs(a - b) <= SAME_PLAN_K for a, b in zip(seen[g[0]], seen[k], strict=True)))
+        group = next(same, None)
+        if group is None:
+            groups.append([k])
+        else:
+            group.append(k)
+    return groups
 
 
 def _single_zone(manager: str) -> bool:
@@ -69,13 +85,30 @@ def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str
             "# its own zone's thermostat (SetpointManager:SingleZone:*); own one alone below if you must",
             "",
         ]
-    if len(air) > 1:  # one knob for the building's supply air, as for its thermostats
-        low = min(_bounds(t.supplies[k], seen[k])[0] for k in air)
-        high = max(_bounds(t.supplies[k], seen[k])[1] for k in air)
-        middle = sum(seen[k][0] + seen[k][1] for k in air) / (2 * len(air))
-        note = f"all {len(air)} air loops' supply air together (their managers replaced as below)"
-        lines += candidate("supply_air_c", "System Node Setpoint", "Temperature Setpoint", [o(k) for k in air], low,
-                           high, clamp(middle, low, high), "C", note)  # fmt: skip
+    groups = _same_plan(air, seen) if len(air) > 1 else []
+    if len(groups) > 1:
+        plans = ", ".join(f"{seen[g[0]][0]:.1f}..{seen[g[0]][1]:.1f} C" for g in groups)
+        lines += [
+            f"# the {len(air)} air loops' own supply air differs (seen {plans}): one knob per own plan, as one",
+            "# value for all would hold some loop off its own plan at every step",
+            "",
+        ]
+    for group in groups:  # one knob for the building's supply air, as for its thermostats, per own plan
+        low = min(_bounds(t.supplies[k], seen[k])[0] for k in group)
+        high = max(_bounds(t.supplies[k], seen[k])[1] for k in group)
+        middle = sum(seen[k][0] + seen[k][1] for k in group) / (2 * len(group))
+        names = [t.supplies[k].name for k in group]
+        if len(groups) == 1:
+            name = "supply_air_c"
+            note = f"all {len(air)} air loops' supply air together (their managers replaced as below)"
+        else:
+            span = (min(seen[k][0] for k in group), max(seen[k][1] for k in group))
+            loops = "_".join(names) if len(names) <= 2 else f"{names[0]}_and_{len(names) - 1}_more"
+            name = f"supply_air_{snake(loops)}_c"
+            note = (f"all {len(group)} air loops' supply air with one own plan together" if len(group) > 1
+                    else "the one air loop's supply air on its own plan") + f"{seen_text(span)}: {', '.join(names)}"
+        lines += candidate(name, "System Node Setpoint", "Temperature Setpoint", [o(k) for k in group], low, high,
+                           clamp(middle, low, high), "C", note)  # fmt: skip
     taken = set(supplies)
     for k in supplies:
         loop, v = t.supplies[k], seen[k]

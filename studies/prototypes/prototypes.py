@@ -37,8 +37,9 @@ def recommended(starter: str) -> str:
     """The starter with its recommended actions and the example tariff uncommented (what its notes ask a user)."""
     out, on = [], False
     for line in starter.splitlines():
-        heading = line.startswith(("# all ", "# the one thermostat's"))
-        if heading and any(k in line for k in ("thermostats'", "thermostat's", "air loops' supply air")):
+        heading = line.startswith(("# all ", "# the one thermostat's", "# the one air loop's"))
+        kinds = ("thermostats'", "thermostat's", "air loops' supply", "air loop's supply")
+        if heading and any(k in line for k in kinds):
             on = True  # a block's heading: its lines follow, to a blank line
         elif on and line.startswith("# "):
             line = line[2:]
