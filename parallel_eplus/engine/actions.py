@@ -62,7 +62,8 @@ class ActionMap:
         self._setup = setup
         self._release = setup.config.relinquish  # NaN: that element released to the building's own control
         self.base = None  # the rule-based controller a residual action corrects (`start`)
-        self._pairs = thermostat_pairs(elements)  # a zone's heating setpoint kept at or below its cooling one
+        self._pairs = thermostat_pairs(elements)  # a zone's heating setpoint kept at or below its cooling one (the
+        # step's record shows what was sent): EnergyPlus stops the run on a crossed thermostat
 
     def start(self) -> None:
         """A new episode: a fresh rule-based controller (its integral state) where a residual corrects one."""
@@ -73,17 +74,13 @@ class ActionMap:
         if self._own is not None:
             return [v * k for v, k in zip(check_action(action, self.policy_names), self._own_step, strict=True)]
         if self._release:
-            return self._uncrossed(released(action, self.low, self.high, self.names))
+            return uncrossed(released(action, self.low, self.high, self.names), self._pairs)
         if self.base is None:
-            return self._uncrossed(scale_action(action, self.low, self.high, self.names))
+            return uncrossed(scale_action(action, self.low, self.high, self.names), self._pairs)
         correction = self.scale * np.array(check_action(action, self.policy_names))
         if self._demand:  # one correction per zone, to the controller's split-range flow demand
             return scale_action(self.base(None, info, demand_correction=correction), self.low, self.high, self.names)
         return scale_action(self.base(None, info) + correction, self.low, self.high, self.names)
-
-    def _uncrossed(self, values: list[float]) -> list[float]:
-        """Crossed thermostats uncrossed (the step's record shows what was sent), where EnergyPlus would stop."""
-        return uncrossed(values, self._pairs)
 
     def applied(self, sent: list[float], info: dict) -> list[float]:
         """What the step applied, for its record: the values sent, or (builtin) each action's schedule in that step
