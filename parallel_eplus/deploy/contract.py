@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.clock import SCHEDULE_FEATURES, TIME_FEATURES, schedule_features, time_features
-from parallel_eplus.buildings.model import thermostat_pairs, uncrossed
+from parallel_eplus.buildings.crossing import thermostat_pairs, uncrossed
 
 FORMAT = 1  # a policy's contract; a planner's is 2 (planner_export.py)
 READS = 2  # the newest format this version reads

@@ -17,13 +17,8 @@ import numpy as np
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.model import (
-    SCHEDULE_FEATURES,
-    TIME_FEATURES,
-    it_load_schedule,
-    thermostat_pairs,
-    uncrossed,
-)
+from parallel_eplus.buildings.crossing import thermostat_pairs, uncrossed
+from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES, it_load_schedule
 from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.deploy.contract import CONTRACT_FILE, FORMAT, ONNX_FILE, output_entries, sensor_entries
 from parallel_eplus.deploy.graph import INPUT, OPSET, OUTPUT, Layer, PolicyArrays, build_model

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from parallel_eplus.buildings.model import thermostat_pairs, uncrossed
+from parallel_eplus.buildings.crossing import thermostat_pairs, uncrossed
 
 if TYPE_CHECKING:
     from parallel_eplus.engine.setup import WorkerSetup
