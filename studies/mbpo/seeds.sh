@@ -6,7 +6,8 @@
 #
 # A seed whose run finished (runs/<PREFIX><N>/model.zip) is not trained again; the year's evaluation is one
 # `evaluate` of all three under one label, so its tables hold their mean and the intervals over the seeds
-# (WORK/year-<PREFIX>/). PREFIX names the recipe's runs (default s); WORK, STEPS, EXTRA as pilot.sh's.
+# (WORK/year-<PREFIX>/). PREFIX names the recipe's runs (default s); WORK, STEPS, BUILDING, TARGET, EXTRA as
+# pilot.sh's; YEAR_DAYS the evaluation's days (365; the CRAC data center's years are 351 days).
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 REPO=$PWD
@@ -18,7 +19,7 @@ for s in 0 1 2; do
 done
 cd "$WORK"
 echo "$(date -Is) year-$P" >> progress.log
-"$REPO/.venv/bin/parallel-eplus" evaluate --building datacenter-2zone --baseline --policy "runs/${P}0/model.zip=MBPO" \
-  --policy "runs/${P}1/model.zip=MBPO" --policy "runs/${P}2/model.zip=MBPO" --weathers CA,CO,FL,IL,VA \
-  --run-days 365 --workers 2 --out "year-$P" --quiet > "year-$P.log" 2>&1
+"$REPO/.venv/bin/parallel-eplus" evaluate --building "${BUILDING:-datacenter-2zone}" --baseline \
+  --policy "runs/${P}0/model.zip=MBPO" --policy "runs/${P}1/model.zip=MBPO" --policy "runs/${P}2/model.zip=MBPO" \
+  --weathers CA,CO,FL,IL,VA --run-days "${YEAR_DAYS:-365}" --workers 2 --out "year-$P" --quiet > "year-$P.log" 2>&1
 echo "$(date -Is) year-$P done (rc=$?)" >> progress.log

@@ -120,6 +120,7 @@ def main() -> None:
     weathers = ["CA", "CO", "FL"]
     starts = Starts()
     log_rows = []
+    began = time.monotonic()  # each round's wall-clock since the start, for the steps-to-goal table (to_goal.py)
 
     def policy_act(obs):
         with th.no_grad():
@@ -143,7 +144,8 @@ def main() -> None:
         log.info("round %d (days %s): power %+.1f %% vs own controls, in band %.2f %% (worst episode %.2f %%); "
                  "%d start states", r, [1, *days], 100 * power, band, worst, len(starts))  # fmt: skip
         log_rows.append({"round": r, "days": [1, *days], "power_vs_own": power, "band_pct": band,
-                         "worst_band_pct": worst, "starts": len(starts)})  # fmt: skip
+                         "worst_band_pct": worst, "starts": len(starts),
+                         "wall_s": round(time.monotonic() - began, 1)})  # fmt: skip
         out = args.out / f"round{r}"
         out.mkdir(parents=True, exist_ok=True)
         model.save(out / "model.zip")
