@@ -92,6 +92,7 @@ def main() -> None:
     p.add_argument("--features", action="store_true", help="the policy also sees the time and IT schedule")
     p.add_argument("--out", type=Path, default=ROOT.parent / "model-gradient")
     args = p.parse_args()
+    began = time.monotonic()  # each round's wall-clock from the start, loading included (to_goal.py's table)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     logging.getLogger("parallel_eplus").setLevel(logging.WARNING)
     th.set_num_threads(1)
@@ -120,7 +121,6 @@ def main() -> None:
     weathers = ["CA", "CO", "FL"]
     starts = Starts()
     log_rows = []
-    began = time.monotonic()  # each round's wall-clock since the start, for the steps-to-goal table (to_goal.py)
 
     def policy_act(obs):
         with th.no_grad():
