@@ -6,7 +6,8 @@ below `--energy`, every weather's share in band at or above `--band`).
 
 - ROUNDS/seed<k>/results.csv: `evaluate` of the pilot's rounds 0..R-1 (labels "round <r>"), without the baseline;
 - FINAL/results.csv: the committed full years of its last round (label "Through the model") and the built-in's;
-- POLICIES/seed<k>/rounds.json: the pilot's log (its policy's steps so far, `starts`, and `wall_s` per round);
+- POLICIES/seed<k>/rounds.json: the pilot's log (its policy's steps so far, `starts`, and `wall_s` per round; a
+  log without it leaves the wall-clock blank);
 - RUNS/*-mpc-seed<k>/status.json: the planner run it started from (its steps and wall-clock).
 
 A round counts everything simulated until its network had been checked on its training weeks: the planner's steps,
@@ -57,7 +58,7 @@ def rounds_table(rounds: Path, final: Path, policies: Path, runs: Path) -> pd.Da
         rows.append({"seed": seed, "round": r, "energy_change_pct": group.energy_change_pct.mean(),
                      "worst_in_band_pct": group.in_band_pct.min(), "in_band_pct": group.in_band_pct.mean(),
                      "weathers": len(group), "planner_steps": status["steps"], "planner_s": status["wall_s"],
-                     "policy_steps": log_row["starts"], "pilot_s": log_row["wall_s"]})  # fmt: skip
+                     "policy_steps": log_row["starts"], "pilot_s": log_row.get("wall_s", np.nan)})  # fmt: skip
     table = pd.DataFrame(rows).sort_values(["seed", "round"], ignore_index=True)
     table["steps"] = table.planner_steps + 2 * table.policy_steps
     table["training_steps"] = table.planner_steps + table.policy_steps
