@@ -46,18 +46,19 @@ def rounds_table(rounds: Path, final: Path, policies: Path, runs: Path) -> pd.Da
         part = pd.read_csv(path)
         parts.append(part[part.controller != BASELINE_LABEL].assign(seed=int(path.parent.name.removeprefix("seed"))))
     df = pd.concat(parts, ignore_index=True)
-    last = {s: len(json.loads((policies / f"seed{s}" / "rounds.json").read_text())) - 1 for s in df.seed.unique()}
+    logs = {s: json.loads((policies / f"seed{s}" / "rounds.json").read_text()) for s in df.seed.unique()}
     pairs = zip(df.seed, df.controller, strict=True)
-    df["round"] = [last[s] if c == FINAL_LABEL else int(c.split()[-1]) for s, c in pairs]
+    df["round"] = [len(logs[s]) - 1 if c == FINAL_LABEL else int(c.split()[-1]) for s, c in pairs]
     df = with_changes(pd.concat([baseline, df], ignore_index=True), BASELINE_LABEL)
     df = df[df.controller != BASELINE_LABEL].astype({"seed": int, "round": int})
     rows = []
     for (seed, r), group in df.groupby(["seed", "round"]):
-        log_row = json.loads((policies / f"seed{seed}" / "rounds.json").read_text())[r]
+        log_row = logs[seed][r]
         status = json.loads(next(runs.glob(f"*-mpc-seed{seed}/status.json")).read_text())
         rows.append({"seed": seed, "round": r, "energy_change_pct": group.energy_change_pct.mean(),
                      "worst_in_band_pct": group.in_band_pct.min(), "in_band_pct": group.in_band_pct.mean(),
-                     "weathers": len(group), "planner_steps": status["steps"], "planner_s": status["wall_s"],
+                     "weathers": len(group), "all_weathers": len(group) == baseline.weather.nunique(),
+                     "planner_steps": status["steps"], "planner_s": status["wall_s"],
                      "policy_steps": log_row["starts"], "pilot_s": log_row.get("wall_s", np.nan)})  # fmt: skip
     table = pd.DataFrame(rows).sort_values(["seed", "round"], ignore_index=True)
     table["steps"] = table.planner_steps + 2 * table.policy_steps
@@ -67,7 +68,7 @@ def rounds_table(rounds: Path, final: Path, policies: Path, runs: Path) -> pd.Da
 
 
 def first_at_goal(table: pd.DataFrame, band: float, energy: float) -> pd.DataFrame:
-    met = table[(table.worst_in_band_pct >= band) & (table.energy_change_pct <= energy) & (table.weathers == 5)]
+    met = table[(table.worst_in_band_pct >= band) & (table.energy_change_pct <= energy) & table.all_weathers]
     return met.groupby("seed").head(1).set_index("seed")
 
 
