@@ -245,7 +245,7 @@ def train_student(mpc: MPC, building, model, env, starts: Starts, cfg, seed: int
     s = cfg.mpc
     clock = Clock(cfg.time_features, model_schedule(cfg.building) if cfg.schedule_features else None)
     policy = model.policy
-    rollouts = Rollouts(mpc, building, NormStats.of(env), policy, clock)
+    rollouts = Rollouts(mpc, building, NormStats.of(env), policy, clock, s.student_margin)
     params = [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters()]
     optimizer = th.optim.Adam(params, lr=s.student_learning_rate)
     cost = train(rollouts, starts, optimizer, s.student_updates, s.student_batch, s.student_comfort_weight,
