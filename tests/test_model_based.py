@@ -246,13 +246,14 @@ def test_the_ray_backend_runs_the_planner_too(tmp_path, no_leaks):
 @pytest.mark.slow
 def test_a_student_trained_through_the_model_sees_the_clock_and_resumes_with_its_starts(tmp_path, no_leaks):
     settings = MPCSettings(explore_steps=96, refit_every=96, epochs=5, candidates=32, dagger_share=0.5,
-                           student="gradient", student_updates=20, student_batch=32)  # fmt: skip
+                           student="gradient", student_updates=20, student_batch=32, student_margin=0.6)  # fmt: skip
     cfg = mpc_config(tmp_path, "grad", run_days=1, timesteps=384, checkpoint_every=192, time_features=True,
                      schedule_features=True, mpc=settings)  # fmt: skip
     final = train(cfg, progress=False)
     run = final.parent
     report = json.loads((run / "distill.json").read_text())
     assert report["student"] == "gradient" and report["starts"] == 384 - 96  # every planner step, both workers
+    assert report["margin_c"] == 0.6  # the student's band, not the planner's --comfort-margin
     assert set(report["cost"]) == {"energy", "comfort", "spread", "moves"}
     model = TRPO.load(final, device="cpu")
     assert model.observation_space.shape == (6 + 4 + 5,)  # the sensors, the time's and the IT schedule's features

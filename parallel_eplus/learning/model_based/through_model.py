@@ -251,4 +251,4 @@ def train_student(mpc: MPC, building, model, env, starts: Starts, cfg, seed: int
     cost = train(rollouts, starts, optimizer, s.student_updates, s.student_batch, s.student_comfort_weight,
                  np.random.default_rng(seed))  # fmt: skip
     return {"student": "gradient", "starts": len(starts), "updates": s.student_updates,
-            "cost": {k: round(v, 4) for k, v in cost.items()}}  # fmt: skip
+            "margin_c": rollouts.margin_c, "cost": {k: round(v, 4) for k, v in cost.items()}}  # fmt: skip
