@@ -126,3 +126,22 @@ def test_a_building_policys_features_are_read_beside_its_sensors(tmp_path, no_le
     )  # fmt: skip
     policy = policy_controller(str(train(cfg, progress=False)))
     assert (policy.time_features, policy.schedule_features) == (True, False)
+
+
+def test_the_medium_offices_rule_resets_its_supply_air_and_leaves_its_thermostats_to_their_schedules(
+    tmp_path, no_leaks
+):
+    """`--rbc` on the medium office: Guideline 36's supply-air reset (buildings/air_reset.py) on the three loops'
+    node, every thermostat released to the building's own schedules. In San Francisco's January (outdoor air below
+    16 C) the reset sits at its 18 C top; the zones stay on their own setpoints, so the episode is the building's
+    own controls but for warmer supply air: the reheat it saves shows in the HVAC energy."""
+    base, rule = Controller(BASELINE_LABEL, "baseline"), Controller(RBC_LABEL, "rbc")
+    df = run_sweep([base, rule], ["CA"], 2, 2, tmp_path, progress=False, building="office-medium")
+    steps = pd.read_parquet(Path(df.set_index("controller").loc[RBC_LABEL, "episode_dir"]) / "steps.parquet")
+    cold = steps["outdoor_temp_c"] < 16
+    assert cold.mean() > 0.9 and (steps.loc[cold, "supply_air_c"] == 18.0).all()
+    assert steps[["cooling_setpoint_c", "heating_setpoint_c"]].isna().all().all()  # released: the schedules set them
+    hvac = df.set_index("controller")["hvac_energy_kwh"]
+    assert hvac[RBC_LABEL] < 0.97 * hvac[BASELINE_LABEL]
+    assert Controller(RBC_LABEL, "rbc").relinquishes("office-medium")
+    assert not Controller(RBC_LABEL, "rbc").relinquishes("datacenter-2zone")

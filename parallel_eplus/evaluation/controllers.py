@@ -6,6 +6,7 @@ saved settings (its building, observation features, residual), so a policy is ev
 
 from __future__ import annotations
 
+import inspect
 import json
 import logging
 import re
@@ -56,6 +57,13 @@ class Controller:
     def model(self) -> str:
         return "baseline" if self.kind == "baseline" else "temp_fan"
 
+    def relinquishes(self, building: str | None) -> bool:
+        """Whether its NaN action elements release their actuators to the building's own control (a rule-based
+        controller that says so: buildings/air_reset.py); the episode then runs with `relinquish`."""
+        if self.kind != "rbc" or not building:
+            return False
+        return bool(getattr(load_building(building).controller_class(), "relinquishes", False))
+
     def make(self, building: str | None = None) -> Callable[[np.ndarray, dict], np.ndarray]:
         """A fresh actor for one episode: (observation, info) -> action. `building`: the swept spec, whose
         `controller` ("module:Class") is the rule-based one; None: the data center's."""
@@ -67,6 +75,8 @@ class Controller:
             cls = load_building(building).controller_class() if building else RuleBasedController
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
+            if "building" in inspect.signature(cls).parameters:  # a class that reads the spec it acts on
+                target["building"] = building
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
         if self.act is not None:
             return self.act

@@ -138,7 +138,7 @@ def _job_config(
         reward=reward or RewardConfig(),
         time_features=controller.time_features, schedule_features=controller.schedule_features,
         residual_scale=controller.residual_scale, residual_space=controller.residual_space,
-        rbc_target_c=controller.rbc_target_c,
+        rbc_target_c=controller.rbc_target_c, relinquish=controller.relinquishes(building),
         output_dir=str(folder if year is None else folder / f"year-{year}"),
         forecast_hours=controller.forecast_hours, forecast_error=controller.forecast_error,
         weather_noise=weather_noise, seed=year or 0, fixed_seed=year is not None,
