@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from parallel_eplus.buildings import reach
@@ -142,3 +144,51 @@ def test_check_proves_the_supply_air_follows_the_action_and_names_a_node_that_do
     problems, _, reaches = reach.judge(spec, reach.node_actions(spec)[:1], samples)
     low = next(r for r in reaches if r.end == "low")
     assert problems and not low.ok and abs(low.mean_c - 12.8) < 0.1  # the schedule's 12.8 C, not the action's 12
+
+
+def _relinquished_day(tmp: Path, supply_air: float) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """office-medium for two January days under `relinquish`, every thermostat released and the three loops' supply
+    air commanded (NaN: released too): its steps, and the cooling coils' setpoints (the MixedAir managers' nodes)."""
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.simulation import Simulation
+
+    coil = "VAV_1_COOLC-VAV_1_HEATCNODE"
+    sim = Simulation(SimulationConfig(building="office-medium", weather="CO", run_days=2, output_dir=str(tmp),
+                                      relinquish=True, energyplus_csv=True,
+                                      extra_outputs=((coil, "System Node Setpoint Temperature"),)))  # fmt: skip
+    low, high = 12.0, 18.0  # office-medium's supply_air_c
+    action = np.array([np.nan, np.nan, np.nan if np.isnan(supply_air) else 2 * (supply_air - low) / (high - low) - 1])
+    try:
+        sim.launch()
+        sim.first_observation()
+        while True:
+            sim.send(action)
+            _, _, terminated, info = sim.receive()
+            if terminated:
+                break
+    finally:
+        sim.close()
+    folder = Path(info["episode_dir"])
+    csv = pd.read_csv(folder / "eplusout.csv")
+    return pd.read_parquet(folder / "steps.parquet"), csv[[c for c in csv.columns if coil in c.upper()]].dropna()
+
+
+@pytest.mark.slow
+def test_a_relinquished_supply_air_is_the_buildings_own_and_a_commanded_one_reaches_the_coils(tmp_path, no_leaks):
+    """`relinquish` (the BACnet device, `--rbc` rules that release actions): the copy drops the node's scheduled
+    manager, so a commanded supply air is the one its MixedAir managers follow; released, the bridge writes the
+    manager's schedule and the run is the building's own controls. Kept, the manager wrote 12.8 C before each apply
+    point and the coils never saw a commanded 18."""
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
+
+    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CO"], 2, 1, tmp_path / "own", progress=False,
+                   building="office-medium")  # fmt: skip
+    own = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
+    released, released_coil = _relinquished_day(tmp_path / "released", np.nan)
+    for signal in ("hvac_power_w", "hvac_naturalgas_w", "core_mid_temp_c"):  # step by step, warm-up included
+        np.testing.assert_allclose(released[signal], own[signal], rtol=1e-6, atol=1e-6)
+    assert np.allclose(released_coil.to_numpy(), 12.8, atol=1.0)  # 12.8 minus the fan's heat
+    commanded, commanded_coil = _relinquished_day(tmp_path / "commanded", 18.0)
+    assert (commanded["supply_air_c"] == 18.0).all()
+    assert commanded_coil.to_numpy().mean() > released_coil.to_numpy().mean() + 4  # 18 minus the fan's heat

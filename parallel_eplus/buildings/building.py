@@ -146,26 +146,35 @@ def _hidden(hidden: list[Sensor], name: str, variable: str, key: str, meter: boo
     return name
 
 
-# The thermostat actuators whose built-in value is a setpoint schedule of the zone's thermostat (thermostat.py)
+# The actuators whose built-in value is a schedule: a zone thermostat's setpoint schedules (thermostat.py), and a
+# node's supply-air temperature where a `SetpointManager:Scheduled` sets it (takeover.py)
 _OWN_SIDE = {("zone temperature control", "heating setpoint"): "heating",
-             ("zone temperature control", "cooling setpoint"): "cooling"}  # fmt: skip
+             ("zone temperature control", "cooling setpoint"): "cooling",
+             ("system node setpoint", "temperature setpoint"): "node"}  # fmt: skip
 
 
 def _own_schedules(spec: BuildingSpec, actions, hidden: list[Sensor]) -> tuple[tuple[str | None, ...], ...]:
-    """Per action, per actuator: the hidden sensor of the schedule the model's own thermostat follows there (the
+    """Per action, per actuator: the hidden sensor of the schedule the model's own controls follow there (the
     value the built-in controls would set; read each step, as the thermostat bounds are), None elsewhere."""
+    from parallel_eplus.buildings.idf_prep import idf_objects
+    from parallel_eplus.buildings.takeover import scheduled_setpoints
     from parallel_eplus.buildings.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
 
     kinds = [[_OWN_SIDE.get((a.component_type.lower(), a.control_type.lower())) for a in e.actuators] for e in actions]
     if not any(k for ks in kinds for k in ks):
         return tuple((None,) * len(e.actuators) for e in actions)
     setpoints = zone_setpoints(spec.idf)
+    nodes = scheduled_setpoints(idf_objects(spec.idf.read_text(encoding="latin-1"))) if any(
+        "node" in ks for ks in kinds) else {}  # fmt: skip
     out = []
     for e, ks in zip(actions, kinds, strict=True):
         names = []
         for a, side in zip(e.actuators, ks, strict=True):
-            sp = setpoints.get(a.key.upper()) if side else None
-            schedule = getattr(sp, side) if sp else None
+            if side == "node":
+                schedule = nodes.get(a.key.upper())
+            else:
+                sp = setpoints.get(a.key.upper()) if side else None
+                schedule = getattr(sp, side) if sp else None
             names.append(_hidden(hidden, sensor_name(schedule), SCHEDULE_VARIABLE, schedule) if schedule else None)
         out.append(tuple(names))
     return tuple(out)

@@ -118,6 +118,22 @@ class Takeover:
         return out
 
 
+def scheduled_setpoints(objects) -> dict[str, str]:
+    """NODE (upper case) -> the schedule of the `SetpointManager:Scheduled` that sets its temperature: the value the
+    model's own controls put on that node each step, which a released node gets back (`relinquish`: its manager is
+    gone from the copy, bridge.py writes the schedule instead). NodeLists expanded."""
+    lists = {o.fields[0].upper(): o.fields[1:] for o in objects if o.kind.lower() == "nodelist" and o.fields}
+    out: dict[str, str] = {}
+    for o in objects:
+        if o.kind.lower() != "setpointmanager:scheduled" or len(o.fields) <= 3:
+            continue
+        if "temperature" not in manager_sets(o, 1):
+            continue
+        for node in lists.get(o.fields[3].upper(), [o.fields[3]]):
+            out.setdefault(node.upper(), o.fields[2])
+    return out
+
+
 def manager_sets(o, spec: int | str) -> set[str]:
     """The setpoints a manager object sets (control variables, lower case)."""
     if isinstance(spec, str):

@@ -37,6 +37,7 @@ from parallel_eplus.engine import frames
 from parallel_eplus.engine.native_handoff import NativeHandoff
 from parallel_eplus.errors import ProtocolError
 
+NODE_SETPOINT = "system node setpoint"
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
 
 
@@ -78,7 +79,11 @@ class Bridge(NativeHandoff):
         self.relinquish = relinquish
         self.python_only = builtin_residual or relinquish or any(s.meter or s.scale != 1.0 for s in self.sensors)
         self.own = spec.own if builtin_residual else None
+        self.own_plans = spec.own if building and len(spec.own) == len(spec.actions) else ()
         self.own_sensors: list[int] = []  # per actuator handle: the sensor index of its own schedule
+        # relinquish: per actuator handle, the sensor of the schedule a released node gets back (its scheduled
+        # manager is gone from the copy: supply.py), -1 where EnergyPlus's own control returns by itself
+        self.fallback: list[int] = []
         self.step_s = 900.0  # seconds per zone timestep, to turn a meter's joules into watts
         self.elements = spec.actions if building and model != "baseline" else control_model(model).actions
         self.before_predictor = bool(building) and model != "baseline" and spec.before_predictor  # the apply point
@@ -133,9 +138,13 @@ class Bridge(NativeHandoff):
                 if h < 0:
                     missing.append(f"actuator '{a.component_type}/{a.control_type}' for '{a.key}'")
                 self.actuator_handles.append((h, i))
+        names = [s.name for s in self.sensors]
         if self.own is not None:
-            names = [s.name for s in self.sensors]
             self.own_sensors = [names.index(n) for own in self.own for n in own]  # resolve() checked every one
+        if self.relinquish and self.own_plans:
+            self.fallback = [names.index(n) if n and a.component_type.lower() == NODE_SETPOINT else -1
+                             for e, own in zip(self.elements, self.own_plans, strict=True)
+                             for a, n in zip(e.actuators, own, strict=True)]  # fmt: skip
         if missing:
             raise RuntimeError("the model lacks " + "; ".join(missing))
         self.minutes = 60 // self.x.num_time_steps_in_hour(state)  # minutes per zone timestep
@@ -229,14 +238,17 @@ class Bridge(NativeHandoff):
             self._hold()
 
     def _apply_or_release(self, state) -> None:
-        """Each actuator set to its action's value, or released to the model's own control where that is NaN."""
+        """Each actuator set to its action's value, or released to the model's own control where that is NaN (every
+        one before the run period: sizing and warm-up run the building's own controls)."""
         set_value, reset = self.x.api.setActuatorValue, self.x.api.resetActuator
-        action = self.action
-        for h, i in self.actuator_handles:
-            v = action[i]
+        action, fallback, started = self.action, self.fallback, self.started
+        for k, (h, i) in enumerate(self.actuator_handles):
+            v = action[i] if started else float("nan")
             if v == v:  # not NaN: commanded
                 set_value(state, h, v)
-            else:  # a node setpoint's own setpoint manager writes it again before each apply point; a fan's flow and
+            elif fallback and fallback[k] >= 0:  # a node whose scheduled manager the copy dropped: its schedule
+                set_value(state, h, self.x.api.getVariableValue(state, self.sensor_handles[fallback[k]]))
+            else:  # a node setpoint's other managers write it again before each apply point; a fan's flow and
                 reset(state, h)  # a thermostat's schedule return to the model's control
         self.pending = False
 

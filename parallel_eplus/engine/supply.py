@@ -11,6 +11,7 @@ start. An episode over is not waited for at its last step but when its process i
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -47,8 +48,7 @@ class EpisodeSupply:
         self.ended: tuple[EnergyPlusProcess, Path | None] | None = None  # an episode past its last step (`settle`)
         self._whole: list[Path] = []  # this worker's own episode directories still whole, oldest first
         self._weather = weather
-        # the model's own managers keep their nodes where a released setpoint must fall back to them (relinquish)
-        taken = () if config.relinquish else taken_setpoints(setup.elements)
+        taken = taken_setpoints(_commanded(setup))
         self._starter = EpisodeStarter(output_dir, setup.idf, config, setup.process_args(), taken)
         # Episodes forked from a template parked at their first control step (fork.py): not with weather noise (a
         # new weather file each episode) or random starts (a new run period), nor for one episode (an evaluation's)
@@ -160,3 +160,16 @@ class EpisodeSupply:
             self.templates.close()
         self.process.close()
         self.spare.close()
+
+
+def _commanded(setup: WorkerSetup) -> tuple:
+    """The actions whose nodes the copy takes from the model's setpoint managers (buildings/takeover.py): every one,
+    or under `relinquish` the nodes a scheduled manager sets, whose schedule the bridge writes when released. A
+    node's other managers stay for a released node to fall back to; one the agent commands is then written after
+    them at each apply point, too late for the managers that follow it (a `SetpointManager:MixedAir` reads its
+    reference node before: the medium office's coils kept 12.8 C under a commanded 18)."""
+    if not setup.config.relinquish:
+        return setup.elements
+    own = setup.building.own if len(setup.building.own) == len(setup.elements) else ()
+    return [replace(e, actuators=tuple(a for a, o in zip(e.actuators, plans, strict=True) if o))
+            for e, plans in zip(setup.elements, own, strict=True)]  # fmt: skip
