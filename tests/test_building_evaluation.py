@@ -134,12 +134,15 @@ def test_the_medium_offices_rule_resets_its_supply_air_and_leaves_its_thermostat
     """`--rbc` on the medium office: Guideline 36's supply-air reset (buildings/air_reset.py) on the three loops'
     node, every thermostat released to the building's own schedules. In San Francisco's January (outdoor air below
     16 C) the reset sits at its 18 C top; the zones stay on their own setpoints, so the episode is the building's
-    own controls but for warmer supply air: the reheat it saves shows in the HVAC energy."""
+    own controls but for warmer supply air: the reheat it saves shows in the HVAC energy (a sunny zone's requests
+    trim it for an hour or two)."""
     base, rule = Controller(BASELINE_LABEL, "baseline"), Controller(RBC_LABEL, "rbc")
     df = run_sweep([base, rule], ["CA"], 2, 2, tmp_path, progress=False, building="office-medium")
     steps = pd.read_parquet(Path(df.set_index("controller").loc[RBC_LABEL, "episode_dir"]) / "steps.parquet")
     cold = steps["outdoor_temp_c"] < 16
-    assert cold.mean() > 0.9 and (steps.loc[cold, "supply_air_c"] == 18.0).all()
+    at_top = steps.loc[cold, "supply_air_c"] == 18.0
+    assert cold.mean() > 0.9 and at_top.mean() > 0.8  # trimmed down only while a zone asks for cooling
+    assert steps["supply_air_c"].between(12.8, 18.0).all()
     assert steps[["cooling_setpoint_c", "heating_setpoint_c"]].isna().all().all()  # released: the schedules set them
     hvac = df.set_index("controller")["hvac_energy_kwh"]
     assert hvac[RBC_LABEL] < 0.97 * hvac[BASELINE_LABEL]

@@ -33,11 +33,11 @@ import numpy as np
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import control_model
+from parallel_eplus.buildings.takeover import NODE_SETPOINT
 from parallel_eplus.engine import frames
 from parallel_eplus.engine.native_handoff import NativeHandoff
 from parallel_eplus.errors import ProtocolError
 
-NODE_SETPOINT = "system node setpoint"
 KIND_RUN_PERIOD_WEATHER = 3  # api.exchange.kind_of_sim during a weather-file run period
 
 

@@ -10,12 +10,13 @@ start. An episode over is not waited for at its last step but when its process i
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from parallel_eplus.buildings.takeover import taken_setpoints
+from parallel_eplus.buildings.takeover import NODE_SETPOINT, taken_setpoints
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import MODEL_FILE, prune_episodes
 from parallel_eplus.engine.fork import Template, Templates
@@ -23,6 +24,7 @@ from parallel_eplus.engine.prepared import EpisodePlan, EpisodeStarter, Prepared
 from parallel_eplus.engine.process import EnergyPlusProcess
 from parallel_eplus.engine.setup import WorkerSetup
 
+log = logging.getLogger(__name__)
 
 class EpisodeSupply:
     """A worker's EnergyPlus processes and the episodes started in them, numbered in the order they began."""
@@ -171,5 +173,12 @@ def _commanded(setup: WorkerSetup) -> tuple:
     if not setup.config.relinquish:
         return setup.elements
     own = setup.building.own if len(setup.building.own) == len(setup.elements) else ()
-    return [replace(e, actuators=tuple(a for a, o in zip(e.actuators, plans, strict=True) if o))
-            for e, plans in zip(setup.elements, own, strict=True)]  # fmt: skip
+    kept = [a.key for e in setup.elements for a in e.actuators if a.component_type.lower() == NODE_SETPOINT]
+    taken = [replace(e, actuators=tuple(a for a, o in zip(e.actuators, plans, strict=True) if o))
+             for e, plans in zip(setup.elements, own, strict=True)]  # fmt: skip
+    kept = [k for k in kept if all(a.key != k for e in taken for a in e.actuators)]
+    if kept:
+        log.warning("relinquish: %s keep the model's own setpoint managers (none a SetpointManager:Scheduled whose "
+                    "schedule a released node could get back); a value commanded there is written after them and may "
+                    "not reach the managers that follow the node", ", ".join(kept))
+    return taken
