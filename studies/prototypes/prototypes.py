@@ -150,6 +150,46 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
     return True
 
 
+RULE = "parallel_eplus.buildings.air_reset:SupplyAirReset"
+
+
+def rule(study: Study, names: list[str], minutes: float) -> None:
+    """Guideline 36's supply-air reset (`evaluate --rbc`: buildings/air_reset.py) against each building's own
+    controls on the same 20 fortnights, where the starter takes over air loops: what the air side holds without
+    learning. Its spec is the study's with the rule named; the csvs go to OUT/<name>/rule/."""
+    deadline = time.time() + 60 * minutes
+    for model in sorted(models(), key=lambda m: m.stat().st_size):
+        name = short_name(model)
+        status = read_status(study, name)
+        if (names and name not in names) or not status.get("checked") or not status.get("supply_air_loops"):
+            continue
+        spec = study.folder(name) / "spec-rule.toml"
+        text = (study.folder(name) / "spec.toml").read_text()
+        spec.write_text(re.sub(r"^(idf = .*)$", rf'\1\ncontroller = "{RULE}"', text, count=1, flags=re.M))
+        kept = study.out / name / "rule"
+        for scenario in SCENARIOS:
+            if (kept / f"{scenario}.csv").is_file():
+                continue
+            if deadline - time.time() < 300:
+                LOG.info("chunk over: run again to continue")
+                return
+            out = study.folder(name) / "eval-rule" / scenario
+            known = sorted(study.folder(name).glob("eval*/*/scenarios.json"))
+            if known and not (out / "scenarios.json").is_file():  # the BOPTEST days the planner was scored on
+                out.mkdir(parents=True, exist_ok=True)
+                shutil.copy(known[0], out / "scenarios.json")
+            LOG.info("%s: the rule on %s", name, scenario)
+            r = subprocess.run(cli("evaluate", "--building", str(spec), "--baseline", "--rbc", "--scenario", scenario,
+                                   "--weathers", EVAL_WEATHERS, "--workers", str(study.workers), "--out", str(out),
+                                   "--quiet"), capture_output=True, text=True, cwd=study.folder(name))  # fmt: skip
+            if r.returncode:
+                LOG.warning("%s: the rule failed on %s: %s", name, scenario, failure(r))
+                break
+            kept.mkdir(parents=True, exist_ok=True)
+            shutil.copy(out / "results.csv", kept / f"{scenario}.csv")
+    LOG.info("every building with air loops done: `table` next")
+
+
 def run(study: Study, names: list[str], minutes: float) -> None:
     """Stages 3-4, building by building (the smallest models first), until the chunk ends."""
     deadline = time.time() + 60 * minutes
@@ -178,7 +218,7 @@ def run(study: Study, names: list[str], minutes: float) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("command", choices=["prepare", "run", "table", "status"])
+    p.add_argument("command", choices=["prepare", "run", "rule", "table", "status"])
     p.add_argument("names", nargs="*", help="short names (default: all 16), e.g. medium-office")
     p.add_argument("--work", type=Path, help="the runs and evaluations (default: $WORK, else ../prototypes-RECIPE)")
     p.add_argument("--out", type=Path, default=REPO / "results" / "prototypes")
@@ -199,6 +239,8 @@ def main(argv: list[str] | None = None) -> int:
                 prepare(study, model)
     elif a.command == "run":
         run(study, a.names, a.minutes)
+    elif a.command == "rule":
+        rule(study, a.names, a.minutes)
     elif a.command == "table":
         print(table(study).to_string())
     else:

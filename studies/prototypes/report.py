@@ -18,7 +18,7 @@ def ratios(folder: Path) -> dict | None:
     if len(frames) < len(SCENARIOS):
         return None
     df = pd.concat(frames)
-    own, learned = df[df.controller == "Baseline"], df[df.controller != "Baseline"]
+    own, learned = df[df.controller == "Baseline"], df[df.controller != "Baseline"].fillna({"run": ""})
     figures = {}
     for column, how in (("hvac_energy_kwh", "sum"), ("bill", "sum"), ("peak_15min_kw", "max"),
                         ("occupied_discomfort_kh", "sum")):  # fmt: skip
@@ -73,7 +73,32 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
                   f"({_docs(study.out)}#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
         lines += ["", "![savings against discomfort](savings.png)"]
+    lines += rule_lines(df, study)
     return "\n".join(lines) + "\n"
+
+
+def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
+    """The buildings whose air loops the starter takes over, Guideline 36's supply-air reset on them (`prototypes.py
+    rule`: `evaluate --rbc`, the thermostats on their own schedules), beside the planner's HVAC ratio."""
+    rows = []
+    for _, r in df.iterrows():
+        figures = ratios(study.out / r.building / "rule")
+        if figures is None:
+            continue
+        rows.append(f"| {r.building} | {_x(figures['hvac_energy_kwh'])} | {_x(figures.get('bill'))} | "
+                    f"{_x(figures.get('peak_15min_kw'))} | {figures['occupied_discomfort_kh_own']:.1f} → "
+                    f"{figures['occupied_discomfort_kh_learned']:.1f} | {figures['in_band_pct_own']:.2f} % → "
+                    f"{figures['in_band_pct']:.2f} % | {_x(r.get('hvac_energy_kwh'))} |")  # fmt: skip
+    if not rows:
+        return []
+    return ["", "## The air side without learning: Guideline 36's supply-air reset", "",
+            "`prototypes.py rule`: the buildings whose starter takes over supply air, `evaluate --rbc` with",
+            "`parallel_eplus.buildings.air_reset:SupplyAirReset` named in the spec (ASHRAE Guideline 36's reset of",
+            "the supply air on outdoor air and the zones' cooling requests; every thermostat on its own schedule), on",
+            "the same 20 fortnights. Ratios to the building's own controls as above; the last column is the",
+            "planner's.", "",
+            "| building | HVAC energy × | bill × | peak × | occupied K·h: own → rule | in own bounds: own → rule "
+            "| planner's HVAC × |", "|---|---|---|---|---|---|---|", *rows]  # fmt: skip
 
 
 def _docs(out: Path) -> str:
