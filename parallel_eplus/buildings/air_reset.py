@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.takeover import NODE_SETPOINT
 
-NODE_SETPOINT = "system node setpoint"
 OUTDOOR = "site outdoor air drybulb temperature"
 
 

@@ -26,6 +26,7 @@ from parallel_eplus.engine.setup import WorkerSetup
 
 log = logging.getLogger(__name__)
 
+
 class EpisodeSupply:
     """A worker's EnergyPlus processes and the episodes started in them, numbered in the order they began."""
 
