@@ -10,8 +10,10 @@ zone sending 3 requests 3 K above its cooling setpoint, 2 at 2 K and 1 while its
 above its setpoint by `request_k`, as the spec observes no loop). The 2-minute intervals run within each control
 step on that step's requests.
 
-Every thermostat action is released (NaN: `SimulationConfig.relinquish`), so the building's own schedules set the
-zones at the step they apply to; any other action is released too. It acts through the same env as a policy.
+It resets the supply-air actions whose own plan is a `SetpointManager:Scheduled`'s schedule (the DOE VAV loops'
+constant 12.8 C); every other action, the thermostats among them, is released (NaN: `SimulationConfig.relinquish`),
+so the building's own schedules and managers set them at the step they apply to. It acts through the same env as a
+policy.
 """
 
 from __future__ import annotations
@@ -59,10 +61,15 @@ class SupplyAirReset:
     def __init__(self, building: str | Path | None = None, cfg: ResetConfig | None = None, **_):
         b = load_building(building)
         self.cfg = cfg or ResetConfig()
-        self.air = [i for i, a in enumerate(b.actions)
-                    if a.actuators and all(u.component_type.lower() == NODE_SETPOINT for u in a.actuators)]  # fmt: skip
+        # the loops a schedule sets (`Building.own`: a SetpointManager:Scheduled, the DOE VAV loops' 12.8 C); a loop on
+        # another manager (the large hotel's DOAS on an outdoor-air reset) keeps it: the action is released
+        own = b.own or tuple((None,) * len(a.actuators) for a in b.actions)
+        self.air = [i for i, (a, plans) in enumerate(zip(b.actions, own, strict=True))
+                    if a.actuators and all(u.component_type.lower() == NODE_SETPOINT for u in a.actuators)
+                    and all(plans)]  # fmt: skip
         if not self.air:
-            raise ValueError(f"{b.spec.name}: no supply-air action (a System Node Setpoint) for the reset to set")
+            raise ValueError(f"{b.spec.name}: no supply-air action (a System Node Setpoint) whose own plan is a "
+                             "SetpointManager:Scheduled's schedule, for the reset to set")
         if not b.zone_bounds:
             raise ValueError(f"{b.spec.name}: the reset reads each zone's own cooling setpoint (band = 'thermostat')")
         outdoor = [s.name for s in b.sensors if s.variable.lower() == OUTDOOR]
