@@ -68,8 +68,10 @@ class SupplyAirReset:
                     if a.actuators and all(u.component_type.lower() == NODE_SETPOINT for u in a.actuators)
                     and all(plans)]  # fmt: skip
         if not self.air:
-            raise ValueError(f"{b.spec.name}: no supply-air action (a System Node Setpoint) whose own plan is a "
-                             "SetpointManager:Scheduled's schedule, for the reset to set")
+            raise ValueError(
+                f"{b.spec.name}: no supply-air action (a System Node Setpoint) whose own plan is a "
+                "SetpointManager:Scheduled's schedule, for the reset to set"
+            )
         if not b.zone_bounds:
             raise ValueError(f"{b.spec.name}: the reset reads each zone's own cooling setpoint (band = 'thermostat')")
         outdoor = [s.name for s in b.sensors if s.variable.lower() == OUTDOOR]
