@@ -19,8 +19,8 @@ from parallel_eplus.evaluation.sweep import run_sweep
 DAYS = 2
 
 
-def _episode(out: Path, act, scale: float = 0.3) -> pd.DataFrame:
-    env = EnergyPlusEnv(building="office-small", weather="CA", run_days=DAYS, output_dir=out, residual_scale=scale,
+def _episode(out: Path, act, scale: float = 0.3, building: str = "office-small") -> pd.DataFrame:
+    env = EnergyPlusEnv(building=building, weather="CA", run_days=DAYS, output_dir=out, residual_scale=scale,
                         residual_space="builtin")  # fmt: skip
     try:
         obs, info = env.reset(seed=0)
@@ -55,6 +55,21 @@ def test_a_correction_moves_each_setpoint_from_its_schedule_within_bounds(tmp_pa
     expected = np.maximum(df.setpoint_htgsetp_sch - 1.05, 15.0)
     np.testing.assert_allclose(df.heating_setpoint_c, expected)
     assert (df.heating_setpoint_c == 15.0).any() and (df.heating_setpoint_c > 19.0).any()
+
+
+@pytest.mark.slow
+def test_a_supply_air_its_scheduled_manager_set_is_corrected_from_that_schedule(tmp_path, no_leaks):
+    """The medium office's three loops' supply air follows a `SetpointManager:Scheduled` (12.8 C): the copy drops the
+    manager and the correction is added to its schedule, so a zero correction is the building's own controls."""
+    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], DAYS, 1, tmp_path / "own", False,
+                   building="office-medium")  # fmt: skip
+    own = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
+    zero = _episode(tmp_path / "zero", lambda obs, info: np.zeros(3, np.float32), building="office-medium")
+    for column in ("core_mid_temp_c", "perimeter_bot_zn_1_temp_c", "hvac_power_w", "gas_w"):
+        np.testing.assert_allclose(zero[column], own[column], rtol=1e-6, atol=1e-6, err_msg=column)
+    assert (zero.supply_air_c == zero.setpoint_seasonal_reset_supply_air_temp_sch).all()
+    warmer = _episode(tmp_path / "warmer", lambda obs, info: np.array([0, 0, 1], np.float32), building="office-medium")
+    np.testing.assert_allclose(warmer.supply_air_c, 12.8 + 0.3 * 3.0)  # 0.3 of half of 12-18 C above the schedule
 
 
 def test_only_a_buildings_thermostats_can_be_corrected():

@@ -184,6 +184,6 @@ def _check_builtin_residual(config: SimulationConfig, building: Building) -> Non
     if lacking:
         raise ValueError(
             f"--residual-space builtin: {', '.join(lacking)} has no setpoint schedule of the building's own to correct "
-            "(only Zone Temperature Control heating and cooling setpoints of a zone with a thermostat have one); use "
-            "--residual-space action with the rule-based controller, or no --residual"
+            "(a zone thermostat's heating and cooling setpoints have one, and a node a SetpointManager:Scheduled "
+            "sets); use --residual-space action with the rule-based controller, or no --residual"
         )
