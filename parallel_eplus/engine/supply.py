@@ -174,10 +174,11 @@ def _commanded(setup: WorkerSetup) -> tuple:
     if not setup.config.relinquish:
         return setup.elements
     own = setup.building.own if len(setup.building.own) == len(setup.elements) else ()
-    kept = [a.key for e in setup.elements for a in e.actuators if a.component_type.lower() == NODE_SETPOINT]
-    taken = [replace(e, actuators=tuple(a for a, o in zip(e.actuators, plans, strict=True) if o))
-             for e, plans in zip(setup.elements, own, strict=True)]  # fmt: skip
-    kept = [k for k in kept if all(a.key != k for e in taken for a in e.actuators)]
+    taken = tuple(replace(e, actuators=tuple(a for a, o in zip(e.actuators, plans, strict=True) if o))
+                  for e, plans in zip(setup.elements, own, strict=True))  # fmt: skip
+    keys = {a.key for e in taken for a in e.actuators}
+    kept = [a.key for e in setup.elements for a in e.actuators
+            if a.component_type.lower() == NODE_SETPOINT and a.key not in keys]  # fmt: skip
     if kept:
         log.warning("relinquish: %s keep the model's own setpoint managers (none a SetpointManager:Scheduled whose "
                     "schedule a released node could get back); a value commanded there is written after them and may "
