@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.takeover import NODE_SETPOINT
 
 OUTDOOR = "site outdoor air drybulb temperature"
 
@@ -63,10 +62,8 @@ class SupplyAirReset:
         self.cfg = cfg or ResetConfig()
         # the loops a schedule sets (`Building.own`: a SetpointManager:Scheduled, the DOE VAV loops' 12.8 C); a loop on
         # another manager (the large hotel's DOAS on an outdoor-air reset) keeps it: the action is released
-        own = b.own or tuple((None,) * len(a.actuators) for a in b.actions)
-        self.air = [i for i, (a, plans) in enumerate(zip(b.actions, own, strict=True))
-                    if a.actuators and all(u.component_type.lower() == NODE_SETPOINT for u in a.actuators)
-                    and all(plans)]  # fmt: skip
+        self.air = [i for i, (a, plans) in enumerate(zip(b.actions, b.node_schedules, strict=True))
+                    if a.actuators and all(plans)]  # fmt: skip
         if not self.air:
             raise ValueError(
                 f"{b.spec.name}: no supply-air action (a System Node Setpoint) whose own plan is a "

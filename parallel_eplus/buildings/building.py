@@ -16,6 +16,7 @@ from parallel_eplus.buildings import model
 from parallel_eplus.buildings.comfort import Comfort
 from parallel_eplus.buildings.model import ActionElement, ControlModel, Sensor, action_elements
 from parallel_eplus.buildings.spec import BuildingSpec, load_spec
+from parallel_eplus.buildings.takeover import NODE_SETPOINT
 
 # The actuators the zone predictor reads, component types (EnergyPlus's EMS calling point for them:
 # BeginTimestepBeforePredictor).
@@ -35,6 +36,18 @@ class Building:
     # Per action, per actuator: the hidden sensor reading the schedule the building's own controls set that
     # actuator to (a thermostat's setpoint schedule), None where there is none; for `--residual-space builtin`.
     own: tuple[tuple[str | None, ...], ...] = ()
+
+    @functools.cached_property
+    def node_schedules(self) -> tuple[tuple[str | None, ...], ...]:
+        """Per action, per actuator: the sensor of the schedule a node setpoint's own `SetpointManager:Scheduled`
+        follows (`own` on node actuators only), None elsewhere. The prepared copy takes such a node even under
+        `relinquish` (engine/supply.py), and a released one gets the schedule back (engine/bridge.py): one place
+        decides which nodes those are."""
+        none = tuple((None,) * len(a.actuators) for a in self.actions)
+        own = self.own if len(self.own) == len(self.actions) else none
+        return tuple(tuple(n if a.component_type.lower() == NODE_SETPOINT else None
+                           for a, n in zip(e.actuators, plans, strict=True))
+                     for e, plans in zip(self.actions, own, strict=True))  # fmt: skip
 
     @property
     def observed(self) -> tuple[Sensor, ...]:

@@ -33,7 +33,6 @@ import numpy as np
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import control_model
-from parallel_eplus.buildings.takeover import NODE_SETPOINT
 from parallel_eplus.engine import frames
 from parallel_eplus.engine.native_handoff import NativeHandoff
 from parallel_eplus.errors import ProtocolError
@@ -79,7 +78,7 @@ class Bridge(NativeHandoff):
         self.relinquish = relinquish
         self.python_only = builtin_residual or relinquish or any(s.meter or s.scale != 1.0 for s in self.sensors)
         self.own = spec.own if builtin_residual else None
-        self.own_plans = spec.own if building and len(spec.own) == len(spec.actions) else ()
+        self.node_schedules = spec.node_schedules if building and model != "baseline" else ()
         self.own_sensors: list[int] = []  # per actuator handle: the sensor index of its own schedule
         # relinquish: per actuator handle, the sensor of the schedule a released node gets back (its scheduled
         # manager is gone from the copy: supply.py), -1 where EnergyPlus's own control returns by itself
@@ -141,10 +140,8 @@ class Bridge(NativeHandoff):
         names = [s.name for s in self.sensors]
         if self.own is not None:
             self.own_sensors = [names.index(n) for own in self.own for n in own]  # resolve() checked every one
-        if self.relinquish and self.own_plans:
-            self.fallback = [names.index(n) if n and a.component_type.lower() == NODE_SETPOINT else -1
-                             for e, own in zip(self.elements, self.own_plans, strict=True)
-                             for a, n in zip(e.actuators, own, strict=True)]  # fmt: skip
+        if self.relinquish and self.node_schedules:
+            self.fallback = [names.index(n) if n else -1 for own in self.node_schedules for n in own]
         if missing:
             raise RuntimeError("the model lacks " + "; ".join(missing))
         self.minutes = 60 // self.x.num_time_steps_in_hour(state)  # minutes per zone timestep

@@ -173,9 +173,8 @@ def _commanded(setup: WorkerSetup) -> tuple:
     reference node before: the medium office's coils kept 12.8 C under a commanded 18)."""
     if not setup.config.relinquish:
         return setup.elements
-    own = setup.building.own if len(setup.building.own) == len(setup.elements) else ()
     taken = tuple(replace(e, actuators=tuple(a for a, o in zip(e.actuators, plans, strict=True) if o))
-                  for e, plans in zip(setup.elements, own, strict=True))  # fmt: skip
+                  for e, plans in zip(setup.elements, setup.building.node_schedules, strict=True))  # fmt: skip
     keys = {a.key for e in taken for a in e.actuators}
     kept = [a.key for e in setup.elements for a in e.actuators
             if a.component_type.lower() == NODE_SETPOINT and a.key not in keys]  # fmt: skip
