@@ -79,6 +79,10 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
     saved = json.loads(saved_path.read_text()) if saved_path.is_file() else {}
     building_name = saved_building(saved)
     mpc = MPC.load(source)
+    if mpc.settings.own_plan != "building":
+        raise ValueError(f"{source}: a planner whose own plan is its building's rule (own_plan=rule) cannot be "
+                         "exported yet: the served planner has no rule beside it. Evaluate it in process "
+                         "(`evaluate --policy RUN/planner`)")
     building = load_building(mpc.building)
     spec = building.spec
     weathers = saved.get("weathers") or list(spec.weathers)[:1] or ["CA"]

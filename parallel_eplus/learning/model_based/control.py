@@ -72,6 +72,8 @@ class MPC:
         self.action_high = np.array([a.high for a in b.actions], float)
         self.thermostat_sides = thermostat_sides(b)
         self.sides = side_array(self.thermostat_sides)  # as the planner reads them (`band_thermostats`)
+        self.rules: list = [None] * workers  # `own_plan=rule`: each worker's rule, made at its first plan
+        self.ruled = np.zeros(n_actions, bool)  # the actions the rule has set (not released)
         self.check_reference()
 
     def check_reference(self) -> None:
@@ -85,10 +87,18 @@ class MPC:
                              "read (`band = \"thermostat\"`)")
         s = self.settings
         if (s.consensus or s.min_saving or s.own_radius is not None or s.guard_k is not None
-                or s.band_thermostats != "free") and \
+                or s.band_thermostats != "free" or s.own_plan != "building") and \
                 s.comfort_reference != "own":  # fmt: skip
-            raise ValueError("--mpc consensus, min_saving, own_radius, guard_k and band_thermostats weigh the "
-                             "search's plan against the own thermostats' plan: add comfort_reference=own")
+            raise ValueError("--mpc consensus, min_saving, own_radius, guard_k, band_thermostats and own_plan weigh "
+                             "the search's plan against the own plan: add comfort_reference=own")
+        if s.own_plan == "rule":
+            try:
+                rule = load_building(self.building).controller_class()
+            except ValueError as e:
+                raise ValueError(f"own_plan=rule: {e}") from None
+            if not getattr(rule, "relinquishes", False):
+                raise ValueError(f"own_plan=rule: {rule.__name__} must release (NaN) the actions it does not set, as "
+                                 "parallel_eplus.buildings.air_reset:SupplyAirReset does (`relinquishes = True`)")
         dated = self.comfort_times.dated_applies
         if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
             log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
@@ -99,7 +109,7 @@ class MPC:
         """[A]: the actions the own plan sets (`own_radius`): the thermostats, and those whose own setpoints the
         calendar recorded by date."""
         sides = np.array([side is not None for side in self.thermostat_sides])
-        return sides | self.comfort_times.own_known(len(sides))
+        return sides | self.comfort_times.own_known(len(sides)) | self.ruled
 
     def own_jump(self) -> float:
         """The largest step, in normalized units, of the own thermostats' plan over the dates the calendar
@@ -149,6 +159,7 @@ class MPC:
     def reset(self, worker: int) -> None:
         """A new episode for `worker`: forget its warm start and its demand peaks."""
         self.warm[worker] = 0.0
+        self.rules[worker] = None  # its rule's state (a reset's trim and respond) starts again
         if self.guard:
             self.guard.reset(worker)
         if self.demand:
@@ -174,7 +185,7 @@ class MPC:
         a_last = np.asarray(a_last, np.float32)
         demand = self.demand.outlook(obs, infos, self.settings.horizon) if self.demand else None
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
-        reference = self.own_plan(infos, bounds, a_last) if self.settings.comfort_reference == "own" else None
+        reference = self.own_plan(infos, bounds, a_last, obs) if self.settings.comfort_reference == "own" else None
         hold = self._guard_check(s, infos) if reference is not None else None
         self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
                                       self.warm[: len(s)], seeds, weights, reference, demand,
@@ -195,13 +206,31 @@ class MPC:
         now = [info["time"] for info in infos]  # one time per worker
         return self.guard.check(s[:, : self.planner.n_temps], self.comfort_times.bounds(now), self.comfort_times(now))
 
-    def own_plan(self, infos: list[dict], bounds: np.ndarray, a_last: np.ndarray) -> np.ndarray:
+    def own_plan(self, infos: list[dict], bounds: np.ndarray, a_last: np.ndarray,
+                 obs: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """[W, H, A]: what the building's own controls would set over each worker's horizon (`own_reference`), from
-        `future`'s bounds and the own setpoints the calendar recorded on those dates."""
+        `future`'s bounds and the own setpoints the calendar recorded on those dates; with `own_plan=rule`, the
+        actions the rule sets at its value now, held over the horizon (a rule is called once a step: its state)."""
         c, h = self.comfort_times, self.settings.horizon
-        return np.stack([own_reference(bounds[i], c.tolerance, self.thermostat_sides, self.action_low, self.action_high,
+        plan = np.stack([own_reference(bounds[i], c.tolerance, self.thermostat_sides, self.action_low, self.action_high,
                                        a_last[i], c.own_actions(step_times(info["time"], self.step_minutes, h)))
                          for i, info in enumerate(infos)])  # fmt: skip
+        if self.settings.own_plan == "rule":
+            not_thermostat = np.array([side is None for side in self.thermostat_sides])
+            for i, info in enumerate(infos):
+                ruled = self._rule(i)(np.asarray(obs)[i], info)
+                sets = np.isfinite(ruled) & not_thermostat
+                plan[i][:, sets] = ruled[sets]
+                self.ruled |= sets
+        return plan
+
+    def _rule(self, worker: int):
+        """The worker's rule (the spec's `controller`, as `evaluate --rbc` makes it), fresh after its reset."""
+        if self.rules[worker] is None:
+            from parallel_eplus.evaluation.controllers import RBC_LABEL, Controller
+
+            self.rules[worker] = Controller(RBC_LABEL, "rbc").make(self.building)
+        return self.rules[worker]
 
     def observe(self, obs: np.ndarray, infos: list[dict]) -> None:
         """Each worker's meter reading of the step that just ended, for its month's demand peaks (`act` reads it

@@ -104,6 +104,13 @@ class MPCSettings(FromText):
     # setpoint 0.8 K above its own with the zone at 24.0 C, a move its data never showed, and the zone rose 0.3 K
     # past the bound (docs/model-based.md). Outside the band's hours the planner moves as before.
     band_thermostats: str = "free"
+    # With comfort_reference=own: where the own plan of an action no thermostat schedule sets comes from: what the
+    # building's own controls set on that date ("building": the DOE VAV loops' constant 12.8 C), or the spec's rule
+    # (its `controller`, `--rbc`), run beside the planner on each worker ("rule": Guideline 36's supply-air reset,
+    # buildings/air_reset.py). The actions the rule releases keep the building's plan. The planner then improves on
+    # the rule, as the data center's best policy corrects its rule, where against the constant it was held within
+    # `own_radius` of 12.8 C, far from where the reset saves (docs/model-based.md).
+    own_plan: str = "building"
     # and this many steps before the band starts (as far as the horizon sees): the retail store's planner set back 0.6 K
     # deeper than its own at night, the zones met the morning's schedule 0.5 K colder, and its first occupied hour held
     # most of its excess K.h (docs/model-based.md). 0: from the band's first step.
@@ -143,6 +150,8 @@ class MPCSettings(FromText):
             raise ValueError(f"comfort_risk {self.comfort_risk!r}: 'mean' or 'worst'")
         if self.band_thermostats not in ("free", "at_least_own", "own"):
             raise ValueError(f"band_thermostats {self.band_thermostats!r}: 'free', 'at_least_own' or 'own'")
+        if self.own_plan not in ("building", "rule"):
+            raise ValueError(f"own_plan {self.own_plan!r}: 'building' or 'rule'")
         if self.student not in ("dagger", "gradient"):
             raise ValueError(f"student {self.student!r}: 'dagger' or 'gradient'")
         if not 0 < self.shrink <= 1:
