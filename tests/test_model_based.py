@@ -305,5 +305,9 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
     off = np.abs(steps["supply_air_c"].to_numpy()[1:] - ruled_c[:-1])  # each step's action, from the step before
     assert off.max() <= 0.6 + 1e-3, off.max()
     assert (ruled_c > 14.0).mean() > 0.5  # far from the building's own 12.8 C: January in Golden
+    from parallel_eplus.deploy.planner_export import export_planner
+
+    with pytest.raises(ValueError, match="cannot be exported yet"):  # the served planner has no rule beside it
+        export_planner(tmp_path / "runs" / "ruled" / "planner" / "planner.pt", tmp_path / "export")
     with pytest.raises(ValueError, match="own_plan=rule"):
         MPC("office-small", MPCSettings(comfort_reference="own", own_plan="rule"), 0.1, 1e-5, 1)
