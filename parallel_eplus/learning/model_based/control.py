@@ -106,8 +106,8 @@ class MPC:
 
     @property
     def follows(self) -> np.ndarray:
-        """[A]: the actions the own plan sets (`own_radius`): the thermostats, and those whose own setpoints the
-        calendar recorded by date."""
+        """[A]: the actions the own plan sets (`own_radius`): the thermostats, those whose own setpoints the
+        calendar recorded by date, and those the rule has set (`own_plan=rule`)."""
         sides = np.array([side is not None for side in self.thermostat_sides])
         return sides | self.comfort_times.own_known(len(sides)) | self.ruled
 
