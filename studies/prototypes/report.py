@@ -98,7 +98,15 @@ def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
             "the same 20 fortnights. Ratios to the building's own controls as above; the last column is the",
             "planner's.", "",
             "| building | HVAC energy × | bill × | peak × | occupied K·h: own → rule | in own bounds: own → rule "
-            "| planner's HVAC × |", "|---|---|---|---|---|---|---|", *rows]  # fmt: skip
+            "| planner's HVAC × |", "|---|---|---|---|---|---|---|", *rows, *ruled_lines(study)]  # fmt: skip
+
+
+def ruled_lines(study: Study) -> list[str]:
+    """A pointer to the planners trained on the reset (`--mpc own_plan=rule`), where their pilots are committed."""
+    if not (study.out / "ruled" / "README.md").is_file():
+        return []
+    return ["", "The planner trained on the reset as its own plan (`--mpc own_plan=rule`), one seed on the medium and",
+            "large offices so far: [ruled/](ruled/README.md)."]
 
 
 def _docs(out: Path) -> str:
