@@ -282,32 +282,3 @@ def test_a_run_too_short_to_plan_ends_with_its_planner_named(tmp_path, monkeypat
     assert f"episode records: {tmp_path / 'runs' / 'short' / 'episodes.csv'}" in out
     assert not (tmp_path / "runs" / "short" / "model.zip").exists()
 
-
-@pytest.mark.slow
-def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rules(tmp_path, no_leaks):
-    """`own_plan=rule` on the medium office: the own plan of the supply air is Guideline 36's reset (the spec's
-    `controller`) run beside the planner, not the building's constant 12.8 C, and `own_radius` holds the planner
-    within 0.2 (0.6 K) of it at every step; a planner with no rule-based `controller` that releases is refused."""
-    settings = MPCSettings(explore_steps=48, refit_every=96, epochs=5, candidates=32, comfort_hours="occupied",
-                           comfort_reference="own", own_plan="rule", own_radius=0.2, support_margin=2.0,
-                           max_increment=2.0, distill=False)  # fmt: skip
-    cfg = mpc_config(tmp_path, "ruled", building="office-medium", weathers=["CO"], workers=1, run_days=2,
-                     timesteps=192, checkpoint_every=96, mpc=settings,
-                     comfort=ComfortConstraint(target_pct=97.5))  # fmt: skip
-    train(cfg, progress=False)
-    planner = planner_controller(str(tmp_path / "runs" / "ruled" / "planner"))
-    df = run_sweep([planner], ["CO"], 2, 1, tmp_path / "eval", progress=False, building="office-medium")
-    steps = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
-    rule = Controller("rule", "rbc").make("office-medium")
-    low, high = 12.0, 18.0  # office-medium's supply_air_c
-    ruled = np.array([rule(np.zeros(0), row) for row in steps.to_dict("records")])[:, -1]
-    ruled_c = low + (ruled + 1) / 2 * (high - low)
-    off = np.abs(steps["supply_air_c"].to_numpy()[1:] - ruled_c[:-1])  # each step's action, from the step before
-    assert off.max() <= 0.6 + 1e-3, off.max()
-    assert (ruled_c > 14.0).mean() > 0.5  # far from the building's own 12.8 C: January in Golden
-    from parallel_eplus.deploy.planner_export import export_planner
-
-    with pytest.raises(ValueError, match="cannot be exported yet"):  # the served planner has no rule beside it
-        export_planner(tmp_path / "runs" / "ruled" / "planner" / "planner.pt", tmp_path / "export")
-    with pytest.raises(ValueError, match="own_plan=rule"):
-        MPC("office-small", MPCSettings(comfort_reference="own", own_plan="rule"), 0.1, 1e-5, 1)

@@ -1,5 +1,6 @@
 """The planner's own plan (`comfort_reference = "own"`): what the building's own controls would set over the
-horizon, and the settings that weigh the search's plan against it (`consensus`, `min_saving`, `own_radius`)."""
+horizon, or its rule (`own_plan = "rule"`), and the settings that weigh the search's plan against it (`consensus`,
+`min_saving`, `own_radius`)."""
 
 from __future__ import annotations
 
@@ -7,19 +8,24 @@ import datetime as dt
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.deploy.planner_runtime import calendar_arrays
+from parallel_eplus.evaluation.controllers import Controller
+from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.imitation import record_baseline
 from parallel_eplus.learning.model_based.calendar import Calendar, own_reference
 from parallel_eplus.learning.model_based.control import MPC, thermostat_sides
 from parallel_eplus.learning.model_based.dataset import Transitions
 from parallel_eplus.learning.model_based.features import step_times
 from parallel_eplus.learning.model_based.planner import _follow
-from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_file
+from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_controller, planner_file
 from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.learning.model_based.sources import add_baseline
+from parallel_eplus.training.config import ComfortConstraint, TrainConfig
+from parallel_eplus.training.train import train
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANNER = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0/best/planner"
@@ -172,3 +178,34 @@ def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan():
         PlannerOptions.parse("own_radius=0.1").apply(MPC.load(planner_file(OFFICE)))
     with pytest.raises(ValueError, match="own_radius"):
         PlannerOptions.parse("comfort_reference=own,own_radius=3")
+
+
+@pytest.mark.slow
+def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rules(tmp_path, no_leaks):
+    """`own_plan=rule` on the medium office: the own plan of the supply air is Guideline 36's reset (the spec's
+    `controller`) run beside the planner, not the building's constant 12.8 C, and `own_radius` holds the planner
+    within 0.2 (0.6 K) of it at every step; a planner with no rule-based `controller` that releases is refused."""
+    settings = MPCSettings(explore_steps=48, refit_every=96, epochs=5, candidates=32, comfort_hours="occupied",
+                           comfort_reference="own", own_plan="rule", own_radius=0.2, support_margin=2.0,
+                           max_increment=2.0, distill=False)  # fmt: skip
+    cfg = TrainConfig(algorithm="mpc", building="office-medium", weathers=["CO"], workers=1, run_days=2,
+                      timesteps=192, checkpoint_every=96, run_name="ruled", runs_dir=str(tmp_path / "runs"),
+                      tensorboard_dir=str(tmp_path / "tb"), mpc=settings,
+                      comfort=ComfortConstraint(target_pct=97.5))  # fmt: skip
+    train(cfg, progress=False)
+    planner = planner_controller(str(tmp_path / "runs" / "ruled" / "planner"))
+    df = run_sweep([planner], ["CO"], 2, 1, tmp_path / "eval", progress=False, building="office-medium")
+    steps = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
+    rule = Controller("rule", "rbc").make("office-medium")
+    low, high = 12.0, 18.0  # office-medium's supply_air_c
+    ruled = np.array([rule(np.zeros(0), row) for row in steps.to_dict("records")])[:, -1]
+    ruled_c = low + (ruled + 1) / 2 * (high - low)
+    off = np.abs(steps["supply_air_c"].to_numpy()[1:] - ruled_c[:-1])  # each step's action, from the step before
+    assert off.max() <= 0.6 + 1e-3, off.max()
+    assert (ruled_c > 14.0).mean() > 0.5  # far from the building's own 12.8 C: January in Golden
+    from parallel_eplus.deploy.planner_export import export_planner
+
+    with pytest.raises(ValueError, match="cannot be exported yet"):  # the served planner has no rule beside it
+        export_planner(tmp_path / "runs" / "ruled" / "planner" / "planner.pt", tmp_path / "export")
+    with pytest.raises(ValueError, match="own_plan=rule"):
+        MPC("office-small", MPCSettings(comfort_reference="own", own_plan="rule"), 0.1, 1e-5, 1)
