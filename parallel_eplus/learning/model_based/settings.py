@@ -104,6 +104,10 @@ class MPCSettings(FromText):
     # setpoint 0.8 K above its own with the zone at 24.0 C, a move its data never showed, and the zone rose 0.3 K
     # past the bound (docs/model-based.md). Outside the band's hours the planner moves as before.
     band_thermostats: str = "free"
+    # and this many steps before the band starts (as far as the horizon sees): the retail store's planner set back 0.6 K
+    # deeper than its own at night, the zones met the morning's schedule 0.5 K colder, and its first occupied hour held
+    # most of its excess K.h (docs/model-based.md). 0: from the band's first step.
+    band_lead: int = 0
     # With comfort_reference=own: where the own plan of an action no thermostat schedule sets comes from: what the
     # building's own controls set on that date ("building": the DOE VAV loops' constant 12.8 C), or the spec's rule
     # (its `controller`, `--rbc`), run beside the planner on each worker ("rule": Guideline 36's supply-air reset,
@@ -111,10 +115,6 @@ class MPCSettings(FromText):
     # the rule, as the data center's best policy corrects its rule, where against the constant it was held within
     # `own_radius` of 12.8 C, far from where the reset saves (docs/model-based.md).
     own_plan: str = "building"
-    # and this many steps before the band starts (as far as the horizon sees): the retail store's planner set back 0.6 K
-    # deeper than its own at night, the zones met the morning's schedule 0.5 K colder, and its first occupied hour held
-    # most of its excess K.h (docs/model-based.md). 0: from the band's first step.
-    band_lead: int = 0
     noise: float = 0.0  # exploration added to the planner's action in training (normalized units)
     # Distillation (distill.py): the policy network fitted to the planner's own actions.
     distill: bool = True
