@@ -281,4 +281,3 @@ def test_a_run_too_short_to_plan_ends_with_its_planner_named(tmp_path, monkeypat
     assert f"planner: {planner}" in out and (planner / "planner.pt").is_file(), out
     assert f"episode records: {tmp_path / 'runs' / 'short' / 'episodes.csv'}" in out
     assert not (tmp_path / "runs" / "short" / "model.zip").exists()
-
