@@ -17,9 +17,10 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
-from recipes import PLAYED, RECIPES
+from recipes import ON_RULE, PLAYED, RECIPES, RULE
 from report import table
 from study import SCENARIOS, Study, finished, models, read_status, scored, short_name, write_status
 
@@ -85,6 +86,17 @@ def prepare(study: Study, model: Path) -> dict:
     return write_status(study, name, **fields)
 
 
+def spec_of(study: Study, name: str) -> Path:
+    """The spec a recipe trains and scores on: the starter's, or (ON_RULE) a copy naming Guideline 36's reset as its
+    rule, written from the starter's each time so the two never drift."""
+    spec = study.folder(name) / "spec.toml"
+    if study.recipe not in ON_RULE:
+        return spec
+    ruled = study.folder(name) / "spec-rule.toml"
+    ruled.write_text(re.sub(r"^(idf = .*)$", rf'\1\ncontroller = "{RULE}"', spec.read_text(), count=1, flags=re.M))
+    return ruled
+
+
 def train(study: Study, name: str, seed: int, deadline: float) -> bool:
     """One run of the recipe until it finishes or the chunk ends (SIGINT: it checkpoints); True when finished."""
     run = study.run_dir(name, seed)
@@ -96,7 +108,7 @@ def train(study: Study, name: str, seed: int, deadline: float) -> bool:
     if list((run / "checkpoints").glob("*.zip")) + list((run / "checkpoints").glob("*.pt")):
         args = ["train", "--quiet", "--resume", str(run), "--timesteps", str(study.steps)]
     else:
-        args = ["train", "--quiet", "--building", str(study.folder(name) / "spec.toml"), "--weathers", TRAIN_WEATHERS,
+        args = ["train", "--quiet", "--building", str(spec_of(study, name)), "--weathers", TRAIN_WEATHERS,
                 "--workers", str(study.workers), "--seed", str(seed), "--timesteps", str(study.steps),
                 "--run-name", run.name, *RECIPES[study.recipe]]  # fmt: skip
         if run.exists():
@@ -136,7 +148,7 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
             out.mkdir(parents=True, exist_ok=True)
             shutil.copy(known[0], out / "scenarios.json")
         LOG.info("%s: evaluating %s", name, scenario)
-        r = subprocess.run(cli("evaluate", "--building", str(study.folder(name) / "spec.toml"), "--baseline",
+        r = subprocess.run(cli("evaluate", "--building", str(spec_of(study, name)), "--baseline",
                                *planners, "--scenario", scenario, "--weathers", EVAL_WEATHERS, "--workers",
                                str(study.workers), "--out", str(out), "--quiet"),
                            capture_output=True, text=True, cwd=study.folder(name))  # fmt: skip
@@ -150,9 +162,6 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
     return True
 
 
-RULE = "parallel_eplus.buildings.air_reset:SupplyAirReset"
-
-
 def rule(study: Study, names: list[str], minutes: float) -> None:
     """Guideline 36's supply-air reset (`evaluate --rbc`: buildings/air_reset.py) against each building's own
     controls on the same 20 fortnights, where the starter takes over air loops: what the air side holds without
@@ -163,9 +172,7 @@ def rule(study: Study, names: list[str], minutes: float) -> None:
         status = read_status(study, name)
         if (names and name not in names) or not status.get("checked") or not status.get("supply_air_loops"):
             continue
-        spec = study.folder(name) / "spec-rule.toml"
-        text = (study.folder(name) / "spec.toml").read_text()
-        spec.write_text(re.sub(r"^(idf = .*)$", rf'\1\ncontroller = "{RULE}"', text, count=1, flags=re.M))
+        spec = spec_of(replace(study, recipe=next(iter(ON_RULE))), name)
         kept = study.out / name / "rule"
         for scenario in SCENARIOS:
             if (kept / f"{scenario}.csv").is_file():
@@ -205,6 +212,8 @@ def run(study: Study, names: list[str], minutes: float) -> None:
             continue
         if status.get("stage") == "train" and status.get("error"):
             continue  # failed before: its row says why (delete status.json's error to retry)
+        if study.recipe in ON_RULE and not status.get("supply_air_loops"):
+            continue  # no air loop taken over: no rule to ride (the table keeps FALLBACK's row)
         if not all(train(study, name, seed, deadline) for seed in study.seeds):
             if time.time() >= deadline - 120:
                 LOG.info("chunk over: run again to continue")
