@@ -20,9 +20,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from recipes import ON_RULE, PLAYED, RECIPES, RULE
+from recipes import ON_RULE, PLAYED, RECIPES
 from report import table
-from study import SCENARIOS, Study, finished, models, read_status, scored, short_name, write_status
+from study import SCENARIOS, Study, finished, models, read_status, scored, short_name, spec_of, write_status
 
 REPO = Path(__file__).resolve().parents[2]
 LOG = logging.getLogger("prototypes")
@@ -84,17 +84,6 @@ def prepare(study: Study, model: Path) -> dict:
         fields |= {"stage": "check", "error": failure(r)}
     LOG.info("%s: %s", name, "checked" if r.returncode == 0 else f"check failed: {fields['error']}")
     return write_status(study, name, **fields)
-
-
-def spec_of(study: Study, name: str) -> Path:
-    """The spec a recipe trains and scores on: the starter's, or (ON_RULE) a copy naming Guideline 36's reset as its
-    rule, written from the starter's each time so the two never drift."""
-    spec = study.folder(name) / "spec.toml"
-    if study.recipe not in ON_RULE:
-        return spec
-    ruled = study.folder(name) / "spec-rule.toml"
-    ruled.write_text(re.sub(r"^(idf = .*)$", rf'\1\ncontroller = "{RULE}"', spec.read_text(), count=1, flags=re.M))
-    return ruled
 
 
 def train(study: Study, name: str, seed: int, deadline: float) -> bool:
@@ -240,8 +229,9 @@ def main(argv: list[str] | None = None) -> int:
     trained, played = (PLAYED[a.recipe][0], a.recipe) if a.recipe in PLAYED else (a.recipe, "")
     a.work = a.work or Path(os.environ.get("WORK", REPO.parent / f"prototypes-{trained}"))
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
+    fallback = REPO / "results" / "prototypes" if trained in ON_RULE else None  # FALLBACK's table: the default --out
     study = Study(a.work, a.out, a.steps, seeds=tuple(int(s) for s in a.seeds.split(",")), recipe=trained,
-                  played=played)  # fmt: skip
+                  played=played, fallback=fallback)  # fmt: skip
     if a.command == "prepare":
         for model in models():
             if not a.names or short_name(model) in a.names:

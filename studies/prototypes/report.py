@@ -7,8 +7,8 @@ import os
 from pathlib import Path
 
 import pandas as pd
-from recipes import PLAYED
-from study import SCENARIOS, Study, finished, models, read_status, scored, short_name
+from recipes import FALLBACK, PLAYED
+from study import SCENARIOS, Study, finished, models, read_status, results_folder, scored, short_name, spec_of
 
 
 def ratios(folder: Path) -> dict | None:
@@ -50,6 +50,9 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
              "scenarios (peak and typical heating and cooling fortnights) on all five weathers (IL and VA held out).",
              "Ratios are the planner's over its own controls' (× built-in, CityLearn's form), summed over the 20",
              "fortnights (peak: the highest 15-minute mean); the bill under the example tariff with demand charges.",
+             *([f"A building whose starter takes over no air loop has no reset to ride: its row is `{FALLBACK}`'s, the",
+                f"same planner ([the `{FALLBACK}` table]({os.path.relpath(study.fallback, study.out)}/README.md))."]
+               if study.fallback else []),
              "", "| building | actions | supply-air loops | HVAC energy × | bill × | peak × "
              "| occupied K·h: own → planner | in own bounds: own → planner | stage |",
              "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
@@ -82,7 +85,7 @@ def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
     rule`: `evaluate --rbc`, the thermostats on their own schedules), beside the planner's HVAC ratio."""
     rows = []
     for _, r in df.iterrows():
-        figures = ratios(study.out / r.building / "rule")
+        figures = ratios((study.fallback or study.out) / r.building / "rule")
         if figures is None:
             continue
         rows.append(f"| {r.building} | {_x(figures['hvac_energy_kwh'])} | {_x(figures.get('bill'))} | "
@@ -105,8 +108,8 @@ def ruled_lines(study: Study) -> list[str]:
     """A pointer to the planners trained on the reset (`--mpc own_plan=rule`), where their pilots are committed."""
     if not (study.out / "ruled" / "README.md").is_file():
         return []
-    return ["", "The planner trained on the reset as its own plan (`--mpc own_plan=rule`), one seed on the medium and",
-            "large offices so far: [ruled/](ruled/README.md)."]
+    return ["", "The planner trained on the reset as its own plan (`--mpc own_plan=rule`, `--recipe ruled`), where the",
+            "starter takes over air loops: [ruled/](ruled/README.md)."]
 
 
 def _docs(out: Path) -> str:
@@ -157,14 +160,17 @@ def table(study: Study) -> pd.DataFrame:
             row["stage"] = "checked, " + ("trained, not scored yet" if finished(run) else "training" if run.exists()
                                           else "not trained yet")  # fmt: skip
         if scored(study, name):
-            row["stage"], row["reason"] = "scored", ""
-            row |= ratios(study.out / name) or {}
+            folder = results_folder(study, name)
+            row["stage"] = "scored" if folder.parent == study.out else f"scored (`{FALLBACK}`: no air loop)"
+            row["reason"] = ""
+            row |= ratios(folder) or {}
         rows.append(row)
     df = pd.DataFrame(rows)
     study.out.mkdir(parents=True, exist_ok=True)
     for name in df.building:  # each spec as the runs used it, its commented candidates left out
         spec = study.folder(name) / "spec.toml"
-        if spec.is_file():
+        if spec.is_file() and results_folder(study, name).parent == study.out:  # a fallback's row: its table's spec
+            spec = spec_of(study, name)
             (study.out / "specs").mkdir(exist_ok=True)
             kept = [ln for ln in spec.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
             (study.out / "specs" / f"{name}.toml").write_text("\n".join(kept) + "\n")

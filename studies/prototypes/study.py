@@ -7,6 +7,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from recipes import ON_RULE, RULE
+
 SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")  # BOPTEST's, each evaluated
 
 
@@ -21,6 +23,7 @@ class Study:
     seeds: tuple[int, ...] = (0,)
     recipe: str = "hedged"  # what it trains (RECIPES)
     played: str = ""  # the recipe it scores, where it plays the trained planners with other settings (PLAYED)
+    fallback: Path | None = None  # FALLBACK's table, whose rows stand where an ON_RULE recipe has no air loop to ride
 
     def folder(self, name: str) -> Path:
         return self.work / name
@@ -63,5 +66,25 @@ def finished(run: Path) -> bool:
         return False
 
 
+def results_folder(study: Study, name: str) -> Path:
+    """Where a building's scenario csvs are: the recipe's, or the fallback's where the recipe does not apply."""
+    if study.recipe in ON_RULE and study.fallback and not read_status(study, name).get("supply_air_loops"):
+        return study.fallback / name
+    return study.out / name
+
+
 def scored(study: Study, name: str) -> bool:
-    return all((study.out / name / f"{s}.csv").is_file() for s in SCENARIOS)
+    return all((results_folder(study, name) / f"{s}.csv").is_file() for s in SCENARIOS)
+
+
+def spec_of(study: Study, name: str) -> Path:
+    """The spec a recipe trains and scores on: the starter's, or (ON_RULE) a copy naming Guideline 36's reset as its
+    rule, written from the starter's each time so the two never drift."""
+    spec = study.folder(name) / "spec.toml"
+    if study.recipe not in ON_RULE:
+        return spec
+    ruled = study.folder(name) / "spec-rule.toml"
+    text = re.sub(r"^(idf = .*)$", rf'\1\ncontroller = "{RULE}"', spec.read_text(), count=1, flags=re.M)
+    if not ruled.is_file() or ruled.read_text() != text:  # unchanged: a run reading it meanwhile is never disturbed
+        ruled.write_text(text)
+    return ruled
