@@ -17,12 +17,11 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from recipes import ON_RULE, PLAYED, RECIPES
 from report import table
-from study import SCENARIOS, Study, finished, models, read_status, scored, short_name, spec_of, write_status
+from study import SCENARIOS, Study, finished, models, read_status, rule_spec, scored, short_name, spec_of, write_status
 
 REPO = Path(__file__).resolve().parents[2]
 LOG = logging.getLogger("prototypes")
@@ -161,7 +160,7 @@ def rule(study: Study, names: list[str], minutes: float) -> None:
         status = read_status(study, name)
         if (names and name not in names) or not status.get("checked") or not status.get("supply_air_loops"):
             continue
-        spec = spec_of(replace(study, recipe=next(iter(ON_RULE))), name)
+        spec = rule_spec(study, name)
         kept = study.out / name / "rule"
         for scenario in SCENARIOS:
             if (kept / f"{scenario}.csv").is_file():

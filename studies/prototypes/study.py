@@ -77,14 +77,17 @@ def scored(study: Study, name: str) -> bool:
     return all((results_folder(study, name) / f"{s}.csv").is_file() for s in SCENARIOS)
 
 
-def spec_of(study: Study, name: str) -> Path:
-    """The spec a recipe trains and scores on: the starter's, or (ON_RULE) a copy naming Guideline 36's reset as its
-    rule, written from the starter's each time so the two never drift."""
-    spec = study.folder(name) / "spec.toml"
-    if study.recipe not in ON_RULE:
-        return spec
+def rule_spec(study: Study, name: str) -> Path:
+    """The starter's spec with Guideline 36's reset named as its rule (`spec-rule.toml`), written from the starter's
+    so the two never drift."""
     ruled = study.folder(name) / "spec-rule.toml"
-    text = re.sub(r"^(idf = .*)$", rf'\1\ncontroller = "{RULE}"', spec.read_text(), count=1, flags=re.M)
+    text = (study.folder(name) / "spec.toml").read_text()
+    text = re.sub(r"^(idf = .*)$", rf'\1\ncontroller = "{RULE}"', text, count=1, flags=re.M)
     if not ruled.is_file() or ruled.read_text() != text:  # unchanged: a run reading it meanwhile is never disturbed
         ruled.write_text(text)
     return ruled
+
+
+def spec_of(study: Study, name: str) -> Path:
+    """The spec a recipe trains and scores on: the starter's, or (ON_RULE) the one naming the reset."""
+    return rule_spec(study, name) if study.recipe in ON_RULE else study.folder(name) / "spec.toml"
