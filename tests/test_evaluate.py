@@ -186,3 +186,20 @@ def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alo
     assert online["reward_mean"].notna().all()
     assert (final.read_bytes(), (final.parent / "vecnormalize.npz").read_bytes()) == before
     assert not list(Path(tempfile.gettempdir()).glob("SB3-*"))  # the learning copies wrote no SB3 log folder
+
+
+def test_resume_runs_only_the_episodes_an_interrupted_sweep_did_not_finish(tmp_path, no_leaks):
+    controllers = [Controller(BASELINE_LABEL, "baseline"), Controller(RBC_LABEL, "rbc")]
+    first = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path, progress=False)
+    cut = Path(first.set_index(["controller", "weather"]).loc[(RBC_LABEL, "FL"), "episode_dir"])
+    summary = cut / "summary.json"  # as a stopped episode leaves it: its partial record, not complete
+    summary.write_text(summary.read_text().replace('"complete": true', '"complete": false'))
+
+    again = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path, progress=False, resume=True)
+    dirs = dict(zip(zip(again.controller, again.weather), again.episode_dir, strict=True))
+    assert [k for k in dirs if dirs[k] not in set(first.episode_dir)] == [(RBC_LABEL, "FL")]
+    assert Path(dirs[(RBC_LABEL, "FL")]).parent == cut.parent and Path(dirs[(RBC_LABEL, "FL")]) != cut
+    pd.testing.assert_series_equal(first.energy_kwh, again.energy_kwh)  # the same table, rerun episode included
+
+    longer = run_sweep(controllers[:1], ["CA"], 2, 1, tmp_path, progress=False, resume=True)
+    assert longer.episode_dir[0] not in set(first.episode_dir)  # another length is another episode

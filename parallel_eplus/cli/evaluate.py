@@ -63,7 +63,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
         not args.quiet, args.building, args.backend, args.ray_address, keep_going=True, periods=periods,
-        weather_noise=args.weather_noise, noisy_years=args.noisy_years,
+        weather_noise=args.weather_noise, noisy_years=args.noisy_years, resume=args.resume,
     )  # fmt: skip
     failures = df.attrs.get("failures", [])
     if df.empty:

@@ -97,6 +97,10 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
     ev.add_argument("--out", type=Path, default=Path("results") / "latest")
+    ev.add_argument(
+        "--resume", action="store_true",
+        help="keep the episodes an interrupted run of this command finished in --out; run only the others",
+    )  # fmt: skip
     ev.add_argument("--histogram", help="CONTROLLER,WEATHER for the West-zone histogram (default: last, VA)")
     ev.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     ev.add_argument(

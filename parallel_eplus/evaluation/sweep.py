@@ -46,6 +46,7 @@ def run_sweep(
     extra_outputs: tuple[tuple[str, str], ...] = (),
     weather_noise: str | None = None,
     noisy_years: int = 1,
+    resume: bool = False,
 ) -> pd.DataFrame:
     """One episode per (controller, weather), up to `workers` at once; returns results.csv's table.
 
@@ -62,7 +63,9 @@ def run_sweep(
 
     `keep_going`: an episode whose EnergyPlus fails (a model's own controls can fail on a weather) is left out
     and the others run on; the table's `attrs["failures"]` lists what failed, why and where (`failure_row`).
-    Otherwise the first failure stops the sweep, as any caller averaging over the weathers needs."""
+    Otherwise the first failure stops the sweep, as any caller averaging over the weathers needs.
+
+    `resume`: the jobs whose episode a previous sweep into `out_dir` finished are not run again (resume.py)."""
     known = None
     if building:
         from parallel_eplus.buildings.check import check_building
@@ -100,12 +103,19 @@ def run_sweep(
             cfg.run_days, cfg.start_day, cfg.start_weekday, cfg.warmup_days = (
                 p.run_days, p.start_day, p.weekday, p.warmup_days
             )  # fmt: skip
+    finished: list[dict] = []
+    if resume:
+        from parallel_eplus.evaluation.resume import split_finished
+
+        finished, jobs = split_finished(jobs)
     steps_per_day = load_building(building).steps_per_day
     total_steps = sum(cfg.run_days for _, cfg in jobs) * steps_per_day
     band = _band_columns(building)
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:
-        if backend == "ray":
+        if not jobs:  # every episode finished before (`resume`)
+            rows, failures = [], []
+        elif backend == "ray":
             from parallel_eplus.evaluation import ray_sweep
 
             # each EnergyPlus step has its own deadline; this bounds the wait for any next episode to end
@@ -115,7 +125,7 @@ def run_sweep(
             rows, failures = run_local(jobs, workers, bar, keep_going)
     finally:
         bar.close()
-    rows = [{**row, **band} for row in rows]  # a spec's band, beside its "% in band"
+    rows = [{**row, **band} for row in finished + rows]  # a spec's band, beside its "% in band"
     if weather_noise is not None:  # each noisy year is one of the controller's runs (seeds.py's intervals)
         rows = [{**row, "run": f"{row.get('run') or ''} year {row['weather_seed']}".strip()} for row in rows]
     order = {c.label: i for i, c in enumerate(controllers)}

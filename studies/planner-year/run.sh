@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The committed planners (three seeds per building) over full years on all five weathers (IL and VA held out), with
 # the weather file as a perfect forecast and with BOPTEST's forecast errors; each (building, forecast, seed) is one
-# `evaluate` of its own, so the study resumes where it stopped (a finished one has its results.csv).
+# `evaluate` of its own, so the study resumes where it stopped (a finished one has its results.csv; an unfinished
+# one keeps its finished episodes: `evaluate --resume`).
 #
 #   bash studies/planner-year/run.sh [BUILDING[:FORECAST]...]   # default: every building, perfect then medium
 #   bash studies/planner-year/run.sh merge                       # the seeds' tables into results/model-based/*/
@@ -33,7 +34,7 @@ one() {  # building forecast seed
     # from $WORK: `python -m` puts the working directory first on the path, before PYTHONPATH's copy
     (cd "$WORK" && "$PY" -m parallel_eplus.cli evaluate --building "$b" --baseline --policy "$planner=Planner" \
         --planner "forecast=$f${SETTINGS:+,$SETTINGS}" --weathers CA,CO,FL,IL,VA --run-days "$(days "$b")" \
-        --workers "$WORKERS" --backend ray --out "$out" --quiet) > "$out.log" 2>&1 || echo "failed: $out.log"
+        --workers "$WORKERS" --backend ray --out "$out" --resume --quiet) > "$out.log" 2>&1 || echo "failed: $out.log"
 }
 
 if [ "${1:-}" = merge ]; then

@@ -1,0 +1,50 @@
+"""`evaluate --resume`: an interrupted sweep continues from the episodes it finished.
+
+A year on a planner takes ~20 minutes of a core and a study runs dozens of them; a session that ends mid-sweep
+must not cost the episodes already done. Each episode writes its `summary.json` (the sweep's row) only when it
+ends, so a finished episode is one whose summary says `complete` for the same weather and length as the job;
+a killed one left no such summary and runs again.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.engine.config import SimulationConfig
+from parallel_eplus.engine.episode import FAILURE_FILE, SUMMARY_FILE
+
+log = logging.getLogger(__name__)
+
+
+def finished_row(controller, cfg: SimulationConfig) -> dict | None:
+    """The job's newest finished episode in its folder, as the row the sweep would have made; None if none."""
+    folder = Path(cfg.output_dir)
+    for episode_dir in sorted(folder.glob("episode-*"), reverse=True):
+        path = episode_dir / SUMMARY_FILE
+        if not path.is_file() or (episode_dir / FAILURE_FILE).is_file():
+            continue
+        try:
+            summary = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue  # cut off while written: the episode runs again
+        same = (summary.get("complete") is True and summary.get("weather") == weather_label(cfg.weather)
+                and summary.get("run_days") == cfg.run_days)  # fmt: skip
+        if same:
+            return {"controller": controller.label, "run": controller.run, **summary, "episode_dir": str(episode_dir)}
+    return None
+
+
+def split_finished(jobs: list[tuple]) -> tuple[list[dict], list[tuple]]:
+    """(rows of the jobs already finished, the jobs still to run)."""
+    rows, todo = [], []
+    for controller, cfg in jobs:
+        row = finished_row(controller, cfg)
+        if row is None:
+            todo.append((controller, cfg))
+        else:
+            rows.append(row)
+    log.info("--resume: %d of %d episodes finished before, %d to run", len(rows), len(jobs), len(todo))
+    return rows, todo
