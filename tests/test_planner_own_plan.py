@@ -5,13 +5,15 @@ horizon, or its rule (`own_plan = "rule"`), and the settings that weigh the sear
 from __future__ import annotations
 
 import datetime as dt
+import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.building import load_building, weather_path
 from parallel_eplus.deploy.planner_runtime import calendar_arrays
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
@@ -203,9 +205,50 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
     off = np.abs(steps["supply_air_c"].to_numpy()[1:] - ruled_c[:-1])  # each step's action, from the step before
     assert off.max() <= 0.6 + 1e-3, off.max()
     assert (ruled_c > 14.0).mean() > 0.5  # far from the building's own 12.8 C: January in Golden
-    from parallel_eplus.deploy.planner_export import export_planner
+    # served, the rule rides along (deploy/served_rule.py): a day in closed loop over HTTP equals the in-process one
+    from parallel_eplus.deploy.export import export
+    from parallel_eplus.evaluation.controllers import http_controller
 
-    with pytest.raises(ValueError, match="cannot be exported yet"):  # the served planner has no rule beside it
-        export_planner(tmp_path / "runs" / "ruled" / "planner" / "planner.pt", tmp_path / "export")
+    from .serving import serving
+
+    out = tmp_path / "export"
+    export(tmp_path / "runs" / "ruled", out, record_days=1, options="band_thermostats=own")  # 48 decisions checked
+    contract = json.loads((out / "controller.json").read_text())
+    assert [r["name"] for r in contract["rule"]["readings"]] == ["setpoint_clgsetp_sch"]  # the zones' cooling setpoint
+    assert contract["planner"]["settings"]["band_thermostats"] == "own"
+    trusting = tmp_path / "trusting"  # the same planner, never falling back: its arithmetic against in process
+    shutil.copytree(out, trusting)
+    contract["fallback"] |= {"max_input_z": 1e9, "max_forecast_gap_c": 1e9, "max_spread_k": 1e9}
+    (trusting / "controller.json").write_text(json.dumps(contract))
+    in_process = planner_controller(f"{tmp_path / 'runs' / 'ruled' / 'planner'}=Planner", "band_thermostats=own")
+    with serving(trusting, tmp_path / "server.log") as url:
+        df = run_sweep([in_process, http_controller(url)], ["CO"], 1, 2, tmp_path / "served", progress=False,
+                       building="office-medium")  # fmt: skip
+    here, there = (pd.read_parquet(Path(d) / "steps.parquet") for d in df.episode_dir)
+    pd.testing.assert_frame_equal(here, there, check_exact=True)  # every setpoint, every step: the rule's state too
+
+    # falling back, it sends the rule's supply air (and the own thermostats); what the rule reads is required
+    from parallel_eplus.buildings.air_reset import advance
+    from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
+    from parallel_eplus.deploy.contract import Contract, InputError
+    from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+
+    runtime = PlannerRuntime(out, Contract.read(out))
+    row = here.iloc[30]
+    times = step_times(row["time"].to_pydatetime(), 10, contract["forecast"]["steps"])
+    weather = PerfectForecast(weather_path("office-medium", "CO")).truth(times)
+    weather[:, 0] += 20.0  # a forecast the outdoor sensor contradicts
+    body = {"time": row["time"].isoformat(), "sensors": {i["name"]: float(row[i["name"]]) for i in contract["inputs"]},
+            "last_setpoints": {o["name"]: float(row[o["name"]]) for o in contract["outputs"]},
+            "forecast": {n: weather[:, i].tolist() for i, n in enumerate(WEATHER)},
+            "rule_readings": {"setpoint_clgsetp_sch": 24.0}, "rule_state": {"t_max_c": 16.0}}  # fmt: skip
+    answer = runtime.act(body)
+    readings = {**body["sensors"], **body["rule_readings"]}
+    t_max, ruled = advance(rule.cfg, rule.points, 16.0, readings)
+    assert answer["fallback"] and "forecast" in answer["reason"] and answer["rule_state"] == {"t_max_c": t_max}
+    assert answer["setpoints"]["supply_air_c"]["value"] == pytest.approx(low + (ruled[2] + 1) / 2 * (high - low))
+    for field, change in (("rule_readings", {"rule_readings": None}), ("rule_state", {"rule_state": {"t_max_c": 30}})):
+        with pytest.raises(InputError, match=field):
+            runtime.act({**body, **change})
     with pytest.raises(ValueError, match="own_plan=rule"):
         MPC("office-small", MPCSettings(comfort_reference="own", own_plan="rule"), 0.1, 1e-5, 1)

@@ -14,18 +14,20 @@ It resets the supply-air actions whose own plan is a `SetpointManager:Scheduled`
 constant 12.8 C); every other action, the thermostats among them, is released (NaN: `SimulationConfig.relinquish`),
 so the building's own schedules and managers set them at the step they apply to. It acts through the same env as a
 policy.
+
+The reset itself (`advance`) reads names and numbers only (`ResetPoints`, resolved once from the building), so a
+served planner riding it (deploy/planner_runtime.py) runs the same arithmetic from its contract, numpy only.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.building import load_building
-
 OUTDOOR = "site outdoor air drybulb temperature"
+NAME = "ASHRAE Guideline 36 supply-air temperature reset"
 
 
 @dataclass
@@ -51,20 +53,26 @@ class ResetConfig:
     request_k: float = 0.2
 
 
-class SupplyAirReset:
-    """Callable (observation, info) -> normalized action: G36's reset on each supply-air node action, NaN (the
-    building's own control) on every other."""
+@dataclass(frozen=True)
+class ResetPoints:
+    """What the reset reads (by sensor name) and sets (by action index) in one building."""
 
-    relinquishes = True  # its NaN elements mean "the building's own control" (the evaluation sets relinquish)
+    air: tuple[int, ...]  # the supply-air actions it sets
+    zones: tuple[tuple[str, str], ...]  # per zone: its temperature, its cooling setpoint (the thermostat's schedule)
+    outdoor: str
+    low: tuple[float, ...]  # every action's bounds
+    high: tuple[float, ...]
+    steps_per_interval: int  # the reset's 2-minute intervals in one control step
 
-    def __init__(self, building: str | Path | None = None, cfg: ResetConfig | None = None, **_):
-        b = load_building(building)
-        self.cfg = cfg or ResetConfig()
+    @classmethod
+    def of(cls, building, cfg: ResetConfig) -> ResetPoints:
+        """Resolved from a building, or why it cannot take the reset."""
+        b = building
         # the loops a schedule sets (`Building.own`: a SetpointManager:Scheduled, the DOE VAV loops' 12.8 C); a loop on
         # another manager (the large hotel's DOAS on an outdoor-air reset) keeps it: the action is released
-        self.air = [i for i, (a, plans) in enumerate(zip(b.actions, b.node_schedules, strict=True))
-                    if a.actuators and all(plans)]  # fmt: skip
-        if not self.air:
+        air = [i for i, (a, plans) in enumerate(zip(b.actions, b.node_schedules, strict=True))
+               if a.actuators and all(plans)]  # fmt: skip
+        if not air:
             raise ValueError(
                 f"{b.spec.name}: no supply-air action (a System Node Setpoint) whose own plan is a "
                 "SetpointManager:Scheduled's schedule, for the reset to set"
@@ -74,34 +82,60 @@ class SupplyAirReset:
         outdoor = [s.name for s in b.sensors if s.variable.lower() == OUTDOOR]
         if not outdoor:
             raise ValueError(f"{b.spec.name}: the reset reads the outdoor dry bulb; observe '{OUTDOOR}'")
-        self.outdoor = outdoor[0]
-        self.zones = list(zip(b.temperatures, (upper for _, upper in b.zone_bounds), strict=True))
-        self.low = np.array([a.low for a in b.actions])
-        self.high = np.array([a.high for a in b.actions])
-        self.n = len(b.actions)
+        zones = tuple(zip(b.temperatures, (upper for _, upper in b.zone_bounds), strict=True))
+        return cls(tuple(air), zones, outdoor[0], tuple(a.low for a in b.actions), tuple(a.high for a in b.actions),
+                   max(1, round(60 / b.steps_per_day * 24 / cfg.interval_min)))  # fmt: skip
+
+    @property
+    def readings(self) -> list[str]:
+        """Every sensor it reads, once each, in order."""
+        return list(dict.fromkeys([self.outdoor, *(name for zone in self.zones for name in zone)]))
+
+
+def advance(cfg: ResetConfig, points: ResetPoints, t_max: float, readings: dict) -> tuple[float, np.ndarray]:
+    """One control step of the reset: (t_max after this step's trims and responds, the normalized action: the
+    supply-air setpoint on `points.air`, NaN elsewhere). `readings`: the step's sensors by name."""
+    beyond = -cfg.ignores
+    for t, upper in points.zones:
+        above = readings[t] - readings[upper]
+        beyond += 3 if above > cfg.three_k else 2 if above > cfg.two_k else 1 if above > cfg.request_k else 0
+    for _ in range(points.steps_per_interval):
+        step = cfg.trim_k if beyond <= 0 else max(cfg.respond_k * beyond, cfg.respond_max_k)
+        t_max = min(max(t_max + step, cfg.min_c), cfg.max_c)
+    share = np.clip((readings[points.outdoor] - cfg.outdoor_low_c) / (cfg.outdoor_high_c - cfg.outdoor_low_c), 0, 1)
+    sat = float(t_max + share * (cfg.min_c - t_max))
+    action = np.full(len(points.low), np.nan)
+    for i in points.air:
+        low, high = points.low[i], points.high[i]
+        action[i] = 2 * (min(max(sat, low), high) - low) / (high - low) - 1
+    return t_max, action.astype(np.float32)
+
+
+def description(cfg: ResetConfig, points: ResetPoints) -> dict:
+    """The reset as a served planner's contract carries it (`from_description` reads it back)."""
+    return {"name": NAME, "config": asdict(cfg), "points": asdict(points)}
+
+
+def from_description(entry: dict) -> tuple[ResetConfig, ResetPoints]:
+    p = entry["points"]
+    points = ResetPoints(tuple(p["air"]), tuple(tuple(z) for z in p["zones"]), p["outdoor"], tuple(p["low"]),
+                         tuple(p["high"]), int(p["steps_per_interval"]))  # fmt: skip
+    return ResetConfig(**entry["config"]), points
+
+
+class SupplyAirReset:
+    """Callable (observation, info) -> normalized action: G36's reset on each supply-air node action, NaN (the
+    building's own control) on every other."""
+
+    relinquishes = True  # its NaN elements mean "the building's own control" (the evaluation sets relinquish)
+
+    def __init__(self, building: str | Path | None = None, cfg: ResetConfig | None = None, **_):
+        from parallel_eplus.buildings.building import load_building
+
+        self.cfg = cfg or ResetConfig()
+        self.points = ResetPoints.of(load_building(building), self.cfg)
         self.t_max = self.cfg.max_c  # SP0
-        self.steps_per_interval = max(1, round(60 / b.steps_per_day * 24 / self.cfg.interval_min))
-
-    def requests(self, info: dict) -> int:
-        c, out = self.cfg, 0
-        for t, upper in self.zones:
-            above = info[t] - info[upper]
-            out += 3 if above > c.three_k else 2 if above > c.two_k else 1 if above > c.request_k else 0
-        return out
-
-    def setpoint(self, outdoor_c: float) -> float:
-        c = self.cfg
-        share = np.clip((outdoor_c - c.outdoor_low_c) / (c.outdoor_high_c - c.outdoor_low_c), 0.0, 1.0)
-        return float(self.t_max + share * (c.min_c - self.t_max))
 
     def __call__(self, obs, info: dict) -> np.ndarray:
-        c = self.cfg
-        beyond = self.requests(info) - c.ignores
-        for _ in range(self.steps_per_interval):
-            step = c.trim_k if beyond <= 0 else max(c.respond_k * beyond, c.respond_max_k)
-            self.t_max = min(max(self.t_max + step, c.min_c), c.max_c)
-        action = np.full(self.n, np.nan)
-        sat = self.setpoint(info[self.outdoor])
-        for i in self.air:
-            action[i] = 2 * (min(max(sat, self.low[i]), self.high[i]) - self.low[i]) / (self.high[i] - self.low[i]) - 1
-        return action.astype(np.float32)
+        self.t_max, action = advance(self.cfg, self.points, self.t_max, info)
+        return action

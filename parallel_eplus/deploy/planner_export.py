@@ -28,6 +28,7 @@ from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.weather_forecast import WEATHER, WEATHER_UNITS
 from parallel_eplus.deploy.contract import CONTRACT_FILE, Contract, output_entries, sensor_entries
 from parallel_eplus.deploy.planner_runtime import ENSEMBLE_FILE, PLANNER_ARRAYS, PlannerRuntime, calendar_arrays
+from parallel_eplus.deploy.served_rule import rule_entry
 from parallel_eplus.learning.model_based.ensemble_graph import INPUT, OUTPUT
 from parallel_eplus.learning.model_based.features import step_times
 
@@ -69,21 +70,26 @@ def _sha256(path: Path) -> str:
 
 def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: float = 6.0,
                    max_forecast_gap_c: float = 6.0, max_spread_k: float | None = None, persistence: bool = False,
-                   record_days: int | None = None) -> Path:  # fmt: skip
+                   record_days: int | None = None, options: str | None = None) -> Path:  # fmt: skip
     """Write the planner at `source` (planner.pt) into `out_dir`; returns the contract's path. `record_days`: how
-    long the own controls are recorded for the fallback's setpoints (default: the run's episodes, up to a year)."""
+    long the own controls are recorded for the fallback's setpoints (default: the run's episodes, up to a year).
+    `options`: settings overriding the planner's own, as `evaluate --planner` gives them (not its forecast: the
+    served planner reads the one each request carries)."""
     from parallel_eplus.learning.model_based.control import MPC
     from parallel_eplus.learning.model_based.ensemble_graph import build_graph
+    from parallel_eplus.learning.model_based.saved_planner import PlannerOptions
 
     saved_path = source.parent / "config.json"
     saved = json.loads(saved_path.read_text()) if saved_path.is_file() else {}
     building_name = saved_building(saved)
-    mpc = MPC.load(source)
-    if mpc.settings.own_plan != "building":
-        raise ValueError(f"{source}: a planner whose own plan is its building's rule (own_plan=rule) cannot be "
-                         "exported yet: the served planner has no rule beside it. Evaluate it in process "
-                         "(`evaluate --policy RUN/planner`)")
+    chosen = PlannerOptions.parse(options)
+    if chosen.forecast != "perfect":
+        raise ValueError("--planner-options forecast: a served planner reads the forecast each request carries")
+    mpc = chosen.apply(MPC.load(source))
     building = load_building(mpc.building)
+    rule = None
+    if mpc.settings.own_plan == "rule":  # the rule it rides is served beside it (served_rule.py), or refused here
+        rule = rule_entry(mpc.rule(0), [s.name for s in building.observed])
     spec = building.spec
     weathers = saved.get("weathers") or list(spec.weathers)[:1] or ["CA"]
     days = record_days or min(int(saved.get("run_days", 365)), 365)
@@ -129,6 +135,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
             "required": False, "meaning": "the last answer's `guard` (steps it still plays the own plan, steps since "
             "it last left it, and the discomfort the model predicted for the own plan's step), sent back so the "
             "planner can test what leaving the own plan cost; without it the guard starts afresh"},
+        "rule": rule,
         "demand_peaks_kw": None if not mpc.demand else {
             "required": False, "charges": mpc.demand.charges.names,
             "meaning": "each demand charge's highest 15-minute facility demand so far this month within its window, "
@@ -199,6 +206,9 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
     for r in rows:
         t, weather, obs = demos.times[r], demos.weathers[r], demos.observations[r]
         info = {"time": t, "weather": weather}
+        if contract["rule"]:  # what the rule reads, in process (info) as in the request (sensors, rule_readings)
+            info |= dict(zip(sensors, map(float, obs[: len(sensors)]), strict=True))
+            info |= {upper: float(demos.bounds[r][k][1]) for k, (_, upper) in enumerate(mpc.rule(0).points.zones)}
         times = step_times(t, mpc.step_minutes, mpc.settings.horizon)
         truth = mpc.forecasts(weather).file.truth(times)
         body = {
@@ -206,6 +216,8 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
             "last_setpoints": dict(zip(names, map(float, demos.physical[r - 1]), strict=True)),
             "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)},
         }  # fmt: skip
+        if contract["rule"]:
+            body["rule_readings"] = {e["name"]: info[e["name"]] for e in contract["rule"]["readings"]}
         mpc.reset(0)
         if mpc.demand:  # the month's peaks so far, kept in process and sent as a client keeps them
             day = int(round(24 * 60 / mpc.step_minutes))

@@ -73,6 +73,12 @@ class PlannerRuntime:
         sides = np.array([side is not None for side in self.sides], bool)  # the own plan sets these (own_radius)
         self.side_array = side_array(self.sides)  # and which bound each thermostat's is (band_thermostats)
         self.follows = sides | self.calendar.own_known(len(sides))
+        self.not_thermostat = ~sides
+        self.rule = None  # the rule the planner rides (`own_plan=rule`): its setpoints are the own plan's there
+        if contract.data.get("rule"):
+            from parallel_eplus.deploy.served_rule import ServedRule
+
+            self.rule = ServedRule(contract.data["rule"], [s["name"] for s in contract.sensors])
         self.own = arrays["own_controls"]  # [12, 24, A] physical: the building's own setpoints by month and hour
         self.x_mean, self.x_std = arrays["x_mean"], arrays["x_std"]
         self.low = np.array([o["low"] for o in contract.outputs])
@@ -98,10 +104,16 @@ class PlannerRuntime:
         seed = decision_seed(self.seed, when.isoformat(), s[0])
         weights = None if self.energy.objective == "energy" else self.energy.at([when, *times[:-1]])[None]
         bounds = self.calendar.bounds(times)
-        reference = None
+        reference, follows, ruled, rule_state = None, self.follows, None, None
         if self.reference == "own":
             reference = own_reference(bounds, self.calendar.tolerance, self.sides, self.low, self.high, a_last,
                                       self.calendar.own_actions(times))[None]  # fmt: skip
+        if self.rule is not None:  # its setpoints now, held over the horizon, as in process (control.py `own_plan`)
+            ruled, rule_state = self.rule.step(body, obs)
+            ruled[~self.not_thermostat] = np.nan
+            sets = np.isfinite(ruled)
+            reference[0][:, sets] = ruled[sets]
+            follows = follows | sets
         demand = None
         if self.demand is not None:  # the month's running peaks come with the request (the server keeps no state)
             try:
@@ -114,7 +126,7 @@ class PlannerRuntime:
         guard = self._guard(body.get("guard"), s, when) if reference is not None else None
         applies = self.calendar(times)[None]
         plan = self.planner.plan(s, a_last[None], exo, applies, bounds[None], self.comfort_weight, self.support,
-                                 warm[None], [seed], weights, reference, demand, self.follows,
+                                 warm[None], [seed], weights, reference, demand, follows,
                                  None if guard is None else guard[1], self.side_array)  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
@@ -123,13 +135,18 @@ class PlannerRuntime:
             "plan": plan.increments[0].tolist(), "spread_k": round(float(plan.spread_k[0]), 4),
             "cost": round(float(plan.cost[0]), 4), "plan_ms": round(plan.ms, 2),
         }  # fmt: skip
+        if rule_state is not None:  # the rule's memory, for the next request to send back (`rule_state`)
+            answer["rule_state"] = rule_state
         if guard is not None:  # its state, for the next request to send back (`guard`)
             guard[0].record(plan, bounds[None, 0], applies[:, 0])
             answer["guard"] = guard[0].states[0].as_dict()
         reason = self._distrust(s[0], a_last, exo[0], weather, body.get("sensors", {}), float(plan.spread_k[0]))
         if reason:
             log.warning("fallback at %s: %s", body.get("time"), reason)
-            own = self.own[when.month - 1, when.hour]
+            own = self.own[when.month - 1, when.hour].copy()
+            if ruled is not None:  # where the rule sets a setpoint, the rule's (the own plan the planner rode)
+                sets = np.isfinite(ruled)
+                own[sets] = (self.low + (ruled.astype(np.float64) + 1) / 2 * (self.high - self.low))[sets]
             answer.update(setpoints=self._physical(own), fallback=True, reason=reason, plan=None)
         return answer
 

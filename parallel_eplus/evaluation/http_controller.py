@@ -93,6 +93,9 @@ class HttpController:
             body |= {"last_setpoints": self.last, "forecast": self._forecast(info), "plan": self.plan}
             if self.guard is not None:  # `guard_k`'s state, as the last answer left it
                 body["guard"] = self.guard
+            if self.contract.get("rule"):  # the rule it rides: what it reads beyond the sensors, and its memory
+                body["rule_readings"] = {r["name"]: float(info[r["name"]]) for r in self.contract["rule"]["readings"]}
+                body["rule_state"] = self.rule_state
         if self.demand is not None:  # the building's meter: the month's running peaks so far, as its BMS keeps them
             self.demand.observe(info["time"], sensors[self.meter])
             body["demand_peaks_kw"] = self.demand.month_peaks(self.charges, info["time"])
@@ -102,12 +105,13 @@ class HttpController:
             raise ValueError(f"controller at {self.url} returned non-finite setpoints: {answer}")
         if self.planner:
             self.last, self.plan = dict(zip(self.outputs, physical.tolist(), strict=True)), answer.get("plan")
-            self.guard = answer.get("guard")
+            self.guard, self.rule_state = answer.get("guard"), answer.get("rule_state")
             self.fallbacks += bool(answer.get("fallback"))
         return 2 * (physical - self.low) / (self.high - self.low) - 1
 
     fallbacks = 0  # answers a served planner marked as fallbacks
     guard = None  # a served planner's `guard`, sent back with the next request
+    rule_state = None  # a served planner's rule's memory (`own_plan=rule`), sent back with the next request
 
     def _forecast(self, info: dict) -> dict[str, list[float]]:
         """The coming steps' weather from the episode's own file, as the contract's forecast block asks for it: the

@@ -218,13 +218,13 @@ class MPC:
         if self.settings.own_plan == "rule":
             not_thermostat = np.array([side is None for side in self.thermostat_sides])
             for i, info in enumerate(infos):
-                ruled = self._rule(i)(np.asarray(obs)[i], info)
+                ruled = self.rule(i)(np.asarray(obs)[i], info)
                 sets = np.isfinite(ruled) & not_thermostat
                 plan[i][:, sets] = ruled[sets]
                 self.ruled |= sets
         return plan
 
-    def _rule(self, worker: int):
+    def rule(self, worker: int):
         """The worker's rule (the spec's `controller`, as `evaluate --rbc` makes it), fresh after its reset."""
         if self.rules[worker] is None:
             from parallel_eplus.evaluation.controllers import RBC_LABEL, Controller
