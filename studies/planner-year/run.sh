@@ -9,7 +9,9 @@
 #
 # Environment: SEEDS (default "0 1 2"), WORK (episodes, outside the repository; default ../planner-year), SETTINGS (extra --planner
 # settings, default none: the planners' own), WORKERS (2: Ray tasks, one planner and one EnergyPlus each), COMMIT
-# (the code the study runs, a `git archive` copy, so later edits to the working tree cannot change its figures).
+# (the code the study runs, a `git archive` copy, so later edits to the working tree cannot change its figures),
+# BUILDING (the spec the planners were trained on, where it is not the target's name: a variant's planners, e.g.
+# `BUILDING=office-small run.sh office-small-cost:perfect` plays results/model-based/office-small-cost/runs/).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 REPO=$PWD
@@ -32,7 +34,7 @@ one() {  # building forecast seed
     [ -f "$out/results.csv" ] && { echo "$b $f seed $s: done"; return; }
     echo "$(date -Is) $b $f seed $s (code $COMMIT)"
     # from $WORK: `python -m` puts the working directory first on the path, before PYTHONPATH's copy
-    (cd "$WORK" && "$PY" -m parallel_eplus.cli evaluate --building "$b" --baseline --policy "$planner=Planner" \
+    (cd "$WORK" && "$PY" -m parallel_eplus.cli evaluate --building "${BUILDING:-$b}" --baseline --policy "$planner=Planner" \
         --planner "forecast=$f${SETTINGS:+,$SETTINGS}" --weathers CA,CO,FL,IL,VA --run-days "$(days "$b")" \
         --workers "$WORKERS" --backend ray --out "$out" --resume --quiet) > "$out.log" 2>&1 || echo "failed: $out.log"
 }
