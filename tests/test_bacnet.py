@@ -259,3 +259,11 @@ def test_a_supervisor_priority_outside_8_to_16_is_refused(priority, tmp_path):
 
     with pytest.raises(ValueError, match="8-16"):
         SupervisorConfig(tmp_path, f"{HOST}:47808", tmp_path / "points.toml", priority=priority)
+
+
+def test_a_planner_is_refused_by_the_supervisor_naming_what_serves_it(tmp_path):
+    from parallel_eplus.deploy.bacnet_supervisor import Supervisor, SupervisorConfig
+
+    (tmp_path / "controller.json").write_text('{"format": 2, "kind": "planner"}')
+    with pytest.raises(ValueError, match="holds a planner.*parallel-eplus serve"):
+        Supervisor(SupervisorConfig(tmp_path, f"{HOST}:47808", tmp_path / "points.toml"))

@@ -59,6 +59,13 @@ class Supervisor:
     def __init__(self, config: SupervisorConfig):
         self.config = config
         self.contract = Contract.read(config.controller)
+        if self.contract.data.get("kind") == "planner":
+            raise ValueError(
+                f"{config.controller} holds a planner: the BACnet supervisor runs a policy network (controller.onnx), "
+                "and a planner needs each step's forecast and its last plan beside the points. Serve it over HTTP "
+                f"(`parallel-eplus serve {config.controller}`; docs/deploy.md), or supervise with a policy learned "
+                "through its model (`train --mpc student=gradient`, then `export`)"
+            )
         self.session, self.io_names = load_session(config.controller, self.contract)
         self.map = PointMap.read(config.point_map)
         names = [o["name"] for o in self.contract.outputs]
