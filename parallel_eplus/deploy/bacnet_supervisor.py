@@ -1,7 +1,8 @@
 """`parallel-eplus serve DIR --bacnet ADDRESS`: an exported controller as a BACnet supervisor (onnxruntime, BAC0).
 
 Every control step it reads the contract's points from the device (one ReadPropertyMultiple: the sensors, the
-time, each setpoint's priority array), computes the setpoints with controller.onnx and writes them at its priority
+time, each setpoint's priority array), computes the setpoints with controller.onnx (an exported planner: its
+runtime, bacnet_planner.py) and writes them at its priority
 (default 8; 1-7 are refused: ASHRAE 135 practice keeps them for life safety and critical equipment). It gives the
 building back (null at its priority, so the device's own control resumes) on SIGINT/SIGTERM, on an error it cannot
 recover from, and for a step whose answer is a fallback (a reading the policy cannot take). A command found at a
@@ -59,21 +60,22 @@ class Supervisor:
     def __init__(self, config: SupervisorConfig):
         self.config = config
         self.contract = Contract.read(config.controller)
+        self.planner = None  # an exported planner (`kind: planner`): each step the request its HTTP client sends
         if self.contract.data.get("kind") == "planner":
-            raise ValueError(
-                f"{config.controller} holds a planner: the BACnet supervisor runs a policy network (controller.onnx), "
-                "and a planner needs each step's forecast and its last plan beside the points. Serve it over HTTP "
-                f"(`parallel-eplus serve {config.controller}`; docs/deploy.md), or supervise with a policy learned "
-                "through its model (`train --mpc student=gradient`, then `export`)"
-            )
-        self.session, self.io_names = load_session(config.controller, self.contract)
+            from parallel_eplus.deploy.bacnet_planner import PlannerSteps
+
+            self.planner = PlannerSteps(config.controller, self.contract)
+        else:
+            self.session, self.io_names = load_session(config.controller, self.contract)
         self.map = PointMap.read(config.point_map)
         names = [o["name"] for o in self.contract.outputs]
-        self.map.check([s["name"] for s in self.contract.sensors], names)
+        extra = self.planner.points if self.planner else []  # a planner's rule reads points beyond the sensors
+        self.map.check([s["name"] for s in self.contract.sensors] + extra, names)
         if self.contract.needs_time and self.map.one("time") is None:
             log.info("no `time` point: the policy's clock features from this machine's local time")
         by_name = {p.name: p for p in self.map.points}
         self.sensors = [by_name[s["name"]] for s in self.contract.sensors]
+        self.extra = [by_name[n] for n in extra]
         self.setpoints = [next(p for p in self.map.role("setpoint") if p.name == n) for n in names]
         self.device = bacnet.peer(config.device)
         self.written: dict[str, float] = {}  # our command on each point (float32, as the device holds it)
@@ -88,7 +90,7 @@ class Supervisor:
         from bacpypes3.pdu import Address
         from bacpypes3.primitivedata import ObjectIdentifier
 
-        wanted = [*self.sensors, *(p for r in ("step", "steps", "time") if (p := self.map.one(r)))]
+        wanted = [*self.sensors, *self.extra, *(p for r in ("step", "steps", "time") if (p := self.map.one(r)))]
         request: list = []
         for p in wanted:
             request += [ObjectIdentifier(p.object_id), ["present-value"]]
@@ -115,8 +117,11 @@ class Supervisor:
     def answer(self, state: dict) -> np.ndarray | None:
         """The controller's setpoints for the readings, or None (a fallback) where it cannot take them."""
         body = {"sensors": {p.name: float(state[p.name]) for p in self.sensors}}
-        if self.contract.needs_time:  # the device's clock, else ours: the local time the coming step starts
+        if self.contract.needs_time or self.planner:  # the device's clock, else ours: when the coming step starts
             body["time"] = str(state.get("time") or dt.datetime.now().isoformat(timespec="seconds"))
+        if self.planner:
+            extra = {p.name: float(state[p.name]) for p in self.extra}
+            return self.planner.answer(body["sensors"], extra, body["time"], state.get("step"))
         try:
             obs = self.contract.observation(body)
         except InputError as e:
