@@ -196,7 +196,7 @@ def test_resume_runs_only_the_episodes_an_interrupted_sweep_did_not_finish(tmp_p
     summary.write_text(summary.read_text().replace('"complete": true', '"complete": false'))
 
     again = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path, progress=False, resume=True)
-    dirs = dict(zip(zip(again.controller, again.weather), again.episode_dir, strict=True))
+    dirs = dict(zip(zip(again.controller, again.weather, strict=True), again.episode_dir, strict=True))
     assert [k for k in dirs if dirs[k] not in set(first.episode_dir)] == [(RBC_LABEL, "FL")]
     assert Path(dirs[(RBC_LABEL, "FL")]).parent == cut.parent and Path(dirs[(RBC_LABEL, "FL")]) != cut
     pd.testing.assert_series_equal(first.energy_kwh, again.energy_kwh)  # the same table, rerun episode included
