@@ -308,6 +308,12 @@ def test_a_planner_supervises_a_day_over_bacnet_as_it_answers_in_process(loop, t
     assert len(over_bacnet) == 96 and "acted on 96 steps (0 fallbacks)" in loop.log("supervisor")
     pd.testing.assert_frame_equal(in_process_planner(planner, tmp_path / "reference"), over_bacnet, check_exact=True)
 
+    from parallel_eplus.deploy.bacnet_planner import PlannerSteps
+    from parallel_eplus.deploy.contract import Contract
+
+    steps = PlannerSteps(planner, Contract.read(planner))  # a reading it cannot take: the building's own controls
+    assert steps.answer({"outdoor_temp_c": 12.0}, {}, "2017-07-01T14:00:00", 5) is None
+    assert list(steps.last.values()) == pytest.approx(steps.runtime.own[6, 14].tolist())  # then in force: theirs
     contract = json.loads((planner / "controller.json").read_text())
     contract["forecast"]["missing"] = "refuse"
     (planner / "controller.json").write_text(json.dumps(contract))

@@ -203,3 +203,17 @@ def test_resume_runs_only_the_episodes_an_interrupted_sweep_did_not_finish(tmp_p
 
     longer = run_sweep(controllers[:1], ["CA"], 2, 1, tmp_path, progress=False, resume=True)
     assert longer.episode_dir[0] not in set(first.episode_dir)  # another length is another episode
+
+
+def test_resume_takes_an_episode_only_for_its_own_weather_length_building_and_test_period():
+    from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.evaluation.resume import same_job
+
+    cfg = SimulationConfig(weather="CO", building="/copy-1/specs/office-medium.toml", run_days=21, start_day=40,
+                           warmup_days=7)  # fmt: skip
+    summary = {"complete": True, "weather": "CO", "run_days": 21, "building": "/copy-2/specs/office-medium.toml",
+               "warmup_days": 7, "period_start": "2017-02-16 00:10:00"}  # fmt: skip
+    assert same_job(summary, cfg)  # day 47: the period's first scored day; another code copy's path, same spec
+    for change in ({"period_start": "2017-07-01 00:10:00"}, {"building": "/x/office-small.toml"}, {"weather": "FL"},
+                   {"complete": False}, {"warmup_days": 0}, {"run_days": 365}):  # fmt: skip
+        assert not same_job({**summary, **change}, cfg), change

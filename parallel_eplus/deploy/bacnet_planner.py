@@ -66,11 +66,20 @@ class PlannerSteps:
             answer = self.runtime.act(body)
         except InputError as e:
             log.warning("fallback at step %s: %s; the building's own controls act", step, e)
-            return None
-        setpoints = [answer["setpoints"][n]["value"] for n in self.outputs]
-        self.last, self.plan = dict(zip(self.outputs, setpoints, strict=True)), answer.get("plan")
+            return self._given_back(time)
         self.guard, self.rule_state = answer.get("guard"), answer.get("rule_state")
         if answer["fallback"]:
             log.warning("fallback at step %s: %s; the building's own controls act", step, answer["reason"])
-            return None
+            return self._given_back(time)
+        setpoints = [answer["setpoints"][n]["value"] for n in self.outputs]
+        self.last, self.plan = dict(zip(self.outputs, setpoints, strict=True)), answer.get("plan")
         return np.array(setpoints)
+
+    def _given_back(self, time: str) -> None:
+        """The step goes to the building's own controls (the supervisor relinquishes): what is in force then is
+        theirs, which the next request's last setpoints take as their typical values at this month and hour (those
+        recorded at export); the search starts afresh."""
+        when = dt.datetime.fromisoformat(time)
+        own = np.clip(self.runtime.own[when.month - 1, when.hour], self.runtime.low, self.runtime.high)
+        self.last, self.plan = dict(zip(self.outputs, map(float, own), strict=True)), None
+        return None

@@ -42,7 +42,7 @@ def unit_of(name: str, declared: str = "") -> str:
     return next((u for suffix, u in UNIT_SUFFIXES.items() if name.endswith(suffix)), "")
 
 
-def _same_unit(a: str, b: str) -> bool:
+def same_unit(a: str, b: str) -> bool:
     return UNIT_ALIASES.get(a.strip().lower(), a.strip()) == UNIT_ALIASES.get(b.strip().lower(), b.strip())
 
 
@@ -134,7 +134,7 @@ class Contract:
         value = readings[name]
         if isinstance(value, dict):
             unit = value.get("unit")
-            if unit is not None and not _same_unit(str(unit), sensor["unit"]):
+            if unit is not None and not same_unit(str(unit), sensor["unit"]):
                 raise InputError(field, f"unit {unit!r}; the controller reads {sensor['unit']!r}")
             value = value.get("value")
         if isinstance(value, bool) or not isinstance(value, int | float):

@@ -249,6 +249,8 @@ def export(run_or_model: Path, out_dir: Path, **planner_options) -> Path:
     planner = planner_source(run_or_model)
     if planner is not None:
         return export_planner(planner, out_dir, **planner_options)
+    if planner_options.get("options"):
+        raise ValueError(f"--planner-options: {run_or_model} is a policy, not a planner (a model-based run's)")
     model_zip = model_file(run_or_model)
     arrays, contract = build(model_zip)
     model = build_model(arrays, doc=f"parallel-eplus controller from {model_zip}")

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from parallel_eplus.buildings.air_reset import advance, description, from_description
-from parallel_eplus.deploy.contract import InputError
+from parallel_eplus.deploy.contract import InputError, same_unit
 
 
 def rule_entry(rule, sensor_names: list[str]) -> dict:
@@ -37,7 +37,11 @@ class ServedRule:
     """One request's step of the rule: (its normalized action, NaN where it releases; its state after the step)."""
 
     def __init__(self, entry: dict, sensor_names: list[str]):
-        self.cfg, self.points = from_description(entry)
+        try:
+            self.cfg, self.points = from_description(entry)
+        except (KeyError, TypeError) as e:
+            raise ValueError(f"the contract's `rule` is not one this version reads ({e}): export the planner "
+                             "again") from None
         self.sensor_names = sensor_names
         self.extra = [r["name"] for r in entry["readings"]]
 
@@ -52,10 +56,16 @@ class ServedRule:
             return {}
         if not isinstance(given, dict):
             raise InputError("rule_readings", f"required: an object of {', '.join(self.extra)} (°C)")
+        unknown = sorted(set(given) - set(self.extra))
+        if unknown:
+            raise InputError(f"rule_readings.{unknown[0]}", f"unknown reading; the rule reads {', '.join(self.extra)}")
         out = {}
         for name in self.extra:
             v = given.get(name)
-            v = v.get("value") if isinstance(v, dict) else v
+            if isinstance(v, dict):
+                if v.get("unit") is not None and not same_unit(str(v["unit"]), "C"):
+                    raise InputError(f"rule_readings.{name}", f"unit {v['unit']!r}; the rule reads °C")
+                v = v.get("value")
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
                 raise InputError(f"rule_readings.{name}", "missing or not a finite number")
             out[name] = float(v)

@@ -11,7 +11,8 @@
 # settings, default none: the planners' own), WORKERS (2: Ray tasks, one planner and one EnergyPlus each), COMMIT
 # (the code the study runs, a `git archive` copy, so later edits to the working tree cannot change its figures),
 # BUILDING (the spec the planners were trained on, where it is not the target's name: a variant's planners, e.g.
-# `BUILDING=office-small run.sh office-small-cost:perfect` plays results/model-based/office-small-cost/runs/).
+# `BUILDING=results/model-based/office-small-cost/spec.toml run.sh office-small-cost:perfect` plays the runs in
+# results/model-based/office-small-cost/runs/, trained on that spec).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 REPO=$PWD
@@ -36,7 +37,7 @@ one() {  # building forecast seed
     # from $WORK: `python -m` puts the working directory first on the path, before PYTHONPATH's copy
     (cd "$WORK" && "$PY" -m parallel_eplus.cli evaluate --building "${BUILDING:-$b}" --baseline --policy "$planner=Planner" \
         --planner "forecast=$f${SETTINGS:+,$SETTINGS}" --weathers CA,CO,FL,IL,VA --run-days "$(days "$b")" \
-        --workers "$WORKERS" --backend ray --out "$out" --resume --quiet) > "$out.log" 2>&1 || echo "failed: $out.log"
+        --workers "$WORKERS" --backend ray --out "$out" --resume --quiet) >> "$out.log" 2>&1 || echo "failed: $out.log"
 }
 
 if [ "${1:-}" = merge ]; then

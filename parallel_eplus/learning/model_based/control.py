@@ -217,8 +217,10 @@ class MPC:
                          for i, info in enumerate(infos)])  # fmt: skip
         if self.settings.own_plan == "rule":
             not_thermostat = np.array([side is None for side in self.thermostat_sides])
-            for i, info in enumerate(infos):
-                ruled = self.rule(i)(np.asarray(obs)[i], info)
+            n = len(self.layout.sensors)
+            for i, info in enumerate(infos):  # the sensors as observed (float32, clipped): what a served rule reads
+                seen = info | dict(zip(self.layout.sensors, np.asarray(obs)[i][:n].tolist(), strict=True))
+                ruled = self.rule(i)(np.asarray(obs)[i], seen)
                 sets = np.isfinite(ruled) & not_thermostat
                 plan[i][:, sets] = ruled[sets]
                 self.ruled |= sets
