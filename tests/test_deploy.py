@@ -260,7 +260,7 @@ def test_a_policy_whose_thermostats_cross_is_exported_and_served_uncrossed(tmp_p
     its cooling one; the env lowers it to the cooling setpoint, and the exported graph and the served answer must
     too: the contract names the pair, and the graph replays the recorded (uncrossed) setpoints within 1e-5."""
     from parallel_eplus.buildings.resources import spec_file
-    from parallel_eplus.deploy.server import load_runtime
+    from parallel_eplus.deploy.runtime import load_runtime
 
     text = spec_file("office-small").read_text()
     text = text.replace("low = 23.0\nhigh = 30.0\ninitial = 24.0", "low = 20.0\nhigh = 24.0\ninitial = 24.0", 1)

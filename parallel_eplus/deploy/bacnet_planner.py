@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.deploy.contract import Contract, InputError
+from parallel_eplus.deploy.runtime import load_runtime
 
 log = logging.getLogger("parallel_eplus.deploy.bacnet_supervisor")
 
@@ -30,8 +31,6 @@ class PlannerSteps:
                 "carry: export it with --persistence (`parallel-eplus export RUN -o DIR --persistence`) to supervise "
                 "over BACnet, or serve it over HTTP with the forecast in each request (docs/deploy.md)"
             )
-        from parallel_eplus.deploy.server import load_runtime
-
         self.runtime = load_runtime(directory)  # its files checked against the contract
         self.outputs = [o["name"] for o in contract.outputs]
         self.last = {o["name"]: float(o["initial"]) for o in contract.outputs}
