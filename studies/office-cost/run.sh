@@ -8,7 +8,8 @@
 # built-in stops at 23: 1 K below its own 24 C leaves no room to pre-cool ahead of the afternoon's prices and peaks).
 #
 #   bash studies/office-cost/run.sh spec    # results/model-based/office-small-cost/spec.toml from the built-in spec
-#   bash studies/office-cost/run.sh train   # three planners, ~17 min each on 2 cores; a finished seed is skipped
+#   bash studies/office-cost/run.sh train   # three planners, ~17 min each on 2 cores; a finished seed is skipped,
+#                                           # a stopped one goes on from its last checkpoint (every 5,000 steps)
 #   bash studies/office-cost/run.sh save    # each finished run's planner into results/model-based/office-small-cost/runs/
 #   bash studies/office-cost/run.sh year    # their full years on the five weathers (studies/planner-year, resumable)
 #   bash studies/office-cost/run.sh merge   # -> results/model-based/office-small-cost/year-planner/
@@ -44,12 +45,17 @@ PY
 train() {  # seed
     local run=$NAME-mpc-seed$1
     if grep -qs '"state": "finished"' "$WORK/runs/$run/status.json"; then echo "$run: finished"; return; fi
-    echo "$(date -Is) $run (code $COMMIT)"
-    (cd "$WORK" && PYTHONPATH=$CODE "$PY" -m parallel_eplus.cli train --building "$SPEC" --weathers CA,CO,FL \
-        --workers 2 --seed "$1" --timesteps 35000 --run-name "$run" --run-days 14 \
-        --random-start --comfort-margin 0.05 --algorithm mpc \
-        --objective cost --time-features --comfort-target 99.8 --checkpoint-every 5000 --overwrite --mpc "$MPC") \
-        > "$WORK/$run.log" 2>&1 || echo "failed: $WORK/$run.log"
+    local args
+    if compgen -G "$WORK/runs/$run/checkpoints/*" > /dev/null; then  # a stopped run: on from its last checkpoint
+        args=(--resume "runs/$run" --timesteps 35000)
+    else
+        args=(--building "$SPEC" --weathers CA,CO,FL --workers 2 --seed "$1" --timesteps 35000 --run-name "$run"
+              --run-days 14 --random-start --comfort-margin 0.05 --algorithm mpc --objective cost --time-features
+              --comfort-target 99.8 --checkpoint-every 5000 --overwrite --mpc "$MPC")
+    fi
+    echo "$(date -Is) $run (code $COMMIT): ${args[0]}"
+    (cd "$WORK" && PYTHONPATH=$CODE "$PY" -m parallel_eplus.cli train "${args[@]}") >> "$WORK/$run.log" 2>&1 \
+        || echo "failed or stopped: $WORK/$run.log (run it again to go on from the last checkpoint)"
 }
 
 save() {  # seed: what a year needs (the planner) and what says how it was made, not the checkpoints
@@ -72,5 +78,5 @@ case ${1:-} in
     save) for s in ${SEEDS:-0 1 2}; do save "$s"; done ;;
     year) BUILDING=$SPEC bash studies/planner-year/run.sh "$NAME:perfect" ;;
     merge) bash studies/planner-year/run.sh merge ;;
-    *) sed -n '2,20p' "$0"; exit 2 ;;
+    *) sed -n '2,18p' "$0"; exit 2 ;;
 esac
