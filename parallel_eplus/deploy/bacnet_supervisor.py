@@ -22,8 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.deploy import bacnet
-from parallel_eplus.deploy.contract import Contract, InputError, load_session
+from parallel_eplus.deploy.contract import Contract, InputError
 from parallel_eplus.deploy.point_map import PointMap
+from parallel_eplus.deploy.runtime import PolicyRuntime
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +67,7 @@ class Supervisor:
 
             self.planner = PlannerSteps(config.controller, self.contract)
         else:
-            self.session, self.io_names = load_session(config.controller, self.contract)
+            self.policy = PolicyRuntime(config.controller, self.contract)
         self.map = PointMap.read(config.point_map)
         names = [o["name"] for o in self.contract.outputs]
         extra = self.planner.points if self.planner else []  # a planner's rule reads points beyond the sensors
@@ -123,11 +124,10 @@ class Supervisor:
             extra = {p.name: float(state[p.name]) for p in self.extra}
             return self.planner.answer(body["sensors"], extra, body["time"], state.get("step"))
         try:
-            obs = self.contract.observation(body)
+            row = self.policy.setpoint_row(body)
         except InputError as e:
             log.warning("fallback at step %s: %s; the building's own controls act", state.get("step"), e)
             return None
-        row = self.session.run([self.io_names[1]], {self.io_names[0]: obs})[0][0]
         return row if np.all(np.isfinite(row)) else None
 
     def _override(self, point, held: dict[int, float]) -> int | None:

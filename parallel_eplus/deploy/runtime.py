@@ -19,9 +19,13 @@ class PolicyRuntime:
         self.contract = contract
         self.session, self.io_names = load_session(directory, contract)
 
-    def act(self, body: dict) -> dict:
+    def setpoint_row(self, body: dict) -> np.ndarray:
+        """The setpoints in the contract's output order (InputError: a reading it cannot take)."""
         obs = self.contract.observation(body)
-        row = self.session.run([self.io_names[1]], {self.io_names[0]: obs})[0][0]
+        return self.session.run([self.io_names[1]], {self.io_names[0]: obs})[0][0]
+
+    def act(self, body: dict) -> dict:
+        row = self.setpoint_row(body)
         if not np.all(np.isfinite(row)):  # pragma: no cover - the graph clips every value it is given
             raise InputError("setpoints", "the controller produced a non-finite setpoint", 500)
         return {"setpoints": self.contract.setpoints(row), "time": body.get("time")}
