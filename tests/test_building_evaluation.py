@@ -148,3 +148,37 @@ def test_the_medium_offices_rule_resets_its_supply_air_and_leaves_its_thermostat
     assert hvac[RBC_LABEL] < 0.97 * hvac[BASELINE_LABEL]
     assert Controller(RBC_LABEL, "rbc").relinquishes("office-medium")
     assert not Controller(RBC_LABEL, "rbc").relinquishes("datacenter-2zone")
+
+
+def test_pre_cooling_follows_the_tariffs_peak_window_and_releases_the_rest(tmp_path, no_leaks):
+    """`--rbc parallel_eplus.buildings.precool:PreCool` on the small office under its example tariff, a July
+    Wednesday: the cooling setpoints 2 K below their own schedule's 24 C from 4 h before the summer peak window
+    (weekdays 12-18 h) and back to it by the window's end, clipped at the spec's 23 C floor; released (NaN: the own
+    schedules) at every other hour and for the heating setpoints. The zones enter the window cooler than under
+    their own controls."""
+    from parallel_eplus.buildings.building import load_building
+    from parallel_eplus.evaluation.scenarios import Period
+
+    rule = "parallel_eplus.buildings.precool:PreCool"
+    with pytest.raises(ValueError, match="cannot be imported"):
+        load_building("office-small").controller_class("parallel_eplus.buildings.precool:Nothing")
+    base, pre = Controller(BASELINE_LABEL, "baseline"), Controller("pre-cool", "rbc", rule=rule)
+    assert pre.relinquishes("office-small")
+    july = Period("summer weekday", day=185, start_day=186, weekday="Wednesday", run_days=1, warmup_days=0)
+    df = run_sweep([base, pre], ["CA"], 2, 2, tmp_path, progress=False, building="office-small", periods={"CA": july})
+    dirs = df.set_index("controller")["episode_dir"]
+    steps = {c: pd.read_parquet(Path(d) / "steps.parquet").set_index("time") for c, d in dirs.items()}
+    s = steps["pre-cool"]
+    assert (s.index[0].month, s.index[0].day, s.index[0].day_name()) == (7, 5, "Wednesday")
+    begins = s.index - pd.Timedelta(minutes=10)  # a step's action applies from its start
+    hour = begins.hour + begins.minute / 60
+    lead, window = (hour >= 8) & (hour < 12), (hour >= 12) & (hour < 18)
+    own = s["setpoint_clgsetp_sch"].shift(1)  # the schedule as read when the action was chosen
+    expected = (own - 2 * ((18 - hour) / 6).where(window, 1.0)).clip(lower=23.0)
+    assert (s.loc[lead, "cooling_setpoint_c"] == 23.0).all()
+    assert ((s.loc[window, "cooling_setpoint_c"] - expected[window]).abs() < 1e-3).all()
+    assert s.loc[~(lead | window), "cooling_setpoint_c"].isna().all() and s["heating_setpoint_c"].isna().all()
+    noon = s.index == s.index[0].normalize() + pd.Timedelta(hours=12)
+    zones = [c for c in s.columns if c.endswith("_temp_c") and c != "outdoor_temp_c"]
+    cooler = steps[BASELINE_LABEL].loc[noon, zones].to_numpy() - s.loc[noon, zones].to_numpy()
+    assert (cooler > 0.3).all(), cooler

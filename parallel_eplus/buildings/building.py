@@ -90,17 +90,20 @@ class Building:
         """The observation's bounds (the observed sensors')."""
         return [s.low for s in self.observed], [s.high for s in self.observed]
 
-    def controller_class(self) -> type:
-        """The class the spec's `controller = "module:Class"` names: its rule-based controller (`--rbc`)."""
-        if not self.spec.controller:
+    def controller_class(self, rule: str | None = None) -> type:
+        """The class the spec's `controller = "module:Class"` names, or `rule` (`--rbc module:Class`): its
+        rule-based controller."""
+        named = rule or self.spec.controller
+        if not named:
             raise ValueError(
-                f'{self.spec.path}: --rbc needs the spec to name a controller (controller = "module:Class")'
+                f'{self.spec.path}: --rbc needs the spec to name a controller (controller = "module:Class") '
+                "or a class after it (--rbc module:Class)"
             )
-        module, _, name = self.spec.controller.partition(":")
+        module, _, name = named.partition(":")
         try:
             return getattr(importlib.import_module(module), name)
         except (ImportError, AttributeError) as e:
-            raise ValueError(f"{self.spec.path}: controller {self.spec.controller!r} cannot be imported: {e}") from None
+            raise ValueError(f"{self.spec.path}: controller {named!r} cannot be imported: {e}") from None
 
     def control(self, model: str = "") -> ControlModel:
         """The spec's agent variant (its IDF, all its actions), or with "baseline" its built-in controls."""

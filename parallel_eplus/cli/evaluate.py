@@ -16,6 +16,7 @@ def _temperatures(text: str, flag: str) -> list[float]:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus import io
+    from parallel_eplus.buildings.building import load_building
     from parallel_eplus.buildings.reward import RewardConfig
     from parallel_eplus.buildings.weather import parse_weathers
     from parallel_eplus.errors import EnergyPlusError
@@ -40,7 +41,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     controllers = []
     if args.baseline:
         controllers.append(Controller(BASELINE_LABEL, "baseline"))
-    if args.rbc:
+    if isinstance(args.rbc, str):  # a class named on the command line instead of the spec's `controller`
+        load_building(args.building).controller_class(args.rbc)  # a name that does not import fails here
+        controllers.append(Controller(f"{RBC_LABEL} ({args.rbc.rpartition(':')[2]})", "rbc", rule=args.rbc))
+    elif args.rbc:
         controllers.append(Controller(RBC_LABEL, "rbc"))
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))

@@ -72,7 +72,11 @@ def build_parser() -> argparse.ArgumentParser:
         "with BOPTEST's forecast errors) and planner settings overriding its own, e.g. candidates=128",
     )  # fmt: skip
     ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
-    ev.add_argument("--rbc", action="store_true", help="include the rule-based controller")
+    ev.add_argument(
+        "--rbc", nargs="?", const=True, default=False, metavar="MODULE:CLASS",
+        help="include the rule-based controller: the spec's `controller`, or the class named here (e.g. "
+        "parallel_eplus.buildings.precool:PreCool, pre-cooling ahead of the tariff's peak)",
+    )  # fmt: skip
     ev.add_argument(
         "--rbc-targets", metavar="C,C,...",
         help="the rule-based controller once per zone target (°C), e.g. 22.7,23.5: what the reward pays for each",

@@ -41,6 +41,7 @@ class Controller:
     time_features: bool = False  # the policy observes model.TIME_FEATURES
     schedule_features: bool = False  # and model.SCHEDULE_FEATURES
     rbc_target_c: float | None = None  # the rule-based controller's zone target; None: RBCConfig's
+    rule: str | None = None  # "module:Class": the rule-based controller instead of the spec's `controller`
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
     residual_space: str = "action"  # what the correction applies to (SimulationConfig)
     building: str | None = None  # the spec a policy was trained on (its config.json); None: the data center
@@ -62,7 +63,7 @@ class Controller:
         controller that says so: buildings/air_reset.py); the episode then runs with `relinquish`."""
         if self.kind != "rbc" or not building:
             return False
-        return bool(getattr(load_building(building).controller_class(), "relinquishes", False))
+        return bool(getattr(load_building(building).controller_class(self.rule), "relinquishes", False))
 
     def make(self, building: str | None = None) -> Callable[[np.ndarray, dict], np.ndarray]:
         """A fresh actor for one episode: (observation, info) -> action. `building`: the swept spec, whose
@@ -72,7 +73,7 @@ class Controller:
             return lambda obs, info: empty
         if self.kind == "rbc":
             target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
-            cls = load_building(building).controller_class() if building else RuleBasedController
+            cls = load_building(building).controller_class(self.rule) if building else RuleBasedController
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             if "building" in inspect.signature(cls).parameters:  # a class that reads the spec it acts on
