@@ -6,7 +6,7 @@ share in its own bounds), one row per seed and one for the seeds' mean with thei
         [--rule results/model-based/office-medium/rule-year/results.csv]
 
 `--rule`: a rule-based controller's years on the same weathers (`evaluate --rbc`), shown as a row and as the
-column "HVAC × the rule". Prints a Markdown table (the README's), nothing else.
+column "HVAC × the rule" (`--rule-name`: its row's name). Prints a Markdown table (the README's), nothing else.
 """
 
 from __future__ import annotations
@@ -32,11 +32,11 @@ def totals(rows: pd.DataFrame) -> pd.Series:
     return out
 
 
-def table(results: pd.DataFrame, rule: pd.DataFrame | None) -> str:
+def table(results: pd.DataFrame, rule: pd.DataFrame | None, rule_name: str = "the rule alone") -> str:
     own = totals(results[results.controller == BASELINE_LABEL].drop_duplicates("weather"))
     rows = {"own controls": own}
     if rule is not None:
-        rows["the rule alone"] = totals(rule[rule.controller != BASELINE_LABEL])
+        rows[rule_name] = totals(rule[rule.controller != BASELINE_LABEL])
     learned = results[results.controller != BASELINE_LABEL]
     seeds = {f"{c} {str(r).rsplit('-', 1)[-1]}": totals(g) for (c, r), g in learned.groupby(["controller", "run"])}
     rows.update(seeds)
@@ -48,7 +48,7 @@ def table(results: pd.DataFrame, rule: pd.DataFrame | None) -> str:
     def ratios(t: pd.Series) -> dict[str, float]:
         keys = ("hvac_energy_kwh", "bill", "bill_energy", "bill_demand")
         r = {k: t[k] / own[k] if own[k] else float("nan") for k in keys}
-        r["rule"] = t["hvac_energy_kwh"] / rows["the rule alone"]["hvac_energy_kwh"] if rule is not None else 0.0
+        r["rule"] = t["hvac_energy_kwh"] / rows[rule_name]["hvac_energy_kwh"] if rule is not None else 0.0
         return r
 
     def line(name: str, t: pd.Series, spread: dict[str, tuple[float, float]] | None = None) -> str:
@@ -85,9 +85,10 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("folder", type=Path, help="a merged year-planner folder (its results.csv)")
     p.add_argument("--rule", type=Path, help="a rule's results.csv over the same years")
+    p.add_argument("--rule-name", default="the rule alone", help="its row's name")
     a = p.parse_args()
     rule = pd.read_csv(a.rule) if a.rule else None
-    print(table(pd.read_csv(a.folder / "results.csv"), rule))
+    print(table(pd.read_csv(a.folder / "results.csv"), rule, a.rule_name))
 
 
 if __name__ == "__main__":
