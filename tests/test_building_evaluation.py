@@ -60,6 +60,9 @@ def test_rule_based_controller_comes_from_the_spec(tmp_path):
     with pytest.raises(ValueError, match="4 actions"):  # the data center's, but only two of its actions
         Controller(RBC_LABEL, "rbc").make("datacenter-2zone-temp")
     assert len(Controller(RBC_LABEL, "rbc").make("datacenter-2zone").temperatures) == 2
+    reset = Controller(RBC_LABEL, "rbc", rule="parallel_eplus.buildings.air_reset:SupplyAirReset")
+    with pytest.raises(ValueError, match="no supply-air action"):  # a rule named (--rbc CLASS) acts, on any building
+        reset.make(None)
     assert not list(tmp_path.iterdir())  # nothing ran
 
 

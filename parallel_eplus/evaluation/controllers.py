@@ -61,7 +61,7 @@ class Controller:
     def relinquishes(self, building: str | None) -> bool:
         """Whether its NaN action elements release their actuators to the building's own control (a rule-based
         controller that says so: buildings/air_reset.py); the episode then runs with `relinquish`."""
-        if self.kind != "rbc" or not building:
+        if self.kind != "rbc" or not (building or self.rule):
             return False
         return bool(getattr(load_building(building).controller_class(self.rule), "relinquishes", False))
 
@@ -73,7 +73,8 @@ class Controller:
             return lambda obs, info: empty
         if self.kind == "rbc":
             target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
-            cls = load_building(building).controller_class(self.rule) if building else RuleBasedController
+            named = building or self.rule  # a rule named on the command line acts on the default building too
+            cls = load_building(building).controller_class(self.rule) if named else RuleBasedController
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             if "building" in inspect.signature(cls).parameters:  # a class that reads the spec it acts on
