@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.scaling import to_unit
+
 OUTDOOR = "site outdoor air drybulb temperature"
 NAME = "ASHRAE Guideline 36 supply-air temperature reset"
 
@@ -104,11 +106,9 @@ def advance(cfg: ResetConfig, points: ResetPoints, t_max: float, readings: dict)
         t_max = min(max(t_max + step, cfg.min_c), cfg.max_c)
     share = np.clip((readings[points.outdoor] - cfg.outdoor_low_c) / (cfg.outdoor_high_c - cfg.outdoor_low_c), 0, 1)
     sat = float(t_max + share * (cfg.min_c - t_max))
-    action = np.full(len(points.low), np.nan)
-    for i in points.air:
-        low, high = points.low[i], points.high[i]
-        action[i] = 2 * (min(max(sat, low), high) - low) / (high - low) - 1
-    return t_max, action.astype(np.float32)
+    physical = np.full(len(points.low), np.nan)
+    physical[list(points.air)] = sat
+    return t_max, to_unit(physical, points.low, points.high, clip=True).astype(np.float32)
 
 
 def description(cfg: ResetConfig, points: ResetPoints) -> dict:

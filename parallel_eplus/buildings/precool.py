@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.scaling import to_unit
+
 COOLING = "cooling setpoint"
 
 
@@ -64,11 +66,9 @@ class PreCool:
         return self.cfg.depth_k * (1.0 if hour < start else (end - hour) / (end - start))
 
     def __call__(self, obs, info: dict) -> np.ndarray:
-        action = np.full(len(self.low), np.nan, np.float32)
+        physical = np.full(len(self.low), np.nan)
         offset = self.offset(info["time"])
         if offset > 0:
             for i, sensors in self.cooling:
-                setpoint = min(info[s] for s in sensors) - offset
-                low, high = self.low[i], self.high[i]
-                action[i] = 2 * (min(max(setpoint, low), high) - low) / (high - low) - 1
-        return action
+                physical[i] = min(info[s] for s in sensors) - offset
+        return to_unit(physical, self.low, self.high, clip=True).astype(np.float32)

@@ -16,6 +16,7 @@ import numpy as np
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.model import it_load_schedule
+from parallel_eplus.buildings.scaling import to_unit
 
 
 @dataclass
@@ -77,4 +78,4 @@ class RuleBasedController:
         flow = np.clip(demand, fan_lo, fan_hi)
         setpoint = c.setpoint_floor_c + c.setpoint_k_per_kg_s * np.maximum(fan_lo - demand, 0.0)
         physical = np.concatenate([setpoint, flow])
-        return (2 * (physical - self.low) / (self.high - self.low) - 1).astype(np.float32)
+        return to_unit(physical, self.low, self.high).astype(np.float32)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.scaling import to_unit
 from parallel_eplus.deploy import bacnet
 from parallel_eplus.deploy.contract import unit_of
 from parallel_eplus.deploy.point_map import PointMap, bacnet_unit
@@ -185,7 +186,7 @@ class Device:
                 for p, s in zip(self.map.role("setpoint"), sources, strict=True)))  # fmt: skip
         self.applied.append(tuple(sources))
         v = np.array(values, dtype=np.float64)
-        return 2 * (v - self.low) / (self.high - self.low) - 1  # NaN stays NaN: released
+        return to_unit(v, self.low, self.high)  # NaN stays NaN: released
 
     # -- the episode, in a thread -----------------------------------------------------------------
     def _episode(self, loop: asyncio.AbstractEventLoop) -> dict:

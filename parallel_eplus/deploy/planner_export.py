@@ -25,6 +25,7 @@ import numpy as np
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.resources import saved_building
+from parallel_eplus.buildings.scaling import to_unit
 from parallel_eplus.buildings.weather_forecast import WEATHER, WEATHER_UNITS
 from parallel_eplus.deploy.contract import CONTRACT_FILE, Contract, output_entries, sensor_entries
 from parallel_eplus.deploy.planner_runtime import ENSEMBLE_FILE, PLANNER_ARRAYS, PlannerRuntime, calendar_arrays
@@ -227,7 +228,7 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
             body["demand_peaks_kw"] = mpc.demand.trackers[0].month_peaks(mpc.demand.charges.names, t)
             peaked += bool(body["demand_peaks_kw"])
         answer = runtime.act(body)
-        a_last = np.array([2 * (demos.physical[r - 1] - demos.low) / (demos.high - demos.low) - 1], np.float32)
+        a_last = to_unit(demos.physical[r - 1 : r], demos.low, demos.high).astype(np.float32)
         expected = demos.to_physical(mpc.act(obs[None], [info], a_last)[0])
         served = np.array([answer["setpoints"][n]["value"] for n in names])
         diff = max(diff, float(np.max(np.abs(served - expected))))

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.scaling import from_unit, to_unit
 from parallel_eplus.buildings.weather_forecast import WEATHER
 from parallel_eplus.deploy.contract import Contract, InputError
 from parallel_eplus.learning.model_based.calendar import Calendar, own_reference
@@ -92,7 +93,7 @@ class PlannerRuntime:
         obs = self.contract.observation(body)[0]  # refuses bad readings and time, naming the field
         when = Contract._time(body.get("time"))
         last = self._last_setpoints(body.get("last_setpoints"))
-        a_last = (2 * (last - self.low) / (self.high - self.low) - 1).astype(np.float32)
+        a_last = to_unit(last, self.low, self.high).astype(np.float32)
         times = step_times(when, self.step_minutes, self.settings.horizon)
         weather, source = self._forecast(body.get("forecast"), body.get("sensors", {}))
         warm = self._warm(body.get("plan"))
@@ -130,7 +131,7 @@ class PlannerRuntime:
                                  None if guard is None else guard[1], self.side_array)  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
-            "setpoints": self._physical(self.low + (action + 1) / 2 * (self.high - self.low)),
+            "setpoints": self._physical(from_unit(action, self.low, self.high)),
             "time": body.get("time"), "fallback": False, "forecast": source,
             "plan": plan.increments[0].tolist(), "spread_k": round(float(plan.spread_k[0]), 4),
             "cost": round(float(plan.cost[0]), 4), "plan_ms": round(plan.ms, 2),
@@ -146,7 +147,7 @@ class PlannerRuntime:
             own = self.own[when.month - 1, when.hour].copy()
             if ruled is not None:  # where the rule sets a setpoint, the rule's (the own plan the planner rode)
                 sets = np.isfinite(ruled)
-                own[sets] = (self.low + (ruled.astype(np.float64) + 1) / 2 * (self.high - self.low))[sets]
+                own[sets] = from_unit(ruled, self.low, self.high)[sets]
             answer.update(setpoints=self._physical(own), fallback=True, reason=reason, plan=None)
         return answer
 

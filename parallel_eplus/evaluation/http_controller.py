@@ -20,6 +20,7 @@ import numpy as np
 from parallel_eplus.buildings.bill import DemandTracker
 from parallel_eplus.buildings.building import load_building, weather_path
 from parallel_eplus.buildings.model import DEFAULT
+from parallel_eplus.buildings.scaling import to_unit
 from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
 
 
@@ -107,7 +108,7 @@ class HttpController:
             self.last, self.plan = dict(zip(self.outputs, physical.tolist(), strict=True)), answer.get("plan")
             self.guard, self.rule_state = answer.get("guard"), answer.get("rule_state")
             self.fallbacks += bool(answer.get("fallback"))
-        return 2 * (physical - self.low) / (self.high - self.low) - 1
+        return to_unit(physical, self.low, self.high)
 
     fallbacks = 0  # answers a served planner marked as fallbacks
     guard = None  # a served planner's `guard`, sent back with the next request

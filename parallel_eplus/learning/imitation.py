@@ -34,6 +34,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.scaling import from_unit
 from parallel_eplus.buildings.weather import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import reported_rows
@@ -59,7 +60,7 @@ class Demonstrations:
     bounds: np.ndarray | None = None  # each row's zone bounds [N, K, 2] where they follow the thermostat's schedules
 
     def to_physical(self, actions: np.ndarray) -> np.ndarray:
-        return self.low + (np.clip(actions, -1, 1) + 1) / 2 * (self.high - self.low)
+        return from_unit(np.clip(actions, -1, 1), self.low, self.high)
 
     def __len__(self) -> int:
         return len(self.observations)
