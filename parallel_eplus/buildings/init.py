@@ -1,7 +1,7 @@
 """`parallel-eplus building init`: a starter spec from any EnergyPlus model, in minutes rather than an afternoon.
 
 From a survey of the model (buildings/survey.py: EnergyPlus's own list of what can be read and actuated, and the
-values seen in one simulated day), the observations (outdoor, zone temperatures, facility power) are written
+values seen in its first simulated week), the observations (outdoor, zone temperatures, facility power) are written
 active and the likely actions (zone thermostat setpoints, node setpoints, fan flows) as commented candidates, with
 bounds a user then edits. What it writes loads with `load_spec`; the candidates are commented because choosing
 what the agent owns is the user's decision.
@@ -98,7 +98,7 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         f"# Starter spec for {idf.name}, written by `parallel-eplus building init` after {s.days:.1f} simulated day(s)",
         f"# on {weather.name}. EnergyPlus listed {n_act} actuators and {n_var} output variables: the",
         "# observations below are the usual ones; the actions are commented candidates. Uncomment what the agent",
-        "# should own, check the bounds (they come from one day of the model's own control), then run",
+        "# should own, check the bounds (they come from a week of the model's own control), then run",
         "# `parallel-eplus building check` on this file. Keys are matched case-insensitively by EnergyPlus.",
     ]
     lines += [
