@@ -73,6 +73,10 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
     knob = "cooling_setpoint_clgsetp_sch_no_optimum"
     assert knobs == {f"{knob}_c": 4, f"{knob}_w_sb_c": 1}
     assert "Air Node" not in text  # zone air nodes' setpoints are the thermostat's, not candidates
+    # The survey's week has working days in it (January 1 is a Sunday and a holiday here): the occupied setpoint
+    # and the setback are both seen, and every fan ran.
+    assert "cooling setpoints on schedule CLGSETP_SCH_NO_OPTIMUM together (seen 23.9..29.4 C)" in text
+    assert text.count("# fan ") == 5 and "at most 0.0 kg/s" not in text
     # Its five packaged units each follow their own zone (SetpointManager:SingleZone:Reheat): no shared supply-air
     # knob, which would end every zone's feedback; each node is still offered alone.
     assert "# all 5 air loops' supply air" not in text and "5 single-zone unit(s) left out" in text
