@@ -79,7 +79,7 @@ def test_the_prepared_copy_drops_the_node_from_its_manager_and_keeps_the_followe
 
     report = prepare_idf(medium_office(), tmp_path / "model.idf", 1, takeover=taken_setpoints(spec.actions))
     text = (tmp_path / "model.idf").read_text(encoding="latin-1")
-    from parallel_eplus.buildings.idf_prep import idf_objects
+    from parallel_eplus.buildings.idf_text import idf_objects
 
     managers = {o.fields[0]: o for o in idf_objects(text) if o.kind.lower().startswith("setpointmanager:")}
     assert "VAV_1 SAT setpoint" not in managers  # commented out: the only node it set is the agent's

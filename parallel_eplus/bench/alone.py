@@ -51,7 +51,8 @@ def alone_model(
     """The episode's model (EnergyPlus's CSV off, as training runs it) with the EMS program appended."""
     target.parent.mkdir(parents=True, exist_ok=True)
     control = building.control()
-    prepare_idf(control.idf, target, run_days, energyplus_csv=False, takeover=taken_setpoints(control.actions))
+    prepare_idf(control.idf, target, run_days, energyplus_csv=False, takeover=taken_setpoints(control.actions),
+                ventilation=building.spec.ventilation == "demand")
     with target.open("a", encoding="latin-1") as f:
         f.write("\n\n" + ems_objects(building, action, calling_point))
     return target

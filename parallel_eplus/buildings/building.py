@@ -172,7 +172,7 @@ _OWN_SIDE = {("zone temperature control", "heating setpoint"): "heating",
 def _own_schedules(spec: BuildingSpec, actions, hidden: list[Sensor]) -> tuple[tuple[str | None, ...], ...]:
     """Per action, per actuator: the hidden sensor of the schedule the model's own controls follow there (the
     value the built-in controls would set; read each step, as the thermostat bounds are), None elsewhere."""
-    from parallel_eplus.buildings.idf_prep import idf_objects
+    from parallel_eplus.buildings.idf_text import idf_objects
     from parallel_eplus.buildings.takeover import scheduled_setpoints
     from parallel_eplus.buildings.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
 

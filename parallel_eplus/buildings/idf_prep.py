@@ -9,58 +9,22 @@ Each episode runs `model.idf` written here from the spec's model, never the user
 - EnergyPlus's own CSV off on request (`energyplus_csv=False`): it holds every reported value in memory until
   the run ends (for the data center a year costs 55 MB and 1.4 s) and our step table already has what
   training needs;
-- the node setpoints the agent's actions own taken from the model's setpoint managers (buildings/takeover.py).
-Objects are found by a small IDF tokenizer that skips comments, so a commented-out object is never touched.
+- the node setpoints the agent's actions own taken from the model's setpoint managers (buildings/takeover.py);
+- on request (`ventilation`), the outdoor air on demand (buildings/ventilation.py).
+Objects are found by a small IDF tokenizer that skips comments (idf_text.py), so a commented-out object is never
+touched.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
+from parallel_eplus.buildings.idf_text import IdfObject, idf_objects
 from parallel_eplus.buildings.takeover import Takeover, plan_takeover, rewrite, taken_setpoints
-
-_TOKEN = re.compile(r"!.*|[,;]")
-
-
-@dataclass(frozen=True)
-class IdfObject:
-    """One object: its class, its fields (stripped, comments dropped) and its span in the text."""
-
-    kind: str
-    fields: list[str]
-    start: int
-    end: int  # just after its ';'
-    spans: list[tuple[int, int]]  # each field's text in the IDF (what `set_fields` rewrites, comments kept)
-
-
-def idf_objects(text: str) -> list[IdfObject]:
-    """Every object of an IDF text in order (comments skipped; fields split on commas, the object on ';')."""
-    objects: list[IdfObject] = []
-    values: list[str] = []
-    spans: list[tuple[int, int]] = []
-    start = pos = 0
-    piece, span = "", None
-    for m in _TOKEN.finditer(text):
-        chunk = text[pos : m.start()]
-        if chunk.strip():
-            first = pos + len(chunk) - len(chunk.lstrip())
-            span = (first if span is None else span[0], pos + len(chunk.rstrip()))
-            if not values and not piece.strip():  # the class name begins here
-                start = first
-        piece += chunk
-        pos = m.end()
-        if m.group(0).startswith("!"):
-            continue
-        values.append(piece.strip())
-        spans.append(span or (m.start(), m.start()))
-        piece, span = "", None
-        if m.group(0) == ";":
-            objects.append(IdfObject(values[0], values[1:], start, m.end(), spans[1:]))
-            values, spans = [], []
-    return objects
+from parallel_eplus.buildings.ventilation import DemandVentilation, plan_ventilation
 
 
 def _line_end(text: str, pos: int) -> int:
@@ -128,13 +92,15 @@ def prepare_idf(
     start_day: int = 1,
     weekday: str | None = None,
     takeover: tuple[tuple[str, str], ...] = (),
+    ventilation: bool = False,
 ) -> Takeover:
     """Write the episode's copy of `source` to `target` (see the module's docstring for what changes); returns what
     it took from the model's setpoint managers.
 
     `outputs`: (key, variable) pairs reported every timestep in EnergyPlus's CSV (which they turn on).
     `start_day`, `weekday`: the run period's first day of the year and its weekday (test scenarios).
-    `takeover`: (NODE, control variable) setpoints the agent's actions own (takeover.taken_setpoints)."""
+    `takeover`: (NODE, control variable) setpoints the agent's actions own (takeover.taken_setpoints).
+    `ventilation`: the outdoor air on demand (buildings/ventilation.py)."""
     text = source.read_text(encoding="latin-1")
     objects = idf_objects(text)
     kinds = {o.kind.lower() for o in objects}
@@ -157,6 +123,9 @@ def prepare_idf(
         replace[files[0].start] = (files[0].end, _set_fields(text, files[0], {0: "Yes" if csv else "No"}))
     managers, report = plan_takeover(objects, takeover)
     by_start = {o.start: o for o in objects}
+    demand = plan_ventilation(text, objects) if ventilation else DemandVentilation()
+    for start, values in demand.set_fields:
+        replace[start] = (by_start[start].end, _set_fields(text, by_start[start], values))
     lists = []
     for start, (end, keep) in managers.items():
         new, nodelist = rewrite(text, by_start[start], keep, _set_fields)
@@ -176,8 +145,10 @@ def prepare_idf(
     if outputs and not files:
         added.append(_object("OutputControl:Files", ["Yes"], "EnergyPlus's CSV for the read-backs"))
     added += lists
+    added += [_object(kind, fields, "outdoor air on demand, set by parallel-eplus")
+              for kind, fields in demand.objects()]  # fmt: skip
     target.write_text("".join(out) + "".join(f"\n\n{a}\n" for a in added), encoding="latin-1")
-    return report
+    return dataclasses.replace(report, ventilation=demand.notes) if ventilation else report
 
 
 def takeover_report(idf: Path, actions) -> Takeover:

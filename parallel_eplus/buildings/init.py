@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from parallel_eplus.buildings.idf_text import idf_objects
 from parallel_eplus.buildings.init_air import economizer_candidates, fan_candidates, node_candidates
 from parallel_eplus.buildings.init_text import candidate as _candidate
 from parallel_eplus.buildings.init_text import clamp as _clamp
@@ -22,6 +23,7 @@ from parallel_eplus.buildings.init_text import toml_str as _str
 from parallel_eplus.buildings.loops import topology
 from parallel_eplus.buildings.survey import Survey, summary, survey
 from parallel_eplus.buildings.thermostat import zone_setpoints
+from parallel_eplus.buildings.ventilation import plan_ventilation
 
 # Fuels besides electricity that a facility meter may count (EnergyPlus's resource types), for the energy figure.
 FUELS = ("NaturalGas", "Propane", "FuelOilNo1", "FuelOilNo2", "Diesel", "Gasoline", "Coal", "OtherFuel1",
@@ -78,7 +80,7 @@ def _zone_air_nodes(idf: Path) -> set[str]:
 
 def occupancy_schedule(idf: Path) -> str | None:
     """The schedule most of the model's People objects follow (their 'Number of People Schedule Name')."""
-    from parallel_eplus.buildings.idf_prep import idf_objects
+    from parallel_eplus.buildings.idf_text import idf_objects
 
     names = [o.fields[2] for o in idf_objects(idf.read_text(encoding="latin-1"))
              if o.kind.lower() == "people" and len(o.fields) > 2 and o.fields[2]]  # fmt: skip
@@ -105,6 +107,7 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         f"name = {_str(name)}",
         f"idf = {_str(_path(idf, spec_dir))}",
         f"# timesteps_per_hour: the IDF's Timestep ({s.timesteps_per_hour} per hour) is the control step",
+        *_ventilation(idf),
         "",
         "[weathers]  # short names for --weathers; any .epw path works too",
         f"{weather_key(weather)} = {_str(_path(weather, spec_dir, weather=True))}",
@@ -253,6 +256,17 @@ def _together(side: str, zones: list[str], schedules: dict, o, seen) -> list[str
         lines += _candidate(name, "Zone Temperature Control", control, [o(k) for k in keys], group_low, group_high,
                             start, "C", note)  # fmt: skip
     return lines
+
+
+def _ventilation(idf: Path) -> list[str]:
+    """The outdoor air on demand, offered where the model holds a fixed minimum (buildings/ventilation.py)."""
+    text = idf.read_text(encoding="latin-1")
+    plan = plan_ventilation(text, idf_objects(text))
+    if not plan.added:
+        return []
+    held = f"{len(plan.added)} of {len(plan.notes)} outdoor-air controllers hold their design"
+    return [f'# ventilation = "demand"  # {held}',
+            "#   minimum whenever they run; on demand, the controller's copy follows the people (docs/buildings.md)"]
 
 
 def _thermostats_cover(idf: Path, temps: list[str], keys: dict[str, str]) -> bool:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from parallel_eplus.buildings.idf_prep import IdfObject, idf_objects
+from parallel_eplus.buildings.idf_text import IdfObject, idf_objects
 from parallel_eplus.buildings.takeover import FOLLOWERS, MANAGERS, manager_sets
 
 

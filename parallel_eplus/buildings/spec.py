@@ -19,6 +19,7 @@ from parallel_eplus.buildings.spec_types import (
     REWARD_KEYS,
     THERMOSTAT,
     THERMOSTAT_TOLERANCE,
+    VENTILATION,
     WEEKDAYS,
     ActionSpec,
     ActuatorSpec,
@@ -214,6 +215,9 @@ def load_spec(path: str | Path) -> BuildingSpec:
             float(tolerance),
         )
     kpis = parse_kpis(data.get("kpis", {}), [o.name for o in observations], errors, path.parent)
+    ventilation = data.get("ventilation", "own")
+    if ventilation not in VENTILATION:
+        errors.append(f"ventilation: {ventilation!r} is not one of {list(VENTILATION)} (docs/buildings.md)")
 
     if errors:
         raise SpecError(f"{path}: {len(errors)} problem(s):\n  " + "\n  ".join(errors))
@@ -232,6 +236,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
         baseline_idf,
         kpis=kpis,
         forecasts=tuple(forecasts),
+        ventilation=ventilation,
     )
 
 

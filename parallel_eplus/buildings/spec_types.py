@@ -20,6 +20,9 @@ class SpecError(ValueError):
     """Every problem found in one spec file, one per line."""
 
 
+VENTILATION = ("own", "demand")  # the controller's copy: its outdoor air as the model has it, or on demand
+
+
 @dataclass(frozen=True)
 class Observation:
     """One element of the observation vector: an output variable (with its key) or a meter, and its bounds."""
@@ -149,3 +152,6 @@ class BuildingSpec:
     # Observations that are forecasts of the episode's weather file (`forecast = "drybulb"` entries), computed on
     # the learner's side after the sensors and the opt-in features (buildings/forecast.py).
     forecasts: tuple[ForecastSpec, ...] = ()
+    # "demand": the controller's copy of the model takes its outdoor air on demand (buildings/ventilation.py);
+    # "own": as the model has it
+    ventilation: str = "own"

@@ -99,11 +99,13 @@ class Follower:
 
 @dataclass(frozen=True)
 class Takeover:
-    """What the prepared copy changed so that the agent's node setpoints are the agent's."""
+    """What the prepared copy changed so that the agent's node setpoints are the agent's (and its outdoor air on
+    demand, `ventilation = "demand"`: buildings/ventilation.py)."""
 
     replaced: tuple[Replaced, ...] = ()
     followers: tuple[Follower, ...] = ()
     unmanaged: tuple[str, ...] = ()  # agent's nodes no manager set (nothing to replace)
+    ventilation: tuple[str, ...] = ()  # the demand-controlled ventilation's report lines
 
     def lines(self) -> list[str]:
         """The prepared-model report: one line per manager replaced or kept following."""
@@ -115,7 +117,7 @@ class Takeover:
             out.append(f'{f.kind} "{f.name}" kept: it follows {f.reference}, now the agent\'s setpoint')
         if self.unmanaged:
             out.append(f"no setpoint manager set {', '.join(self.unmanaged)}: nothing replaced there")
-        return out
+        return out + list(self.ventilation)
 
 
 def scheduled_setpoints(objects) -> dict[str, str]:

@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from parallel_eplus.buildings.idf_prep import idf_objects
+from parallel_eplus.buildings.idf_text import idf_objects
 
 SCHEDULE_VARIABLE = "Schedule Value"
 

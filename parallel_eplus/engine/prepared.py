@@ -57,12 +57,19 @@ class EpisodeStarter:
     start and a prepared one, which is why they are the same episode."""
 
     def __init__(
-        self, output_dir: Path, idf: Path, config: SimulationConfig, args: list[str], takeover: tuple = ()
+        self,
+        output_dir: Path,
+        idf: Path,
+        config: SimulationConfig,
+        args: list[str],
+        takeover: tuple = (),
+        ventilation: bool = False,
     ) -> None:
         """`args`: the EnergyPlus side's arguments every episode shares (model, steps, initial action); `takeover`:
-        the node setpoints the actions own, taken from the model's managers (buildings/takeover.py)."""
+        the node setpoints the actions own, taken from the model's managers (buildings/takeover.py); `ventilation`:
+        the outdoor air on demand (buildings/ventilation.py)."""
         self.output_dir, self.idf, self.config, self.args = output_dir, idf, config, args
-        self.takeover = takeover
+        self.takeover, self.ventilation = takeover, ventilation
         self._models: dict[int, bytes] = {}  # the episode's model (idf_prep.py) per first day of the run
 
     def model(self, path: Path | None = None, start_day: int | None = None) -> bytes:
@@ -77,7 +84,7 @@ class EpisodeStarter:
             with tempfile.TemporaryDirectory(prefix="parallel-eplus-model-") as tmp:
                 made = Path(tmp) / MODEL_FILE
                 report = prepare_idf(self.idf, made, cfg.run_days, cfg.energyplus_csv, cfg.extra_outputs,
-                                     day, cfg.start_weekday, self.takeover)  # fmt: skip
+                                     day, cfg.start_weekday, self.takeover, self.ventilation)  # fmt: skip
                 model = self._models[day] = made.read_bytes()
             if not cfg.random_start or len(self._models) == 1:  # the same report for every start day
                 for line in report.lines():

@@ -65,6 +65,12 @@ class WorkerSetup:
                 "--initial-action", *map(str, self.initial_action), *own]  # fmt: skip
 
     @property
+    def demand_ventilation(self) -> bool:
+        """Whether this worker's copy takes its outdoor air on demand: the spec's `ventilation = "demand"`, for
+        its controllers, never its own controls (`--baseline`), which run the model as it is."""
+        return self.building.spec.ventilation == "demand" and self.model.name != "baseline"
+
+    @property
     def builtin_residual(self) -> bool:
         """Whether actions are corrections to the building's own setpoint schedules (`residual_space` builtin)."""
         return bool(self.config.residual_scale) and self.config.residual_space == "builtin"

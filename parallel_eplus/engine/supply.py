@@ -52,7 +52,8 @@ class EpisodeSupply:
         self._whole: list[Path] = []  # this worker's own episode directories still whole, oldest first
         self._weather = weather
         taken = taken_setpoints(_commanded(setup))
-        self._starter = EpisodeStarter(output_dir, setup.idf, config, setup.process_args(), taken)
+        self._starter = EpisodeStarter(output_dir, setup.idf, config, setup.process_args(), taken,
+                                       setup.demand_ventilation)  # fmt: skip
         # Episodes forked from a template parked at their first control step (fork.py): not with weather noise (a
         # new weather file each episode) or random starts (a new run period), nor for one episode (an evaluation's)
         forks = prepare and config.fork_episodes and setup.noise is None and not config.random_start
