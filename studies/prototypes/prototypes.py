@@ -21,7 +21,20 @@ from pathlib import Path
 
 from recipes import ON_RULE, PLAYED, RECIPES
 from report import table
-from study import SCENARIOS, Study, finished, models, read_status, rule_spec, scored, short_name, spec_of, write_status
+from study import (
+    SCENARIOS,
+    Study,
+    finished,
+    models,
+    read_status,
+    results_folder,
+    rule_spec,
+    scored,
+    short_name,
+    spec_of,
+    ventilation_spec,
+    write_status,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 LOG = logging.getLogger("prototypes")
@@ -150,6 +163,66 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
     return True
 
 
+def scenarios_of(own: Path) -> dict:
+    """Each weather's BOPTEST periods as the building's committed csvs scored them (`scenarios.json`'s form): the
+    days a year of its own controls gave, without running the years again."""
+    import datetime as dt
+
+    import pandas as pd
+
+    known: dict = {}
+    for scenario in SCENARIOS:
+        for _, row in pd.read_csv(own / f"{scenario}.csv").drop_duplicates("weather").iterrows():
+            first = pd.Timestamp(row.period_start).normalize() - pd.Timedelta(seconds=1)  # the step ending 00:10
+            start = (first.normalize() + pd.Timedelta(days=1) - pd.Timedelta(days=int(row.warmup_days))).date()
+            start_day = start.timetuple().tm_yday
+            known.setdefault(row.weather, {})[scenario] = {
+                "scenario": scenario, "day": start_day - 1 + 14, "start_day": start_day,
+                "weekday": start.strftime("%A"), "run_days": int(row.run_days), "warmup_days": int(row.warmup_days),
+                "first_scored": str(dt.date(2013, 1, 1) + dt.timedelta(days=start_day - 1 + int(row.warmup_days))),
+            }  # fmt: skip
+    return known
+
+
+def score_rule(study: Study, name: str, spec: Path, folder: str, deadline: float, own: Path | None = None) -> str:
+    """`evaluate --rbc` with the rule `spec` names on the 20 fortnights, its csvs kept in OUT/<name>/<folder>/:
+    "done", "chunk" (the chunk ended) or "failed". `own`: a folder of the building's committed csvs whose own
+    controls' rows are reused (they are the same runs: EnergyPlus is deterministic) with their days, so only the
+    rule runs."""
+    import json
+
+    import pandas as pd
+
+    kept = study.out / name / folder
+    for scenario in SCENARIOS:
+        if (kept / f"{scenario}.csv").is_file():
+            continue
+        if deadline - time.time() < 300:
+            return "chunk"
+        out = study.folder(name) / f"eval-{folder}" / scenario
+        known = sorted(study.folder(name).glob("eval*/*/scenarios.json"))
+        if not (out / "scenarios.json").is_file() and (known or own):  # the BOPTEST days the planner was scored on
+            out.mkdir(parents=True, exist_ok=True)
+            if known:
+                shutil.copy(known[0], out / "scenarios.json")
+            else:
+                (out / "scenarios.json").write_text(json.dumps(scenarios_of(own), indent=2))
+        LOG.info("%s: %s on %s", name, folder, scenario)
+        args = ["--building", str(spec), *([] if own else ["--baseline"]), "--rbc", "--scenario", scenario,
+                "--weathers", EVAL_WEATHERS, "--workers", str(study.workers), "--out", str(out), "--quiet"]
+        r = subprocess.run(cli("evaluate", *args), capture_output=True, text=True, cwd=study.folder(name))
+        if r.returncode:
+            LOG.warning("%s: %s failed on %s: %s", name, folder, scenario, failure(r))
+            return "failed"
+        results = pd.read_csv(out / "results.csv")
+        if own:
+            base = pd.read_csv(own / f"{scenario}.csv")
+            results = pd.concat([base[base.controller == "Baseline"], results], ignore_index=True)
+        kept.mkdir(parents=True, exist_ok=True)
+        results.to_csv(kept / f"{scenario}.csv", index=False)
+    return "done"
+
+
 def rule(study: Study, names: list[str], minutes: float) -> None:
     """Guideline 36's supply-air reset (`evaluate --rbc`: buildings/air_reset.py) against each building's own
     controls on the same 20 fortnights, where the starter takes over air loops: what the air side holds without
@@ -160,29 +233,33 @@ def rule(study: Study, names: list[str], minutes: float) -> None:
         status = read_status(study, name)
         if (names and name not in names) or not status.get("checked") or not status.get("supply_air_loops"):
             continue
-        spec = rule_spec(study, name)
-        kept = study.out / name / "rule"
-        for scenario in SCENARIOS:
-            if (kept / f"{scenario}.csv").is_file():
-                continue
-            if deadline - time.time() < 300:
-                LOG.info("chunk over: run again to continue")
-                return
-            out = study.folder(name) / "eval-rule" / scenario
-            known = sorted(study.folder(name).glob("eval*/*/scenarios.json"))
-            if known and not (out / "scenarios.json").is_file():  # the BOPTEST days the planner was scored on
-                out.mkdir(parents=True, exist_ok=True)
-                shutil.copy(known[0], out / "scenarios.json")
-            LOG.info("%s: the rule on %s", name, scenario)
-            r = subprocess.run(cli("evaluate", "--building", str(spec), "--baseline", "--rbc", "--scenario", scenario,
-                                   "--weathers", EVAL_WEATHERS, "--workers", str(study.workers), "--out", str(out),
-                                   "--quiet"), capture_output=True, text=True, cwd=study.folder(name))  # fmt: skip
-            if r.returncode:
-                LOG.warning("%s: the rule failed on %s: %s", name, scenario, failure(r))
-                break
-            kept.mkdir(parents=True, exist_ok=True)
-            shutil.copy(out / "results.csv", kept / f"{scenario}.csv")
+        if score_rule(study, name, rule_spec(study, name), "rule", deadline) == "chunk":
+            LOG.info("chunk over: run again to continue")
+            return
     LOG.info("every building with air loops done: `table` next")
+
+
+def ventilation(study: Study, names: list[str], minutes: float) -> None:
+    """The building's own controls with the outdoor air on demand (`ventilation = "demand"`, the starter's offer;
+    `evaluate --rbc` with buildings/ventilation.py's OnDemand) on the same 20 fortnights, where the model holds a
+    fixed minimum of outdoor air; its own controls' rows from the table's csvs. The csvs go to
+    OUT/<name>/ventilation/."""
+    from parallel_eplus.buildings.idf_text import idf_objects
+    from parallel_eplus.buildings.ventilation import plan_ventilation
+
+    deadline = time.time() + 60 * minutes
+    for model in sorted(models(), key=lambda m: m.stat().st_size):
+        name = short_name(model)
+        if (names and name not in names) or not scored(study, name):
+            continue
+        text = model.read_text(encoding="latin-1")
+        if not plan_ventilation(text, idf_objects(text)).added or not prepare(study, model).get("checked"):
+            continue
+        spec = ventilation_spec(study, name)
+        if score_rule(study, name, spec, "ventilation", deadline, own=results_folder(study, name)) == "chunk":
+            LOG.info("chunk over: run again to continue")
+            return
+    LOG.info("every building with a fixed minimum of outdoor air done: `table` next")
 
 
 def run(study: Study, names: list[str], minutes: float) -> None:
@@ -215,7 +292,7 @@ def run(study: Study, names: list[str], minutes: float) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("command", choices=["prepare", "run", "rule", "table", "status"])
+    p.add_argument("command", choices=["prepare", "run", "rule", "ventilation", "table", "status"])
     p.add_argument("names", nargs="*", help="short names (default: all 16), e.g. medium-office")
     p.add_argument("--work", type=Path, help="the runs and evaluations (default: $WORK, else ../prototypes-RECIPE)")
     p.add_argument("--out", type=Path, default=REPO / "results" / "prototypes")
@@ -239,6 +316,8 @@ def main(argv: list[str] | None = None) -> int:
         run(study, a.names, a.minutes)
     elif a.command == "rule":
         rule(study, a.names, a.minutes)
+    elif a.command == "ventilation":
+        ventilation(study, a.names, a.minutes)
     elif a.command == "table":
         print(table(study).to_string())
     else:

@@ -76,5 +76,7 @@ PLAYED = {"banded": ("hedged", "band_thermostats=own"), "ruled": ("hedged-rule",
 # Recipes trained on a spec naming Guideline 36's reset as its rule (`spec-rule.toml`), so only on the buildings whose
 # starter takes over air loops; the others keep `FALLBACK`'s row (the same planner: no air side to ride).
 RULE = "parallel_eplus.buildings.air_reset:SupplyAirReset"
+# The building's own controls with the outdoor air on demand (`ventilation = "demand"`): `prototypes.py ventilation`
+ON_DEMAND = "parallel_eplus.buildings.on_demand:OnDemand"
 ON_RULE = {"hedged-rule"}
 FALLBACK = "banded"

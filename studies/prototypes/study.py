@@ -7,7 +7,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from recipes import ON_RULE, RULE
+from recipes import ON_DEMAND, ON_RULE, RULE
 
 SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")  # BOPTEST's, each evaluated
 
@@ -86,6 +86,18 @@ def rule_spec(study: Study, name: str) -> Path:
     if not ruled.is_file() or ruled.read_text() != text:  # unchanged: a run reading it meanwhile is never disturbed
         ruled.write_text(text)
     return ruled
+
+
+def ventilation_spec(study: Study, name: str) -> Path:
+    """The starter's spec with its outdoor air on demand (`ventilation = "demand"`, the starter's offer) and every
+    action released to the building's own controls (`spec-ventilation.toml`), written from the starter's."""
+    spec = study.folder(name) / "spec-ventilation.toml"
+    text = (study.folder(name) / "spec.toml").read_text()
+    demand = f'ventilation = "demand"\ncontroller = "{ON_DEMAND}"'
+    text = re.sub(r"^(idf = .*)$", lambda m: f"{m.group(1)}\n{demand}", text, count=1, flags=re.M)
+    if not spec.is_file() or spec.read_text() != text:
+        spec.write_text(text)
+    return spec
 
 
 def spec_of(study: Study, name: str) -> Path:
