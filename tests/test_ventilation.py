@@ -17,6 +17,8 @@ from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
 from parallel_eplus.evaluation.sweep import run_sweep
 
 RULE = "parallel_eplus.buildings.on_demand:OnDemand"
+ROOT = Path(__file__).resolve().parents[1]
+MEDIUM_PLANNER = ROOT / "results/model-based/office-medium/runs/office-medium-mpc-seed0/planner"  # committed
 OUTDOOR_AIR = """
 [[observations]]
 name = "core_oa_kg_s"
@@ -76,3 +78,20 @@ def test_the_outdoor_air_follows_the_people_and_the_own_controls_keep_theirs(tmp
     assert "Controller:MechanicalVentilation" not in (Path(dirs[BASELINE_LABEL]) / "model.idf").read_text("latin-1")
     hvac = df.set_index("controller")["hvac_energy_kwh"]
     assert hvac["on demand"] < 0.95 * hvac[BASELINE_LABEL]
+
+
+def test_a_planner_acts_in_a_variant_of_its_building_and_nowhere_else(tmp_path, caplog, no_leaks):
+    """A spec with the building's observations and actions but another copy (the medium office with its outdoor air
+    on demand) takes the planners trained on the building, with a warning; another building still refuses them."""
+    from parallel_eplus.learning.model_based.saved_planner import planner_controller
+
+    planner = planner_controller(f"{MEDIUM_PLANNER}=Planner", "band_thermostats=own")
+    variant = tmp_path / "office-medium-dcv.toml"
+    text = (spec_dir() / "office-medium.toml").read_text()
+    variant.write_text(text.replace('name = "office-medium"', 'name = "office-medium-dcv"\nventilation = "demand"', 1))
+    df = run_sweep([planner], ["CA"], 1, 1, tmp_path / "out", progress=False, building=str(variant))
+    assert "a variant with the same observations and actions" in caplog.text
+    model = (Path(df.episode_dir.iloc[0]) / "model.idf").read_text(encoding="latin-1")
+    assert model.count("Controller:MechanicalVentilation,") == 3  # one per floor's air loop
+    with pytest.raises(ValueError, match="trained on building office-medium"):
+        run_sweep([planner], ["CA"], 1, 1, tmp_path / "other", progress=False, building="office-small")

@@ -54,6 +54,13 @@ class Building:
         """The sensors the agent observes (the spec's observations)."""
         return self.sensors[: len(self.sensors) - self.hidden]
 
+    def interface(self) -> tuple:
+        """What a policy trained on this building reads and sets: its observations and its actions (names, bounds,
+        actuators, in order). A spec with the same interface is a variant of the building a policy can act in (its
+        model or its copy changed, e.g. `ventilation = "demand"`)."""
+        return (tuple((s.name, s.variable, s.key, s.low, s.high) for s in self.observed), self.spec.actions,
+                self.spec.time_features, self.spec.schedule_features, self.spec.forecasts)  # fmt: skip
+
     @property
     def sensor_names(self) -> tuple[str, ...]:
         return tuple(s.name for s in self.sensors)

@@ -72,14 +72,18 @@ def run_sweep(
 
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
-    swept = load_building(building).spec.path  # None: the data center's spec, as a run that named it
-    for c in controllers:  # a policy acts only in the building it was trained on
-        acting = c.kind in ("policy", "http", "planner")
-        if acting and load_building(c.building).spec.path != swept:
+    swept = load_building(building)  # its spec's path None: the data center's spec, as a run that named it
+    for c in controllers:  # a policy acts only in the building it was trained on, or a variant of it
+        trained = load_building(c.building) if c.kind in ("policy", "http", "planner") else swept
+        if trained.spec.path == swept.spec.path:
+            continue
+        if trained.interface() != swept.interface():
             raise ValueError(
                 f"{c.path or c.url} was trained on building {c.building or 'datacenter-2zone (default)'}, "
                 f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"
             )
+        log.warning("%s was trained on %s and acts in %s, a variant with the same observations and actions: what "
+                    "it learned of the building may not hold there", c.path or c.url, trained.spec.path, building)
     weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs
     for c in controllers:  # a rule-based controller the building cannot take fails here, not mid-sweep
         if c.kind == "rbc":
