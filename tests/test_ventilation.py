@@ -48,6 +48,13 @@ def test_the_copy_gains_a_mechanical_ventilation_controller_per_unit_and_a_typo_
     assert not prepare_idf(spec.idf, tmp_path / "own.idf", 1).ventilation
     with pytest.raises(SpecError, match="ventilation: 'on demand' is not one of"):
         load_spec(office(tmp_path, "on demand"))
+    import pyenergyplus.dataset as d  # the midrise apartment's units: outdoor air per zone, nothing to follow
+
+    flats = Path(d.ref_models["midrise_apartment"])
+    lines = prepare_idf(flats, tmp_path / "flats.idf", 1, ventilation=True).ventilation
+    kept = [line for line in lines if "does not depend on people" in line]
+    assert len(lines) == 24 and len(kept) == 23
+    assert 'Controller:OutdoorAir "SPLITSYSTEMAC:01_OA_Controller" kept' in kept[0]
 
 
 def test_the_outdoor_air_follows_the_people_and_the_own_controls_keep_theirs(tmp_path, no_leaks):

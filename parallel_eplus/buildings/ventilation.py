@@ -3,18 +3,18 @@
 Why: the DOE prototypes' packaged units hold their outdoor air at the design occupancy's whenever they run
 (`Controller:OutdoorAir`'s fixed minimum on its schedule), and on them the thermostats, the only other knob, save
 under 1 % at the same comfort (results/prototypes/). Demand-controlled ventilation is the sequence a supervisory
-controller runs there (ASHRAE 62.1's Vbz = Rp * Pz + Ra * Az, ASHRAE Guideline 36 5.16.3 and 5.18.4, required by
-90.1 in dense spaces): the outdoor air follows the people present. EnergyPlus computes it itself, with the physics
+controller runs there (ASHRAE 62.1's Vbz = Rp * Pz + Ra * Az, as in ASHRAE Guideline 36; 90.1 requires it in
+densely occupied spaces): the outdoor air follows the people present. EnergyPlus computes it itself, with the physics
 it already has: a `Controller:MechanicalVentilation` with demand-controlled ventilation on sums each zone's
 `DesignSpecification:OutdoorAir` over the people its `People` objects hold at that step (a CO2 sensor's ideal).
 
 The copy adds one to each outdoor-air controller that has none, for the zones its air loop serves, and sets the
 controller's fixed minimum to 0 so the requested flow governs (an economizer still opens above it). Left as they
 are, with the reason in the prepared-model report: a controller with its own, a 100 % outdoor-air unit (a
-dedicated outdoor-air system: a minimum-fraction schedule, or the same fixed minimum and maximum), and a loop with a
-zone whose `Sizing:Zone` names no `DesignSpecification:OutdoorAir` (it would get no outdoor air). The building's
-own controls (`evaluate --baseline`) run the model as it is: the measure is the controller's (on_demand.py scores
-it alone).
+dedicated outdoor-air system: a minimum-fraction schedule, or the same fixed minimum and maximum), a loop with a
+zone whose `Sizing:Zone` names no `DesignSpecification:OutdoorAir` (it would get no outdoor air), and a loop whose
+zones have no per-person rate (nothing to follow). The building's own controls (`evaluate --baseline`) run the
+model as it is: the measure is the controller's (on_demand.py scores it alone).
 """
 
 from __future__ import annotations
@@ -50,6 +50,16 @@ def _number(value: str) -> float | None:
         return float(value)
     except ValueError:
         return None
+
+
+def _per_person(o) -> bool:
+    """Whether a DesignSpecification:OutdoorAir has a per-person part (EnergyPlus's defaults: Flow/Person at
+    0.00944 m3/s a person), the only part demand-controlled ventilation scales: per area and per zone it is the
+    same flow, and a controller with only those keeps the model's own minimum (the midrise apartment's units,
+    Flow/Zone: on demand, their flow changed where it had nothing to follow)."""
+    method = (_field(o, 1) or "Flow/Person").lower()
+    rate = _number(_field(o, 2)) if _field(o, 2) else 0.00944
+    return method in ("flow/person", "sum", "maximum") and bool(rate)
 
 
 def loop_zones(objects) -> dict[str, list[str]]:
@@ -88,6 +98,8 @@ def plan_ventilation(text: str, objects) -> DemandVentilation:
     """The copy's demand-controlled ventilation for an IDF text and its objects (idf_prep.idf_objects)."""
     by_name = {o.fields[0].upper(): o for o in objects if o.kind.lower() == "controller:outdoorair" and o.fields}
     zone_lists = {o.fields[0].upper(): o.fields[1:] for o in objects if o.kind.lower() == "zonelist" and o.fields}
+    people = {o.fields[0].upper(): _per_person(o) for o in objects
+              if o.kind.lower() == "designspecification:outdoorair" and o.fields}  # fmt: skip
     dsoa = {}
     for o in objects:
         if o.kind.lower() == "sizing:zone" and _field(o, SIZING_DSOA):
@@ -105,7 +117,9 @@ def plan_ventilation(text: str, objects) -> DemandVentilation:
                else f"its air loop {loop or '(none found)'} reaches no zone" if not zones
                else "zone(s) " + ", ".join(z for z in zones if z.upper() not in dsoa)
                + " have no DesignSpecification:OutdoorAir (Sizing:Zone)"
-               if any(z.upper() not in dsoa for z in zones) else "")  # fmt: skip
+               if any(z.upper() not in dsoa for z in zones)
+               else "its zones' outdoor air does not depend on people (no per-person rate)"
+               if not any(people.get(dsoa[z.upper()].upper()) for z in zones) else "")  # fmt: skip
         if why:
             notes.append(f'Controller:OutdoorAir "{name}" kept: {why}')
             continue

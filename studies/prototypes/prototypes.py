@@ -243,7 +243,8 @@ def ventilation(study: Study, names: list[str], minutes: float) -> None:
     """The building's own controls with the outdoor air on demand (`ventilation = "demand"`, the starter's offer;
     `evaluate --rbc` with buildings/ventilation.py's OnDemand) on the same 20 fortnights, where the model holds a
     fixed minimum of outdoor air; its own controls' rows from the table's csvs. The csvs go to
-    OUT/<name>/ventilation/."""
+    OUT/<name>/ventilation/; where the starter takes over supply air, Guideline 36's reset with it to
+    OUT/<name>/rule-ventilation/."""
     from parallel_eplus.buildings.idf_text import idf_objects
     from parallel_eplus.buildings.ventilation import plan_ventilation
 
@@ -255,10 +256,14 @@ def ventilation(study: Study, names: list[str], minutes: float) -> None:
         text = model.read_text(encoding="latin-1")
         if not plan_ventilation(text, idf_objects(text)).added or not prepare(study, model).get("checked"):
             continue
-        spec = ventilation_spec(study, name)
-        if score_rule(study, name, spec, "ventilation", deadline, own=results_folder(study, name)) == "chunk":
-            LOG.info("chunk over: run again to continue")
-            return
+        status = prepare(study, model)
+        for folder, reset in (("ventilation", False), ("rule-ventilation", True)):
+            if reset and not status.get("supply_air_loops"):
+                continue  # the reset with it, where the starter takes over supply air
+            spec = ventilation_spec(study, name, reset)
+            if score_rule(study, name, spec, folder, deadline, own=results_folder(study, name)) == "chunk":
+                LOG.info("chunk over: run again to continue")
+                return
     LOG.info("every building with a fixed minimum of outdoor air done: `table` next")
 
 

@@ -88,12 +88,13 @@ def rule_spec(study: Study, name: str) -> Path:
     return ruled
 
 
-def ventilation_spec(study: Study, name: str) -> Path:
+def ventilation_spec(study: Study, name: str, reset: bool = False) -> Path:
     """The starter's spec with its outdoor air on demand (`ventilation = "demand"`, the starter's offer) and every
-    action released to the building's own controls (`spec-ventilation.toml`), written from the starter's."""
-    spec = study.folder(name) / "spec-ventilation.toml"
+    action released to the building's own controls (`spec-ventilation.toml`), or with Guideline 36's reset as its
+    rule (`reset`: `spec-rule-ventilation.toml`), written from the starter's."""
+    spec = study.folder(name) / ("spec-rule-ventilation.toml" if reset else "spec-ventilation.toml")
     text = (study.folder(name) / "spec.toml").read_text()
-    demand = f'ventilation = "demand"\ncontroller = "{ON_DEMAND}"'
+    demand = f'ventilation = "demand"\ncontroller = "{RULE if reset else ON_DEMAND}"'
     text = re.sub(r"^(idf = .*)$", lambda m: f"{m.group(1)}\n{demand}", text, count=1, flags=re.M)
     if not spec.is_file() or spec.read_text() != text:
         spec.write_text(text)
