@@ -52,7 +52,7 @@ def alone_model(
     target.parent.mkdir(parents=True, exist_ok=True)
     control = building.control()
     prepare_idf(control.idf, target, run_days, energyplus_csv=False, takeover=taken_setpoints(control.actions),
-                ventilation=building.spec.ventilation == "demand")
+                ventilation=building.spec.demand_ventilation)
     with target.open("a", encoding="latin-1") as f:
         f.write("\n\n" + ems_objects(building, action, calling_point))
     return target

@@ -95,7 +95,7 @@ def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray, energyplus
     control = building.control()
     days = -(-len(replays) // building.steps_per_day)
     prepare_idf(control.idf, idf, days, energyplus_csv, takeover=taken_setpoints(control.actions),
-                ventilation=building.spec.ventilation == "demand")
+                ventilation=building.spec.demand_ventilation)
     epw = building.spec.weathers.get(cfg.weather) or resolve_weather(cfg.weather)
     model = building.spec.name if cfg.building else "temp_fan"
     return [

@@ -20,7 +20,7 @@ class OnDemand:
         from parallel_eplus.buildings.building import load_building
 
         b = load_building(building)
-        if b.spec.ventilation != "demand":
+        if not b.spec.demand_ventilation:
             raise ValueError(f'{b.spec.name}: OnDemand scores the outdoor air on demand; set ventilation = "demand" '
                              "in the spec (docs/buildings.md)")  # fmt: skip
         self.n = len(b.actions)

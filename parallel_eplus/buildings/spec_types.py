@@ -155,3 +155,8 @@ class BuildingSpec:
     # "demand": the controller's copy of the model takes its outdoor air on demand (buildings/ventilation.py);
     # "own": as the model has it
     ventilation: str = "own"
+
+    @property
+    def demand_ventilation(self) -> bool:
+        """Whether the controller's copy takes its outdoor air on demand (buildings/ventilation.py)."""
+        return self.ventilation == "demand"

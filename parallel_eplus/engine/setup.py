@@ -68,7 +68,7 @@ class WorkerSetup:
     def demand_ventilation(self) -> bool:
         """Whether this worker's copy takes its outdoor air on demand: the spec's `ventilation = "demand"`, for
         its controllers, never its own controls (`--baseline`), which run the model as it is."""
-        return self.building.spec.ventilation == "demand" and self.model.name != "baseline"
+        return self.building.spec.demand_ventilation and self.model.name != "baseline"
 
     @property
     def builtin_residual(self) -> bool:
