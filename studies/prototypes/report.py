@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 import pandas as pd
-from recipes import FALLBACK, PLAYED
+from recipes import FALLBACK, IN_DEMAND, ON_RULE, PLAYED
 from study import SCENARIOS, Study, finished, models, read_status, results_folder, scored, short_name, spec_of
 
 
@@ -50,8 +50,8 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
              "scenarios (peak and typical heating and cooling fortnights) on all five weathers (IL and VA held out).",
              "Ratios are the planner's over its own controls' (× built-in, CityLearn's form), summed over the 20",
              "fortnights (peak: the highest 15-minute mean); the bill under the example tariff with demand charges.",
-             *([f"A building whose starter takes over no air loop has no reset to ride: its row is `{FALLBACK}`'s, the",
-                f"same planner ([the `{FALLBACK}` table]({os.path.relpath(study.fallback, study.out)}/README.md))."]
+             *([f"Where the recipe does not apply ({_why_not(study)}), the row is `{FALLBACK}`'s, the same",
+                f"planner ([the `{FALLBACK}` table]({os.path.relpath(study.fallback, study.out)}/README.md))."]
                if study.fallback else []),
              "", "| building | actions | supply-air loops | HVAC energy × | bill × | peak × "
              "| occupied K·h: own → planner | in own bounds: own → planner | stage |",
@@ -166,6 +166,13 @@ def ruled_lines(study: Study) -> list[str]:
             "starter takes over air loops: [ruled/](ruled/README.md)."]
 
 
+def _why_not(study: Study) -> str:
+    """Why a recipe trained nothing on a building (`study.applies`)."""
+    reasons = [*(["no air loop taken over"] if study.recipe in ON_RULE else []),
+               *(["no fixed minimum of outdoor air"] if study.recipe in IN_DEMAND else [])]  # fmt: skip
+    return " or ".join(reasons)
+
+
 def _docs(out: Path) -> str:
     """docs/model-based.md as the table's folder links it (results/prototypes/, or a recipe's folder below it)."""
     return os.path.relpath(Path(__file__).resolve().parents[2] / "docs" / "model-based.md", Path(out).resolve())
@@ -215,7 +222,7 @@ def table(study: Study) -> pd.DataFrame:
                                           else "not trained yet")  # fmt: skip
         if scored(study, name):
             folder = results_folder(study, name)
-            row["stage"] = "scored" if folder.parent == study.out else f"scored (`{FALLBACK}`: no air loop)"
+            row["stage"] = "scored" if folder.parent == study.out else f"scored (`{FALLBACK}`: {_why_not(study)})"
             row["reason"] = ""
             row |= ratios(folder) or {}
         rows.append(row)

@@ -7,7 +7,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from recipes import ON_DEMAND, ON_RULE, RULE
+from recipes import IN_DEMAND, ON_DEMAND, ON_RULE, RULE
 
 SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")  # BOPTEST's, each evaluated
 
@@ -23,7 +23,7 @@ class Study:
     seeds: tuple[int, ...] = (0,)
     recipe: str = "hedged"  # what it trains (RECIPES)
     played: str = ""  # the recipe it scores, where it plays the trained planners with other settings (PLAYED)
-    fallback: Path | None = None  # FALLBACK's table, whose rows stand where an ON_RULE recipe has no air loop to ride
+    fallback: Path | None = None  # FALLBACK's table, whose rows stand where the recipe does not apply (`applies`)
 
     def folder(self, name: str) -> Path:
         return self.work / name
@@ -55,6 +55,7 @@ def read_status(study: Study, name: str) -> dict:
 
 def write_status(study: Study, name: str, **fields) -> dict:
     status = read_status(study, name) | fields
+    study.folder(name).mkdir(parents=True, exist_ok=True)
     status_file(study, name).write_text(json.dumps(status, indent=1) + "\n")
     return status
 
@@ -66,9 +67,31 @@ def finished(run: Path) -> bool:
         return False
 
 
+def applies(study: Study, name: str) -> bool:
+    """Whether the recipe has something to train on: an air loop's reset to ride (ON_RULE), outdoor air to put on
+    demand (IN_DEMAND)."""
+    status = read_status(study, name)
+    if study.recipe in ON_RULE and not status.get("supply_air_loops"):
+        return False
+    return study.recipe not in IN_DEMAND or bool(demand_controllers(study, name))
+
+
+def demand_controllers(study: Study, name: str) -> int:
+    """How many outdoor-air controllers the copy with the outdoor air on demand changes (buildings/ventilation.py),
+    kept in the building's status.json."""
+    status = read_status(study, name)
+    if "demand_controllers" not in status:
+        from parallel_eplus.buildings.idf_text import idf_objects
+        from parallel_eplus.buildings.ventilation import plan_ventilation
+
+        text = next(m for m in models() if short_name(m) == name).read_text(encoding="latin-1")
+        status = write_status(study, name, demand_controllers=len(plan_ventilation(text, idf_objects(text)).added))
+    return status["demand_controllers"]
+
+
 def results_folder(study: Study, name: str) -> Path:
     """Where a building's scenario csvs are: the recipe's, or the fallback's where the recipe does not apply."""
-    if study.recipe in ON_RULE and study.fallback and not read_status(study, name).get("supply_air_loops"):
+    if study.fallback and not applies(study, name):
         return study.fallback / name
     return study.out / name
 
@@ -88,7 +111,7 @@ def rule_spec(study: Study, name: str) -> Path:
     return ruled
 
 
-def ventilation_spec(study: Study, name: str, reset: bool = False) -> Path:
+def demand_spec(study: Study, name: str, reset: bool = False) -> Path:
     """The starter's spec with its outdoor air on demand (`ventilation = "demand"`, the starter's offer) and every
     action released to the building's own controls (`spec-ventilation.toml`), or with Guideline 36's reset as its
     rule (`reset`: `spec-rule-ventilation.toml`), written from the starter's."""
@@ -102,5 +125,8 @@ def ventilation_spec(study: Study, name: str, reset: bool = False) -> Path:
 
 
 def spec_of(study: Study, name: str) -> Path:
-    """The spec a recipe trains and scores on: the starter's, or (ON_RULE) the one naming the reset."""
+    """The spec a recipe trains and scores on: the starter's, the one naming the reset (ON_RULE), or either with the
+    outdoor air on demand (IN_DEMAND: the spec `prototypes.py ventilation` scores the measure alone on)."""
+    if study.recipe in IN_DEMAND:
+        return demand_spec(study, name, reset=study.recipe in ON_RULE)
     return rule_spec(study, name) if study.recipe in ON_RULE else study.folder(name) / "spec.toml"
