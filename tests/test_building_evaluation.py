@@ -185,3 +185,27 @@ def test_pre_cooling_follows_the_tariffs_peak_window_and_releases_the_rest(tmp_p
     zones = [c for c in s.columns if c.endswith("_temp_c") and c != "outdoor_temp_c"]
     cooler = steps[BASELINE_LABEL].loc[noon, zones].to_numpy() - s.loc[noon, zones].to_numpy()
     assert (cooler > 0.3).all(), cooler
+
+
+def _medium_office_with(tmp_path: Path, lines: str, name: str) -> Path:
+    """The shipped medium office's spec with `lines` after its `controller`, as NAME.toml."""
+    from parallel_eplus.buildings.resources import spec_file
+
+    text = spec_file("office-medium").read_text()
+    spec = tmp_path / f"{name}.toml"
+    spec.write_text(text.replace('controller = "', f'{lines}\ncontroller = "', 1))
+    return spec
+
+
+def test_the_specs_controller_settings_reach_its_rule(tmp_path, no_leaks):
+    """`controller_settings = { max_c = 16.0 }`: the reset's top at 16 C, not Guideline 36's 18 C, in a real day of
+    San Francisco's January (outdoor air below 16 C: the reset at its top); a setting the rule does not have fails
+    before anything runs, with the names it takes."""
+    spec = _medium_office_with(tmp_path, "controller_settings = { max_c = 16.0 }", "top")
+    df = run_sweep([Controller(RBC_LABEL, "rbc")], ["CA"], 1, 1, tmp_path / "out", progress=False, building=str(spec))
+    steps = pd.read_parquet(Path(df.loc[0, "episode_dir"]) / "steps.parquet")
+    top = steps["supply_air_c"].round(4)  # float32 through the normalized action
+    assert top.max() == 16.0 and (top == 16.0).mean() > 0.8
+    typo = _medium_office_with(tmp_path, "controller_settings = { request_kk = 0.02 }", "typo")
+    with pytest.raises(ValueError, match='no setting .request_kk.; close: "request_k"'):
+        Controller(RBC_LABEL, "rbc").make(str(typo))

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.rule_settings import rule_config
 from parallel_eplus.buildings.scaling import to_unit
 
 OUTDOOR = "site outdoor air drybulb temperature"
@@ -129,10 +130,11 @@ class SupplyAirReset:
 
     relinquishes = True  # its NaN elements mean "the building's own control" (the evaluation sets relinquish)
 
-    def __init__(self, building: str | Path | None = None, cfg: ResetConfig | None = None, **_):
+    def __init__(self, building: str | Path | None = None, cfg: ResetConfig | None = None, target_c=None,
+                 **settings):  # fmt: skip
         from parallel_eplus.buildings.building import load_building
 
-        self.cfg = cfg or ResetConfig()
+        self.cfg = cfg or rule_config(ResetConfig, settings, "SupplyAirReset")  # the spec's controller_settings
         self.points = ResetPoints.of(load_building(building), self.cfg)
         self.t_max = self.cfg.max_c  # SP0
 

@@ -16,8 +16,11 @@ class OnDemand:
 
     relinquishes = True  # its NaN elements mean "the building's own control" (the evaluation sets relinquish)
 
-    def __init__(self, building: str | Path | None = None, **_):
+    def __init__(self, building: str | Path | None = None, target_c=None, **settings):
         from parallel_eplus.buildings.building import load_building
+
+        if settings:
+            raise ValueError(f"controller_settings: OnDemand takes none (given {', '.join(settings)})")
 
         b = load_building(building)
         if not b.spec.demand_ventilation:

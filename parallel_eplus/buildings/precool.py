@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.rule_settings import rule_config
 from parallel_eplus.buildings.scaling import to_unit
 
 COOLING = "cooling setpoint"
@@ -35,10 +36,11 @@ class PreCool:
 
     relinquishes = True
 
-    def __init__(self, building: str | Path | None = None, cfg: PreCoolConfig | None = None, **_):
+    def __init__(self, building: str | Path | None = None, cfg: PreCoolConfig | None = None, target_c=None,
+                 **settings):  # fmt: skip
         from parallel_eplus.buildings.building import load_building
 
-        self.cfg = cfg or PreCoolConfig()
+        self.cfg = cfg or rule_config(PreCoolConfig, settings, "PreCool")  # the spec's controller_settings
         b = load_building(building)
         tariff = b.comfort.kpis.tariffs["Electricity"]
         timed = [d for d in tariff.demand if d.window.hours is not None and len(d.window.hours) == 1]

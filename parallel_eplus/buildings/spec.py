@@ -219,6 +219,13 @@ def load_spec(path: str | Path) -> BuildingSpec:
     if ventilation not in VENTILATION:
         errors.append(f"ventilation: {ventilation!r} is not one of {list(VENTILATION)} (docs/buildings.md)")
 
+    settings = data.get("controller_settings", {})
+    if not isinstance(settings, dict) or any(isinstance(v, (dict, list)) for v in settings.values()):
+        errors.append("controller_settings: a table of numbers, booleans or strings, e.g. { request_k = 0.02 }")
+        settings = {}
+    elif settings and not data.get("controller"):
+        errors.append("controller_settings: set for no rule; name one with controller = \"module:Class\"")
+
     if errors:
         raise SpecError(f"{path}: {len(errors)} problem(s):\n  " + "\n  ".join(errors))
     return BuildingSpec(
@@ -237,6 +244,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
         kpis=kpis,
         forecasts=tuple(forecasts),
         ventilation=ventilation,
+        controller_settings=tuple(settings.items()),
     )
 
 

@@ -155,6 +155,8 @@ class BuildingSpec:
     # "demand": the controller's copy of the model takes its outdoor air on demand (buildings/ventilation.py);
     # "own": as the model has it
     ventilation: str = "own"
+    # `controller_settings`: the spec's `controller`'s settings (its config's fields: buildings/rule_settings.py)
+    controller_settings: tuple[tuple[str, Any], ...] = ()
 
     @property
     def demand_ventilation(self) -> bool:

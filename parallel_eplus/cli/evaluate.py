@@ -46,6 +46,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers.append(Controller(f"{RBC_LABEL} ({args.rbc.rpartition(':')[2]})", "rbc", rule=args.rbc))
     elif args.rbc:
         controllers.append(Controller(RBC_LABEL, "rbc"))
+    if args.rbc and args.building and load_building(args.building).spec.controller_settings:
+        controllers[-1].make(args.building)  # the spec's settings for its rule: a wrong one fails here
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
     from parallel_eplus.learning.model_based.saved_planner import planner_controller

@@ -74,11 +74,14 @@ class Controller:
         if self.kind == "rbc":
             target = {} if self.rbc_target_c is None else {"target_c": self.rbc_target_c}
             named = building or self.rule  # a rule named on the command line acts on the default building too
-            cls = load_building(building).controller_class(self.rule) if named else RuleBasedController
+            b = load_building(building) if named else None
+            cls = b.controller_class(self.rule) if b else RuleBasedController
             if cls is RuleBasedController:
                 return RuleBasedController(RBCConfig(**target), building)
             if "building" in inspect.signature(cls).parameters:  # a class that reads the spec it acts on
                 target["building"] = building
+            if self.rule in (None, b.spec.controller):  # the spec's own rule: with the spec's settings for it
+                target |= dict(b.spec.controller_settings)
             return cls(**target)  # a user's class: called (observation, info) -> normalized action
         if self.act is not None:
             return self.act

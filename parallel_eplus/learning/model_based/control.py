@@ -99,6 +99,10 @@ class MPC:
             if not getattr(rule, "relinquishes", False):
                 raise ValueError(f"own_plan=rule: {rule.__name__} must release (NaN) the actions it does not set, as "
                                  "parallel_eplus.buildings.air_reset:SupplyAirReset does (`relinquishes = True`)")
+            try:
+                self.rule(0)  # made with the spec's controller_settings: a wrong one fails before any episode
+            except ValueError as e:
+                raise ValueError(f"own_plan=rule: {e}") from None
         dated = self.comfort_times.dated_applies
         if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
             log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
