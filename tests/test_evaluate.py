@@ -188,6 +188,35 @@ def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alo
     assert not list(Path(tempfile.gettempdir()).glob("SB3-*"))  # the learning copies wrote no SB3 log folder
 
 
+def test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder(tmp_path, no_leaks):
+    """Ctrl-C in `evaluate --backend ray`: the running tasks are cancelled and Ray's workers killed outright, so they
+    cannot remove their episodes' scratch folders; the evaluation removes them (their owners are gone)."""
+    pytest.importorskip("ray")
+    import signal
+    import time
+
+    from parallel_eplus.engine.pipe_sweep import owner_alive
+
+    def scratch() -> set[Path]:
+        return set(Path(tempfile.gettempdir()).glob("parallel-eplus-eval-*"))
+
+    before = scratch()
+    args = ["evaluate", "--baseline", "--weathers", "CA,FL", "--run-days", "365", "--workers", "2", "--backend", "ray",
+            "--out", str(tmp_path), "--quiet"]  # fmt: skip
+    proc = subprocess.Popen([sys.executable, "-m", "parallel_eplus.cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    deadline = time.monotonic() + 180
+    while not scratch() - before:  # the episodes have started
+        assert proc.poll() is None, proc.stdout.read()
+        assert time.monotonic() < deadline
+        time.sleep(0.5)
+    time.sleep(3)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=180)
+    assert proc.returncode != 0 and "interrupted" in out
+    assert [d for d in scratch() - before if owner_alive(d) is False] == []
+
+
 def test_resume_runs_only_the_episodes_an_interrupted_sweep_did_not_finish(tmp_path, no_leaks):
     controllers = [Controller(BASELINE_LABEL, "baseline"), Controller(RBC_LABEL, "rbc")]
     first = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path, progress=False)

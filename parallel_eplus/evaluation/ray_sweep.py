@@ -116,3 +116,7 @@ def run_jobs(
             ray.cancel(ref, force=True)
         if owns:
             ray.shutdown()
+            if pending:  # its workers were killed outright: their episodes' folders are this run's to remove
+                from parallel_eplus.engine.pipe_sweep import sweep
+
+                sweep()
