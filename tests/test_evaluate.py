@@ -188,6 +188,32 @@ def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alo
     assert not list(Path(tempfile.gettempdir()).glob("SB3-*"))  # the learning copies wrote no SB3 log folder
 
 
+def test_a_ray_evaluations_bar_moves_within_its_episodes(tmp_path, no_leaks):
+    """`--backend ray`: each task reports its steps as it goes (every PROGRESS_STEPS), so the bar of a year-long
+    evaluation moves before its first episode ends, and ends at every step counted once."""
+    pytest.importorskip("ray")
+    from parallel_eplus.evaluation import ray_sweep
+    from parallel_eplus.evaluation.sweep import _job_config
+
+    events: list[tuple[str, int]] = []
+
+    class Bar:  # what the sweep's tqdm is told
+        n = 0
+
+        def update(self, k: int) -> None:
+            self.n += k
+            events.append(("update", self.n))
+
+        def set_postfix(self, **_) -> None:
+            events.append(("episode ended", self.n))
+
+    base = Controller(BASELINE_LABEL, "baseline")
+    rows, _ = ray_sweep.run_jobs([(base, _job_config(base, "CA", None, 365, None, tmp_path))], 1, None, Bar(), 900)
+    first_end = events.index(next(e for e in events if e[0] == "episode ended"))
+    assert any(0 < n < 365 * 96 for kind, n in events[:first_end] if kind == "update")  # part of the year
+    assert events[-1][1] == rows[0]["steps"] == 365 * 96
+
+
 def test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder(tmp_path, no_leaks):
     """Ctrl-C in `evaluate --backend ray`: the running tasks are cancelled and Ray's workers killed outright, so they
     cannot remove their episodes' scratch folders; the evaluation removes them (their owners are gone)."""

@@ -25,6 +25,21 @@ from parallel_eplus.evaluation.controllers import failure_row
 log = logging.getLogger(__name__)
 
 RETURNED_FILES = ("steps.parquet", "summary.json", "eplusout.err")
+PROGRESS_STEPS = 1000  # a task reports its steps this often, so the bar moves within a year-long episode
+POLL_S = 5.0  # how often the driver reads them
+
+
+class _Steps:
+    """The steps each running episode has taken, as its task reports them (a Ray actor the tasks share)."""
+
+    def __init__(self):
+        self.steps: dict[int, int] = {}
+
+    def add(self, key: int, n: int) -> None:
+        self.steps[key] = self.steps.get(key, 0) + n
+
+    def read(self) -> dict[int, int]:
+        return self.steps
 
 
 def _policy_files(model_zip: Path) -> dict[str, bytes]:
@@ -35,8 +50,10 @@ def _policy_files(model_zip: Path) -> dict[str, bytes]:
     return {MODEL_FILE: model_zip.read_bytes(), Path(NORMALIZE_FILE).with_suffix(stats.suffix).name: stats.read_bytes()}
 
 
-def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None) -> tuple[dict, dict[str, bytes]]:
-    """One whole episode on a node; returns (its results row, the files the figures read)."""
+def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None, progress=None,
+             key: int = 0) -> tuple[dict, dict[str, bytes]]:  # fmt: skip
+    """One whole episode on a node; returns (its results row, the files the figures read). `progress`: the
+    driver's `_Steps`, told every PROGRESS_STEPS steps."""
     from parallel_eplus.engine.pipe_sweep import write_owner
     from parallel_eplus.engine.simulation import Simulation
 
@@ -51,10 +68,13 @@ def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None) 
         try:
             sim.launch()
             obs, info = sim.first_observation()
-            terminated = False
+            terminated, steps = False, 0
             while not terminated:
                 sim.send(act(obs, info))
                 obs, _, terminated, info = sim.receive()
+                steps += 1
+                if progress is not None and steps % PROGRESS_STEPS == 0:
+                    progress.add.remote(key, PROGRESS_STEPS)  # not waited for
         finally:
             sim.close()
         episode_dir = Path(info["episode_dir"])
@@ -75,25 +95,32 @@ def run_jobs(
 
     owns = connect(address, workers)
     task = ray.remote(num_cpus=1, max_retries=0)(_episode)
+    progress = ray.remote(num_cpus=0)(_Steps).remote()
     shipped: dict[Path, object] = {}
     pending: dict = {}
     try:
-        for controller, cfg in jobs:
+        for key, (controller, cfg) in enumerate(jobs):
             files = None
             if controller.kind == "policy":
                 if controller.path not in shipped:  # once per policy, however many weathers run it
                     shipped[controller.path] = ray.put(_policy_files(controller.path))
                 files = shipped[controller.path]
-            pending[task.remote(controller, cfg, files)] = (controller, cfg)
+            pending[task.remote(controller, cfg, files, progress, key)] = (controller, cfg, key)
         log.info("Ray evaluation: %d episodes over %.0f CPUs", len(jobs), ray.cluster_resources().get("CPU", 0))
         rows: list[dict] = []
         failures: list[dict] = []
+        finished_steps = 0
+        t0 = time.monotonic()
         while pending:
-            t0 = time.monotonic()
-            done, _ = ray.wait(list(pending), num_returns=1, timeout=deadline_s)
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=POLL_S)
             if not done:
-                raise TimeoutError(f"no evaluation episode finished within {deadline_s:.0f} s on the Ray cluster")
-            controller, cfg = pending.pop(done[0])
+                if time.monotonic() - t0 > deadline_s:
+                    raise TimeoutError(f"no evaluation episode finished within {deadline_s:.0f} s on the Ray cluster")
+                running = {k for _, _, k in pending.values()}
+                steps = ray.get(progress.read.remote(), timeout=60)
+                bar.update(max(0, finished_steps + sum(n for k, n in steps.items() if k in running) - bar.n))
+                continue
+            controller, cfg, _ = pending.pop(done[0])
             try:
                 row, files = ray.get(done[0], timeout=60)
             except EnergyPlusError as e:  # Ray's task error is also the task's own exception type
@@ -107,9 +134,11 @@ def run_jobs(
                 io.write_bytes(local / name, data)
             row["episode_dir"] = str(local)
             rows.append(row)
-            bar.update(int(row.get("steps", 0)))
+            finished_steps += int(row.get("steps", 0))
+            bar.update(max(0, finished_steps - bar.n))  # the running episodes' steps: at the next poll
             bar.set_postfix(done=len(rows), last=f"{controller.label} {row['weather']}")
             log.debug("%s %s: %.0f s", controller.label, row["weather"], time.monotonic() - t0)
+            t0 = time.monotonic()
         return rows, failures
     finally:
         for ref in pending:  # failed or interrupted: stop what still runs (its EnergyPlus sees its pipes close)
