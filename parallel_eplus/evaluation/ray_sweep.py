@@ -121,6 +121,7 @@ def run_jobs(
                 bar.update(max(0, finished_steps + sum(n for k, n in steps.items() if k in running) - bar.n))
                 continue
             controller, cfg, _ = pending.pop(done[0])
+            t0 = time.monotonic()  # the deadline is for the next episode to end, a failed one's too
             try:
                 row, files = ray.get(done[0], timeout=60)
             except EnergyPlusError as e:  # Ray's task error is also the task's own exception type
@@ -137,8 +138,7 @@ def run_jobs(
             finished_steps += int(row.get("steps", 0))
             bar.update(max(0, finished_steps - bar.n))  # the running episodes' steps: at the next poll
             bar.set_postfix(done=len(rows), last=f"{controller.label} {row['weather']}")
-            log.debug("%s %s: %.0f s", controller.label, row["weather"], time.monotonic() - t0)
-            t0 = time.monotonic()
+            log.debug("%s %s done", controller.label, row["weather"])
         return rows, failures
     finally:
         for ref in pending:  # failed or interrupted: stop what still runs (its EnergyPlus sees its pipes close)
