@@ -101,3 +101,26 @@ def test_a_heating_setpoint_above_its_zones_cooling_setpoint_is_lowered_to_it(tm
         env.close()
     assert len(df) == 144 and (df.cooling_setpoint_c == 23.0).all()  # a day of 10-minute steps
     assert (df.heating_setpoint_c == 23.0).all()
+
+
+@pytest.mark.slow
+def test_a_rule_that_corrects_the_own_schedules_holds_each_thermostat_its_margin_inside(tmp_path, no_leaks):
+    """`OwnMargin` (a rule whose actions correct the building's own schedules) keeps each setpoint 0.5 K inside its
+    schedule at every step, the 06:00 change included: from the observation, a rule sees the schedule of the step
+    that ended and would hold the setback's 26.7 C for that step."""
+    from parallel_eplus.buildings.resources import spec_file
+    from parallel_eplus.evaluation.controllers import RBC_LABEL
+
+    text = spec_file("office-small").read_text()
+    rule = 'controller = "parallel_eplus.buildings.own_margin:OwnMargin"\ncontroller_settings = { margin_k = 0.5 }\n'
+    spec = tmp_path / "margin.toml"
+    spec.write_text(text.replace("[weathers]", rule + "[weathers]", 1))
+    df = run_sweep([Controller(RBC_LABEL, "rbc")], ["CA"], DAYS, 1, tmp_path / "out", False, building=str(spec))
+    steps = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
+    np.testing.assert_allclose(steps.cooling_setpoint_c, steps.setpoint_clgsetp_sch - 0.5, atol=1e-4)
+    np.testing.assert_allclose(steps.heating_setpoint_c, steps.setpoint_htgsetp_sch + 0.5, atol=1e-4)
+    assert {23.5, 26.2} <= set(steps.cooling_setpoint_c.round(2))  # the schedule changed within the episode
+    wide = tmp_path / "wide.toml"
+    wide.write_text(text.replace("[weathers]", rule.replace("0.5", "3.0") + "[weathers]", 1))
+    with pytest.raises(ValueError, match="margin_k 3.0 K: within"):
+        Controller(RBC_LABEL, "rbc").make(str(wide))

@@ -61,9 +61,20 @@ class Controller:
     def relinquishes(self, building: str | None) -> bool:
         """Whether its NaN action elements release their actuators to the building's own control (a rule-based
         controller that says so: buildings/air_reset.py); the episode then runs with `relinquish`."""
+        return self._rule_says(building, "relinquishes")
+
+    def residual(self, building: str | None) -> tuple[float, str]:
+        """(residual_scale, residual_space) for its episodes: a policy's as trained, or, for a rule-based controller
+        whose actions correct the building's own schedules (`corrects_own`: buildings/own_margin.py), "builtin" at
+        scale 1, so EnergyPlus's side adds them to each schedule at the step it applies to."""
+        if self._rule_says(building, "corrects_own"):
+            return 1.0, "builtin"
+        return self.residual_scale, self.residual_space
+
+    def _rule_says(self, building: str | None, flag: str) -> bool:
         if self.kind != "rbc" or not (building or self.rule):
             return False
-        return bool(getattr(load_building(building).controller_class(self.rule), "relinquishes", False))
+        return bool(getattr(load_building(building).controller_class(self.rule), flag, False))
 
     def make(self, building: str | None = None) -> Callable[[np.ndarray, dict], np.ndarray]:
         """A fresh actor for one episode: (observation, info) -> action. `building`: the swept spec, whose

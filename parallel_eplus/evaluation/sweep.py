@@ -149,11 +149,12 @@ def _job_config(
     out_dir: Path, weather_noise: str | None = None, year: int | None = None,
 ) -> SimulationConfig:  # fmt: skip
     folder = out_dir / "episodes" / slug(controller.label) / (controller.run or "") / weather_label(weather)
+    residual_scale, residual_space = controller.residual(building)
     return SimulationConfig(
         weather=weather, model=controller.model, building=building, run_days=run_days,
         reward=reward or RewardConfig(),
         time_features=controller.time_features, schedule_features=controller.schedule_features,
-        residual_scale=controller.residual_scale, residual_space=controller.residual_space,
+        residual_scale=residual_scale, residual_space=residual_space,
         rbc_target_c=controller.rbc_target_c, relinquish=controller.relinquishes(building),
         output_dir=str(folder if year is None else folder / f"year-{year}"),
         forecast_hours=controller.forecast_hours, forecast_error=controller.forecast_error,
