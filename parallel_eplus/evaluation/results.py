@@ -12,6 +12,7 @@ import pandas as pd
 
 from parallel_eplus import io
 from parallel_eplus.buildings.model import COMFORT_BAND_C
+from parallel_eplus.engine.episode import STEPS_FILE
 from parallel_eplus.evaluation.building_table import comparable
 from parallel_eplus.evaluation.controllers import BASELINE_LABEL
 
@@ -141,6 +142,8 @@ def write_results(df: pd.DataFrame, out_dir: Path, histogram: tuple[str, str] | 
             "no West-zone histogram: no episode of %r on %s (controllers: %s)",
             histogram[0], histogram[1], ", ".join(df["controller"].unique()),
         )  # fmt: skip
+    elif not (Path(row.iloc[0]["episode_dir"]) / STEPS_FILE).is_file():  # a row kept from another machine's run
+        log.warning("no West-zone histogram: %s holds no steps", row.iloc[0]["episode_dir"])
     else:
         files.append(
             plots.west_zone_histogram(Path(row.iloc[0]["episode_dir"]), histogram, out_dir / "west_zone_histogram.png")
