@@ -8,7 +8,18 @@ from __future__ import annotations
 import time
 
 from commands import LOG, own_rows, prepare, score
-from study import Study, demand_controllers, demand_spec, models, read_status, results_folder, rule_spec, short_name
+from study import (
+    DEMAND_RULES,
+    Study,
+    demand_controllers,
+    demand_spec,
+    models,
+    own_schedules,
+    read_status,
+    results_folder,
+    rule_spec,
+    short_name,
+)
 
 
 def rule(study: Study, names: list[str], minutes: float) -> None:
@@ -32,7 +43,8 @@ def ventilation(study: Study, names: list[str], minutes: float) -> None:
     """The building's own controls with the outdoor air on demand (`ventilation = "demand"`, the starter's offer;
     buildings/on_demand.py's OnDemand), where the model holds a fixed minimum of outdoor air; its own controls' rows
     from the table's csvs. The csvs go to OUT/<name>/ventilation/; where the starter takes over supply air,
-    Guideline 36's reset with it to OUT/<name>/rule-ventilation/."""
+    Guideline 36's reset with it to OUT/<name>/rule-ventilation/; where every action has a schedule of the building's
+    own, each thermostat 0.02 K inside it (buildings/own_margin.py) to OUT/<name>/margin-ventilation/."""
     deadline = time.time() + 60 * minutes
     for model in sorted(models(), key=lambda m: m.stat().st_size):
         name = short_name(model)
@@ -41,10 +53,12 @@ def ventilation(study: Study, names: list[str], minutes: float) -> None:
             continue
         if not demand_controllers(study, name):
             continue
-        for folder, reset in (("ventilation", False), ("rule-ventilation", True)):
-            if reset and not read_status(study, name).get("supply_air_loops"):
+        for folder in DEMAND_RULES:
+            if folder == "rule-ventilation" and not read_status(study, name).get("supply_air_loops"):
                 continue  # the reset with it, where the starter takes over supply air
-            spec, kept = demand_spec(study, name, reset), study.out / name / folder
+            spec, kept = demand_spec(study, name, folder), study.out / name / folder
+            if folder == "margin-ventilation" and not own_schedules(spec):
+                continue  # a margin inside each own schedule, where every action has one
             if score(study, name, spec, f"eval-{folder}", kept, ["--rbc"], deadline, own=own)[0] == "chunk":
                 LOG.info("chunk over: run again to continue")
                 return

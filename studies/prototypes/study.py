@@ -7,7 +7,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from recipes import IN_DEMAND, ON_DEMAND, ON_RULE, RULE
+from recipes import IN_DEMAND, MARGIN, ON_DEMAND, ON_RULE, RULE
 
 SCENARIOS = ("peak_heat", "typical_heat", "peak_cool", "typical_cool")  # BOPTEST's, each evaluated
 
@@ -111,22 +111,35 @@ def rule_spec(study: Study, name: str) -> Path:
     return ruled
 
 
-def demand_spec(study: Study, name: str, reset: bool = False) -> Path:
-    """The starter's spec with its outdoor air on demand (`ventilation = "demand"`, the starter's offer) and every
-    action released to the building's own controls (`spec-ventilation.toml`), or with Guideline 36's reset as its
-    rule (`reset`: `spec-rule-ventilation.toml`), written from the starter's."""
-    spec = study.folder(name) / ("spec-rule-ventilation.toml" if reset else "spec-ventilation.toml")
+# The measures in the copy with the outdoor air on demand (OUT/<name>/<folder>/, `prototypes.py ventilation`): the
+# rule each one's spec names
+DEMAND_RULES = {"ventilation": ON_DEMAND, "rule-ventilation": RULE, "margin-ventilation": MARGIN}
+
+
+def demand_spec(study: Study, name: str, measure: str = "ventilation") -> Path:
+    """The starter's spec with its outdoor air on demand (`ventilation = "demand"`, the starter's offer) and the
+    measure's rule (DEMAND_RULES): every action released to the building's own controls (`spec-ventilation.toml`),
+    Guideline 36's reset (`spec-rule-ventilation.toml`) or the thermostats a margin inside their own schedules
+    (`spec-margin-ventilation.toml`), written from the starter's."""
+    spec = study.folder(name) / f"spec-{measure}.toml"
     text = (study.folder(name) / "spec.toml").read_text()
-    demand = f'ventilation = "demand"\ncontroller = "{RULE if reset else ON_DEMAND}"'
+    demand = f'ventilation = "demand"\ncontroller = "{DEMAND_RULES[measure]}"'
     text = re.sub(r"^(idf = .*)$", lambda m: f"{m.group(1)}\n{demand}", text, count=1, flags=re.M)
     if not spec.is_file() or spec.read_text() != text:
         spec.write_text(text)
     return spec
 
 
+def own_schedules(spec: Path) -> bool:
+    """Whether every action of `spec` has a schedule of the building's own (what OwnMargin corrects)."""
+    from parallel_eplus.buildings.building import load_building
+
+    return all(all(own) for own in load_building(str(spec)).own)
+
+
 def spec_of(study: Study, name: str) -> Path:
     """The spec a recipe trains and scores on: the starter's, the one naming the reset (ON_RULE), or either with the
     outdoor air on demand (IN_DEMAND: the spec `prototypes.py ventilation` scores the measure alone on)."""
     if study.recipe in IN_DEMAND:
-        return demand_spec(study, name, reset=study.recipe in ON_RULE)
+        return demand_spec(study, name, "rule-ventilation" if study.recipe in ON_RULE else "ventilation")
     return rule_spec(study, name) if study.recipe in ON_RULE else study.folder(name) / "spec.toml"
