@@ -41,8 +41,8 @@ class OwnMargin:
         from parallel_eplus.buildings.building import load_building
 
         self.cfg = cfg or rule_config(MarginConfig, settings, "OwnMargin")  # the spec's controller_settings
-        if not 0 <= self.cfg.margin_k <= 2:
-            raise ValueError(f"controller_settings: OwnMargin's margin_k {self.cfg.margin_k} K: within [0, 2]")
+        if not 0 <= self.cfg.margin_k <= 1:  # inward from both sides: past half a deadband the setpoints would cross
+            raise ValueError(f"controller_settings: OwnMargin's margin_k {self.cfg.margin_k} K: within [0, 1]")
         b = load_building(building)
         correction = np.zeros(len(b.actions), dtype=np.float32)
         for i, a in enumerate(b.actions):
