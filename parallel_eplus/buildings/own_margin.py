@@ -34,7 +34,7 @@ class OwnMargin:
     """Callable (observation, info) -> corrections to the building's own schedules, normalized: the thermostats'
     `margin_k` inward, every other action none. `evaluate --rbc parallel_eplus.buildings.own_margin:OwnMargin`."""
 
-    corrects_own = True  # its actions correct the own schedules at the step they apply to (Controller.corrects_own)
+    corrects_own = True  # its actions correct the own schedules at the step they apply to (Controller.residual)
 
     def __init__(self, building: str | Path | None = None, cfg: MarginConfig | None = None, target_c=None,
                  **settings):  # fmt: skip
