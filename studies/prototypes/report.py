@@ -241,7 +241,8 @@ def table(study: Study) -> pd.DataFrame:
     study.out.mkdir(parents=True, exist_ok=True)
     for name in df.building:  # each spec as the runs used it, its commented candidates left out
         spec = study.folder(name) / "spec.toml"
-        if spec.is_file() and results_folder(study, name).parent == study.out:  # a fallback's row: its table's spec
+        # a scored row of this recipe's own (a fallback's row: its table's spec)
+        if spec.is_file() and scored(study, name) and results_folder(study, name).parent == study.out:
             spec = spec_of(study, name)
             (study.out / "specs").mkdir(exist_ok=True)
             kept = [ln for ln in spec.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
