@@ -26,9 +26,13 @@ def ratios(folder: Path) -> dict | None:
             continue
         base = own[column].agg(how)
         per_run = learned.groupby("run")[column].agg(how)  # each seed's planner; their mean
-        figures[column] = (per_run / base).mean() if base else float("nan")
+        ratio = per_run / base if base else per_run * float("nan")
+        figures[column] = ratio.mean()
         figures[f"{column}_own"] = base
         figures[f"{column}_learned"] = per_run.mean()
+        if len(per_run) > 1:  # several seeds: their range beside the mean (one seed is an anecdote)
+            figures |= {f"{column}_lo": ratio.min(), f"{column}_hi": ratio.max(),
+                        f"{column}_learned_lo": per_run.min(), f"{column}_learned_hi": per_run.max()}
     figures["in_band_pct"] = learned.in_band_pct.mean()
     figures["in_band_pct_own"] = own.in_band_pct.mean()
     return figures
@@ -36,6 +40,14 @@ def ratios(folder: Path) -> dict | None:
 
 def _x(value: float) -> str:
     return "" if pd.isna(value) else f"{value:.3f}"
+
+
+def _spread(r: pd.Series, column: str, digits: int = 3) -> str:
+    """A figure with its seeds' range where several planners were scored."""
+    value, lo, hi = (r.get(c, float("nan")) for c in (column, f"{column}_lo", f"{column}_hi"))
+    if pd.isna(value):
+        return ""
+    return f"{value:.{digits}f}" + ("" if pd.isna(lo) else f" [{lo:.{digits}f}, {hi:.{digits}f}]")
 
 
 def markdown(df: pd.DataFrame, study: Study) -> str:
@@ -50,6 +62,8 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
              "scenarios (peak and typical heating and cooling fortnights) on all five weathers (IL and VA held out).",
              "Ratios are the planner's over its own controls' (× built-in, CityLearn's form), summed over the 20",
              "fortnights (peak: the highest 15-minute mean); the bill under the example tariff with demand charges.",
+             *(["With several seeds, a figure is their planners' mean and [lowest, highest]."]
+               if len(study.seeds) > 1 else []),
              *([f"Where the recipe does not apply ({_why_not(study)}), the row is `{FALLBACK}`'s, the same",
                 f"planner ([the `{FALLBACK}` table]({os.path.relpath(study.fallback, study.out)}/README.md))."]
                if study.fallback else []),
@@ -59,11 +73,12 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
     for _, r in df.iterrows():
         kh = in_band = ""
         if not pd.isna(r.get("hvac_energy_kwh", float("nan"))):
-            kh = f"{r.occupied_discomfort_kh_own:.1f} → {r.occupied_discomfort_kh_learned:.1f}"
+            kh = f"{r.occupied_discomfort_kh_own:.1f} → {_spread(r, 'occupied_discomfort_kh_learned', 1)}"
             in_band = f"{r.in_band_pct_own:.2f} % → {r.in_band_pct:.2f} %"
         stage = r.stage + (f": {r.reason}" if r.reason else "")
-        lines.append(f"| {r.building} | {r.actions} | {r['supply-air loops']} | {_x(r.get('hvac_energy_kwh'))} | "
-                     f"{_x(r.get('bill'))} | {_x(r.get('peak_15min_kw'))} | {kh} | {in_band} | {stage} |")  # fmt: skip
+        figures = " | ".join(_spread(r, c) for c in ("hvac_energy_kwh", "bill", "peak_15min_kw"))
+        lines.append(f"| {r.building} | {r.actions} | {r['supply-air loops']} | {figures} | {kh} | {in_band} "
+                     f"| {stage} |")
     done = df.dropna(subset=["hvac_energy_kwh"]) if "hvac_energy_kwh" in df else df.iloc[:0]
     if len(done):
         saves = ((done.hvac_energy_kwh < SAVES) | (done.get("bill", 1) < SAVES)).sum()
