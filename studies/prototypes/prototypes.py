@@ -110,7 +110,7 @@ def run(study: Study, names: list[str], minutes: float) -> None:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("command", choices=["prepare", "run", "rule", "ventilation", "table", "status"])
-    p.add_argument("names", nargs="*", help="short names (default: all 16), e.g. medium-office")
+    p.add_argument("names", nargs="*", help="short names (default: all 16), e.g. medium-office; `table`: its rows")
     p.add_argument("--work", type=Path, help="the runs and evaluations (default: $WORK, else ../prototypes-RECIPE)")
     p.add_argument("--out", type=Path, help=f"the table (default: results/prototypes/, RECIPE/ in it but {FALLBACK})")
     p.add_argument("--steps", type=int, default=Study.steps)
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     elif a.command == "ventilation":
         ventilation(study, a.names, a.minutes)
     elif a.command == "table":
-        print(table(study).to_string())
+        print(table(study, a.names).to_string())
     else:
         for model in models():
             s = read_status(study, short_name(model))

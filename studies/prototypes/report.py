@@ -52,7 +52,8 @@ def _spread(r: pd.Series, column: str, digits: int = 3) -> str:
 
 def markdown(df: pd.DataFrame, study: Study) -> str:
     """The table a reader wants: every building, its figures as ratios to its own controls, or why it has none."""
-    lines = ["# Every DOE reference prototype, scored", "",
+    every = len(df) == len(models())  # else the rows asked for (`table NAMES`): the seeds' buildings
+    lines = ["# Every DOE reference prototype, scored" if every else f"{', '.join(df.building)}: scored", "",
              "Made by `python studies/prototypes/prototypes.py table` (the study: studies/prototypes/README.md). Each",
              "row is one model of the EnergyPlus wheel taken as a new user takes it: `building init`, the starter's",
              f"recommended actions, `building check`, the planner's recipe (`--recipe {study.played or study.recipe}`"
@@ -85,14 +86,26 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
         holds = (done.occupied_discomfort_kh_learned <= done.occupied_discomfort_kh_own + SAME_KH).sum()
         lower = f"HVAC energy or bill at least {100 * (1 - SAVES):.1f} % lower"
         lines += ["", f"Scored: {len(done)} of {len(df)}. {lower}: {saves}; no more occupied",
-                  f"discomfort than its own controls: {holds} (to {SAME_KH} K·h; goal: all, savings on 12 of 16).",
+                  f"discomfort than its own controls: {holds} (to {SAME_KH} K·h"
+                  + ("; goal: all, savings on 12 of 16)." if every else ")."),
                   "",
                   "Why the planner finds so little, building by building, and what was tried: [docs/model-based.md]"
                   f"({_docs(study.out)}#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
         lines += ["", "![savings against discomfort](savings.png)"]
+    lines += seeds_lines(study) if every else []
     lines += rule_lines(df, study)
     return "\n".join(lines) + "\n"
+
+
+def seeds_lines(study: Study) -> list[str]:
+    """Pointers to the tables of the buildings scored over several seeds (`--seeds 0,1,2 --out OUT/RECIPE-seeds`)."""
+    tables = sorted((study.fallback or study.out).glob("*-seeds/prototypes.csv"))
+    if not tables:
+        return []
+    links = [f"{', '.join(pd.read_csv(t).building)} ([{t.parent.name}]({os.path.relpath(t.parent, study.out)}"
+             "/README.md))" for t in tables]  # fmt: skip
+    return ["", f"Over several seeds, each figure with their range: {'; '.join(links)}."]
 
 
 MEASURES = ("rule", "ventilation", "rule-ventilation", "margin-ventilation")  # OUT/<name>/<folder>/: measures.py
@@ -152,7 +165,7 @@ def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
                       "`parallel_eplus.buildings.own_margin:OwnMargin`, with `ventilation = \"demand\"`), where every",
                       "action has a schedule of the building's own: the comfort the measure costs, bought back.", "",
                       *_measure_table(margin, "margin")]  # fmt: skip
-        lines += best_lines(df, study)
+        lines += best_lines(df, study) if len(df) == len(models()) else []  # the goal's count: every row
     return lines
 
 
@@ -233,11 +246,14 @@ def figure(df: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-def table(study: Study) -> pd.DataFrame:
-    """One row per prototype: what was taken over, how far the path got, the ratios to its own controls."""
+def table(study: Study, names: list[str] | None = None) -> pd.DataFrame:
+    """One row per prototype (or per one of NAMES, as for the buildings scored over several seeds): what was taken
+    over, how far the path got, the ratios to its own controls."""
     rows = []
     for model in models():
         name = short_name(model)
+        if names and name not in names:
+            continue
         status = read_status(study, name)
         row = {"building": name, "model": model.name, "actions": ", ".join(status.get("actions", [])),
                "supply-air loops": status.get("supply_air_loops", ""), "stage": status.get("stage", "not started"),
