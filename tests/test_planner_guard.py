@@ -158,3 +158,43 @@ def test_band_lead_holds_the_thermostats_to_their_own_plan_that_many_steps_befor
         assert all(ahead_only) if led else not all(ahead_only)
     with pytest.raises(ValueError, match="band_lead"):
         PlannerOptions.parse("band_lead=-1")
+
+
+def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_process_and_served(tmp_path, no_leaks):
+    """With `band_thermostats=own` and `own_margin`, a July morning's cooling setpoint is its own less the margin and
+    its heating setpoint its own plus the margin, in K; the served planner sets the same; refused outside [0, 1] K
+    or without the own plan."""
+    from parallel_eplus.buildings.weather_forecast import WEATHER
+    from parallel_eplus.deploy.contract import Contract
+    from parallel_eplus.deploy.export import export
+    from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+
+    margin, info, obs = 0.05, {"time": JULY, "weather": "CA"}, observation(23.5, 25.0)
+    at_own = office("band_thermostats=own")
+    a_last = at_own.own_plan([info], at_own.future([info])[2], np.zeros((1, 2), np.float32))[:, 0]  # on its own plan
+
+    def physical(mpc: MPC, action: np.ndarray) -> np.ndarray:
+        return mpc.action_low + (action[0] + 1) / 2 * (mpc.action_high - mpc.action_low)
+
+    inside = office(f"band_thermostats=own,own_margin={margin}")
+    own, held = (physical(m, m.act(obs, [info], a_last)) for m in (at_own, inside))
+    np.testing.assert_allclose(own, physical(at_own, a_last), atol=1e-4)  # cooling (0), heating (1) at their own
+    np.testing.assert_allclose(held - own, [-margin, margin], atol=1e-4)
+
+    inside.save(tmp_path / "planner" / "planner.pt")
+    export(tmp_path / "planner", tmp_path / "served", record_days=1, workers=1)
+    data = Contract.read(tmp_path / "served").data  # its fallback off: this test is the margin's
+    assert data["planner"]["settings"]["own_margin"] == margin
+    runtime = PlannerRuntime(tmp_path / "served", Contract(dict(data, fallback=dict(
+        data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None))))
+    truth = inside.forecasts("CA").file.truth(step_times(JULY, inside.step_minutes, inside.settings.horizon))
+    names, sensors = [o["name"] for o in data["outputs"]], [i["name"] for i in data["inputs"]]
+    answer = runtime.act({"time": JULY.isoformat(), "sensors": dict(zip(sensors, map(float, obs[0]), strict=True)),
+                          "last_setpoints": dict(zip(names, map(float, physical(inside, a_last)), strict=True)),
+                          "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)}})  # fmt: skip
+    np.testing.assert_allclose([answer["setpoints"][n]["value"] for n in names], held, atol=1e-4)
+    for bad in ("own_margin=-0.1", "own_margin=2"):
+        with pytest.raises(ValueError, match="own_margin"):
+            PlannerOptions.parse(bad)
+    with pytest.raises(ValueError, match="comfort_reference=own"):
+        PlannerOptions.parse("own_margin=0.1").apply(MPC.load(planner_file(OFFICE)))

@@ -40,7 +40,7 @@ SAMPLED_DECISIONS = 48
 PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
                     "disagreement_weight", "comfort_risk", "terminal_weight", "consensus",
                     "min_saving", "own_radius", "occupancy_input", "guard_k", "guard_steps",
-                    "band_thermostats", "band_lead")  # what a served plan needs
+                    "band_thermostats", "band_lead", "own_margin")  # what a served plan needs
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 

@@ -46,6 +46,7 @@ class _Settings:
         self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
         self.consensus, self.min_saving, self.own_radius, self.occupancy_input = False, 0.0, None, False
         self.guard_k, self.guard_steps, self.band_thermostats, self.band_lead = None, 12, "free", 0
+        self.own_margin = 0.0
         self.__dict__.update(values)
 
 
@@ -107,7 +108,8 @@ class PlannerRuntime:
         bounds = self.calendar.bounds(times)
         reference, follows, ruled, rule_state = None, self.follows, None, None
         if self.reference == "own":
-            reference = own_reference(bounds, self.calendar.tolerance, self.sides, self.low, self.high, a_last,
+            inside = self.calendar.tolerance + self.settings.own_margin  # as in process (control.py `own_plan`)
+            reference = own_reference(bounds, inside, self.sides, self.low, self.high, a_last,
                                       self.calendar.own_actions(times))[None]  # fmt: skip
         if self.rule is not None:  # its setpoints now, held over the horizon, as in process (control.py `own_plan`)
             ruled, rule_state = self.rule.step(body, obs)

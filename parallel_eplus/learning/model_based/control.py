@@ -86,11 +86,11 @@ class MPC:
                              "(a zone's heating or cooling setpoint) that follows a schedule its comfort bounds "
                              "read (`band = \"thermostat\"`)")
         s = self.settings
-        if (s.consensus or s.min_saving or s.own_radius is not None or s.guard_k is not None
+        if (s.consensus or s.min_saving or s.own_radius is not None or s.guard_k is not None or s.own_margin
                 or s.band_thermostats != "free" or s.own_plan != "building") and \
                 s.comfort_reference != "own":  # fmt: skip
-            raise ValueError("--mpc consensus, min_saving, own_radius, guard_k, band_thermostats and own_plan weigh "
-                             "the search's plan against the own plan: add comfort_reference=own")
+            raise ValueError("--mpc consensus, min_saving, own_radius, guard_k, own_margin, band_thermostats and "
+                             "own_plan weigh the search's plan against the own plan: add comfort_reference=own")
         if s.own_plan == "rule":
             try:
                 rule = load_building(self.building).controller_class()
@@ -216,7 +216,8 @@ class MPC:
         `future`'s bounds and the own setpoints the calendar recorded on those dates; with `own_plan=rule`, the
         actions the rule sets at its value now, held over the horizon (a rule is called once a step: its state)."""
         c, h = self.comfort_times, self.settings.horizon
-        plan = np.stack([own_reference(bounds[i], c.tolerance, self.thermostat_sides, self.action_low, self.action_high,
+        inside = c.tolerance + self.settings.own_margin  # the bounds were widened by the tolerance
+        plan = np.stack([own_reference(bounds[i], inside, self.thermostat_sides, self.action_low, self.action_high,
                                        a_last[i], c.own_actions(step_times(info["time"], self.step_minutes, h)))
                          for i, info in enumerate(infos)])  # fmt: skip
         if self.settings.own_plan == "rule":
