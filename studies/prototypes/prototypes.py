@@ -124,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     a.out = a.out or (results if a.recipe == FALLBACK else results / a.recipe)
     a.work = a.work or Path(os.environ.get("WORK", REPO.parent / f"prototypes-{trained}"))
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
-    fallback = results if trained in ON_RULE | IN_DEMAND else None  # FALLBACK's table
+    # FALLBACK's table: its rows where the recipe does not apply, and its own controls' rows everywhere
+    fallback = results if trained in ON_RULE | IN_DEMAND or played not in ("", FALLBACK) else None
     study = Study(a.work, a.out, a.steps, seeds=tuple(int(s) for s in a.seeds.split(",")), recipe=trained,
                   played=played, fallback=fallback)  # fmt: skip
     if a.command == "prepare":

@@ -81,9 +81,12 @@ RECIPES = {
 # came from moves off the own plan in occupied hours (a cooling setpoint 0.8 K above its own with the zone at the
 # bound); played so, each held its own controls' occupied K.h on the pilots' fortnights (docs/model-based.md).
 # `ruled`: `hedged-rule`'s planners so (the thermostats on their own plan, the supply air near the reset).
+# `banded-margin`: `banded` with the own plan 0.02 K inside each own setpoint (`own_margin`), for the five buildings
+# whose `banded` planner ended 0.08-0.2 occupied K.h above its own controls (docs/model-based.md).
 PLAYED = {"banded": ("hedged", "band_thermostats=own"), "ruled": ("hedged-rule", "band_thermostats=own"),
           "banded-demand": ("hedged-demand", "band_thermostats=own"),
-          "ruled-demand": ("hedged-rule-demand", "band_thermostats=own")}
+          "ruled-demand": ("hedged-rule-demand", "band_thermostats=own"),
+          "banded-margin": ("hedged", "band_thermostats=own,own_margin=0.02")}
 
 # Recipes trained on a spec naming Guideline 36's reset as its rule (`spec-rule.toml`), so only on the buildings whose
 # starter takes over air loops; the others keep `FALLBACK`'s row (the same planner: no air side to ride).

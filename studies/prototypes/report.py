@@ -67,7 +67,7 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
                if len(study.seeds) > 1 else []),
              *([f"Where the recipe does not apply ({_why_not(study)}), the row is `{FALLBACK}`'s, the same",
                 f"planner ([the `{FALLBACK}` table]({os.path.relpath(study.fallback, study.out)}/README.md))."]
-               if study.fallback else []),
+               if _why_not(study) else []),
              "", "| building | actions | supply-air loops | HVAC energy × | bill × | peak × "
              "| occupied K·h: own → planner | in own bounds: own → planner | stage |",
              "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
