@@ -171,8 +171,8 @@ def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
 
 def best_lines(df: pd.DataFrame, study: Study) -> list[str]:
     """The goal counted over what the service offers each building: the planner (this table's, and every played
-    recipe's where it ran: on the reset, in the on-demand copy), the reset and the outdoor air on demand, a building
-    counting where any of them saves."""
+    recipe's where it ran: on the reset, in the on-demand copy, with a margin), the reset and the outdoor air on
+    demand, a building counting where any of them saves."""
     saves, holds = set(), set()
     base = study.fallback or study.out
     for _, r in df.iterrows():
@@ -191,7 +191,8 @@ def best_lines(df: pd.DataFrame, study: Study) -> list[str]:
                 if kh <= own + SAME_KH:
                     holds.add(r.building)
     lower = f"at least {100 * (1 - SAVES):.1f} % lower in HVAC energy or bill"
-    return ["", "Over the planners (this table's; on the reset, `ruled`; in the on-demand copy, `banded-demand`) and",
+    played = ", ".join(f"`{recipe}`" for recipe in PLAYED if recipe != FALLBACK)
+    return ["", f"Over the planners (this table's, and where they ran, {played}) and",
             "the measures (the reset; the outdoor air on demand, alone, with the reset or with a margin),",
             f"{len(saves)} of {len(df)} buildings are {lower} with one of them, {len(holds)} at no",
             "more occupied discomfort than their own controls (goal: 12 of 16, all at no more)."]  # fmt: skip
