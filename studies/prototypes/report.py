@@ -53,7 +53,7 @@ def _spread(r: pd.Series, column: str, digits: int = 3) -> str:
 def markdown(df: pd.DataFrame, study: Study) -> str:
     """The table a reader wants: every building, its figures as ratios to its own controls, or why it has none."""
     every = len(df) == len(models())  # else the rows asked for (`table NAMES`): the seeds' buildings
-    lines = ["# Every DOE reference prototype, scored" if every else f"{', '.join(df.building)}: scored", "",
+    lines = ["# Every DOE reference prototype, scored" if every else f"# {', '.join(df.building)}: scored", "",
              "Made by `python studies/prototypes/prototypes.py table` (the study: studies/prototypes/README.md). Each",
              "row is one model of the EnergyPlus wheel taken as a new user takes it: `building init`, the starter's",
              f"recommended actions, `building check`, the planner's recipe (`--recipe {study.played or study.recipe}`"
