@@ -93,7 +93,7 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
                   f"({_docs(study.out)}#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
         lines += ["", "![savings against discomfort](savings.png)"]
-    lines += seeds_lines(study) if every else []
+    lines += [*seeds_lines(study), *played_lines(study)] if every else []
     lines += rule_lines(df, study)
     return "\n".join(lines) + "\n"
 
@@ -106,6 +106,14 @@ def seeds_lines(study: Study) -> list[str]:
     links = [f"{', '.join(pd.read_csv(t).building)} ([{t.parent.name}]({os.path.relpath(t.parent, study.out)}"
              "/README.md))" for t in tables]  # fmt: skip
     return ["", f"Over several seeds, each figure with their range: {'; '.join(links)}."]
+
+
+def played_lines(study: Study) -> list[str]:
+    """Pointers to the other played recipes' tables (`--recipe NAME`, OUT/NAME/), each with what it plays."""
+    links = [f"[`{name}`]({name}/README.md) (`{trained}` with `{settings}`)"
+             for name, (trained, settings) in PLAYED.items()
+             if name != FALLBACK and (study.out / name / "README.md").is_file()]  # fmt: skip
+    return ["", f"The other recipes' tables, each on the buildings it ran on: {'; '.join(links)}."] if links else []
 
 
 MEASURES = ("rule", "ventilation", "rule-ventilation", "margin-ventilation")  # OUT/<name>/<folder>/: measures.py
