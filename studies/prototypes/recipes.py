@@ -101,3 +101,5 @@ ON_RULE = {"hedged-rule", "hedged-rule-demand"}
 # others keep `FALLBACK`'s row too.
 IN_DEMAND = {"hedged-demand", "hedged-rule-demand"}
 FALLBACK = "banded"
+# The played recipes with tables of their own (RECIPE/ in the main one): every one but FALLBACK, which is the main one
+OTHERS = [name for name in PLAYED if name != FALLBACK]

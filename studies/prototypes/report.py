@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 import pandas as pd
-from recipes import FALLBACK, IN_DEMAND, ON_RULE, PLAYED
+from recipes import FALLBACK, IN_DEMAND, ON_RULE, OTHERS, PLAYED
 from study import SCENARIOS, Study, finished, models, read_status, results_folder, scored, short_name, spec_of
 
 
@@ -110,9 +110,8 @@ def seeds_lines(study: Study) -> list[str]:
 
 def played_lines(study: Study) -> list[str]:
     """Pointers to the other played recipes' tables (`--recipe NAME`, OUT/NAME/), each with what it plays."""
-    links = [f"[`{name}`]({name}/README.md) (`{trained}` with `{settings}`)"
-             for name, (trained, settings) in PLAYED.items()
-             if name != FALLBACK and (study.out / name / "README.md").is_file()]  # fmt: skip
+    links = [f"[`{name}`]({name}/README.md) (`{PLAYED[name][0]}` with `{PLAYED[name][1]}`)"
+             for name in OTHERS if (study.out / name / "README.md").is_file()]  # fmt: skip
     return ["", f"The other recipes' tables, each on the buildings it ran on: {'; '.join(links)}."] if links else []
 
 
@@ -187,7 +186,7 @@ def best_lines(df: pd.DataFrame, study: Study) -> list[str]:
         options = [(r.get("hvac_energy_kwh"), r.get("bill"), r.get("occupied_discomfort_kh_learned"),
                     r.get("occupied_discomfort_kh_own"))]  # fmt: skip
         folders = [base / r.building / m for m in MEASURES]
-        folders += [base / recipe / r.building for recipe in PLAYED if recipe != FALLBACK]
+        folders += [base / recipe / r.building for recipe in OTHERS]
         for folder in folders:
             f = ratios(folder)
             if f:
@@ -199,7 +198,7 @@ def best_lines(df: pd.DataFrame, study: Study) -> list[str]:
                 if kh <= own + SAME_KH:
                     holds.add(r.building)
     lower = f"at least {100 * (1 - SAVES):.1f} % lower in HVAC energy or bill"
-    played = ", ".join(f"`{recipe}`" for recipe in PLAYED if recipe != FALLBACK)
+    played = ", ".join(f"`{recipe}`" for recipe in OTHERS)
     return ["", f"Over the planners (this table's, and where they ran, {played}) and",
             "the measures (the reset; the outdoor air on demand, alone, with the reset or with a margin),",
             f"{len(saves)} of {len(df)} buildings are {lower} with one of them, {len(holds)} at no",
