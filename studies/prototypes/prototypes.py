@@ -21,7 +21,7 @@ from commands import LOG, cli, own_rows, prepare, score
 from measures import rule, ventilation
 from recipes import FALLBACK, IN_DEMAND, ON_RULE, PLAYED, RECIPES
 from report import table
-from study import Study, applies, finished, models, read_status, scored, short_name, spec_of, write_status
+from study import Study, applies, claimed, finished, models, read_status, scored, short_name, spec_of, write_status
 
 REPO = Path(__file__).resolve().parents[2]
 TRAIN_WEATHERS = "CA,CO,FL"
@@ -79,31 +79,36 @@ def evaluate(study: Study, name: str, deadline: float) -> bool:
     return True
 
 
+def run_one(study: Study, model: Path, deadline: float) -> bool:
+    """One building's stages 3-4 as far as the chunk goes; False when the chunk is over."""
+    name = short_name(model)
+    status = prepare(study, model)
+    if not status.get("checked"):
+        return True
+    if status.get("stage") == "train" and status.get("error"):
+        return True  # failed before: its row says why (delete status.json's error to retry)
+    if not applies(study, name):
+        return True  # no reset to ride, no outdoor air to put on demand: the table keeps FALLBACK's row
+    if not all(train(study, name, seed, deadline) for seed in study.seeds):
+        return time.time() < deadline - 120
+    return evaluate(study, name, deadline) or time.time() < deadline - 600
+
+
 def run(study: Study, names: list[str], minutes: float) -> None:
     """Stages 3-4, building by building (the smallest models first), until the chunk ends."""
     deadline = time.time() + 60 * minutes
     todo = sorted(models(), key=lambda m: m.stat().st_size)
     for model in todo:
         name = short_name(model)
-        if names and name not in names:
+        if names and name not in names or scored(study, name):
             continue
-        if scored(study, name):
-            continue
-        status = prepare(study, model)
-        if not status.get("checked"):
-            continue
-        if status.get("stage") == "train" and status.get("error"):
-            continue  # failed before: its row says why (delete status.json's error to retry)
-        if not applies(study, name):
-            continue  # no reset to ride, no outdoor air to put on demand: the table keeps FALLBACK's row
-        if not all(train(study, name, seed, deadline) for seed in study.seeds):
-            if time.time() >= deadline - 120:
+        with claimed(study, name) as mine:
+            if not mine:
+                LOG.info("%s: another `run` has it, skipped", name)
+                continue
+            if not run_one(study, model, deadline):
                 LOG.info("chunk over: run again to continue")
                 return
-            continue
-        if not evaluate(study, name, deadline) and time.time() >= deadline - 600:
-            LOG.info("chunk over: run again to continue")
-            return
     LOG.info("every building done or failed: `table` next")
 
 

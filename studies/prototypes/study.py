@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,6 +45,19 @@ def short_name(model: Path) -> str:
     """RefBldgStand-aloneRetailNew2004_Chicago -> stand-alone-retail."""
     core = model.stem.removeprefix("RefBldg").split("New2004")[0]
     return re.sub(r"(?<=[a-z])(?=[A-Z])", "-", core).lower()
+
+
+@contextmanager
+def claimed(study: Study, name: str) -> Iterator[bool]:
+    """Whether this process has the building to itself: two `run`s over overlapping names would train one run folder."""
+    study.folder(name).mkdir(parents=True, exist_ok=True)
+    with open(study.folder(name) / ".run.lock", "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True  # released when the file closes, or with the process
 
 
 def status_file(study: Study, name: str) -> Path:
