@@ -98,6 +98,7 @@ def run(study: Study, names: list[str], minutes: float) -> None:
     """Stages 3-4, building by building (the smallest models first), until the chunk ends."""
     deadline = time.time() + 60 * minutes
     todo = sorted(models(), key=lambda m: m.stat().st_size)
+    others: list[str] = []  # the buildings another `run` has
     for model in todo:
         name = short_name(model)
         if names and name not in names or scored(study, name):
@@ -105,11 +106,15 @@ def run(study: Study, names: list[str], minutes: float) -> None:
         with claimed(study, name) as mine:
             if not mine:
                 LOG.info("%s: another `run` has it, skipped", name)
+                others.append(name)
                 continue
             if not run_one(study, model, deadline):
                 LOG.info("chunk over: run again to continue")
                 return
-    LOG.info("every building done or failed: `table` next")
+    if others:
+        LOG.info("every building done or failed but %s, another `run`'s: `table` when it ends", ", ".join(others))
+    else:
+        LOG.info("every building done or failed: `table` next")
 
 
 def main(argv: list[str] | None = None) -> int:
