@@ -123,6 +123,8 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
     while not episodes.exists() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.5)
     assert episodes.exists(), proc.communicate()[0] if proc.poll() is not None else "no episode within 600 s"
+    with pytest.raises(ValueError, match="still being trained"):  # a second trainer in its folder: refused
+        train(TrainConfig(timesteps=512), resume=tmp_path / "runs" / "cut", progress=False)
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 130, out

@@ -7,6 +7,7 @@ changed, and continues in the folder it is in now. Both write config.json before
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 
 import pandas as pd
@@ -14,7 +15,8 @@ import pandas as pd
 from parallel_eplus import io
 from parallel_eplus.runs.checkpoints import resume_point
 from parallel_eplus.runs.policy_files import _check_init_from, run_dir_of
-from parallel_eplus.runs.run_files import saved_steps, trim_episodes
+from parallel_eplus.runs.registry import process_alive
+from parallel_eplus.runs.run_files import read_status, saved_steps, trim_episodes
 from parallel_eplus.runs.run_names import claim_run_name
 from parallel_eplus.training.config import TrainConfig
 
@@ -27,6 +29,7 @@ def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) ->
     if resume is not None and cfg.init_from is not None:
         raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
     if resume is not None:
+        _refuse_a_live_run(Path(resume))
         checkpoint = _resume_point(Path(resume))
         saved = TrainConfig.from_json((run_dir_of(checkpoint) / "config.json").read_text())
         saved.continue_in(run_dir_of(checkpoint))
@@ -50,6 +53,17 @@ def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) ->
     run_dir.mkdir(parents=True, exist_ok=True)
     io.write_text(run_dir / "config.json", cfg.to_json())
     return cfg, checkpoint
+
+
+def _refuse_a_live_run(path: Path) -> None:
+    """Two trainers in one run folder would interleave its checkpoints, episodes and status: the second one stops."""
+    run_dir = path if (path / "config.json").is_file() else run_dir_of(path)
+    status = read_status(run_dir) or {}
+    if status.get("state") == "running" and status.get("pid") != os.getpid() and process_alive(status):
+        raise ValueError(
+            f"{run_dir} is still being trained (pid {status.get('pid')}): wait for it, or stop it first "
+            f"(`parallel-eplus runs stop {run_dir.name}`), then --resume"
+        )
 
 
 def _resume_point(path: Path) -> Path:
