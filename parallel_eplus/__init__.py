@@ -1,17 +1,21 @@
 """Reinforcement-learning control of a data center's cooling against parallel EnergyPlus simulations.
 
 Importing the package registers `parallel_eplus/DataCenter-v0` (with Gymnasium: the `train` extra); everything else
-loads on first use, so the EnergyPlus-side process (which imports `parallel_eplus.buildings.model`) stays small and
+loads on first use, so the EnergyPlus-side process (which imports `parallel_eplus.buildings.datacenter`) stays small and
 starts fast.
 """
 
 import os as _os
 
+from parallel_eplus import _moved
+
+_moved.install()  # module paths from before 1.1 import, with a DeprecationWarning, until 2.0
+
 ENV_ID = "parallel_eplus/DataCenter-v0"
 
 BUILDING_ENV_ID = "parallel_eplus/Building-v0"  # the same env; pass building=SPEC
 
-ENGINE_SIDE = "PARALLEL_EPLUS_ENGINE_SIDE"  # set for the EnergyPlus-side process (engine/process.py), which has no env
+ENGINE_SIDE = "PARALLEL_EPLUS_ENGINE_SIDE"  # set for the EnergyPlus-side process (episodes/process.py): no env
 
 if not _os.environ.get(ENGINE_SIDE):  # Gymnasium would cost that process ~50 ms of start-up per worker (issue 39)
     try:  # a controller server's install (`pip install parallel-eplus[serve]`) has no Gymnasium and needs no env
@@ -27,7 +31,7 @@ _LAZY = {
     "EnergyPlusEnv": "envs.env",
     "EnergyPlusError": "errors",
     "ProtocolError": "errors",
-    "RewardConfig": "buildings.reward",
+    "RewardConfig": "buildings.scoring.reward",
 }
 
 

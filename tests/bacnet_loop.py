@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from parallel_eplus.deploy.point_map import PointMap
+from parallel_eplus.deploy.bacnet.point_map import PointMap
 
 HOST = "127.0.0.1"
 
@@ -84,14 +84,12 @@ class Client:
         self.lp, self.map = lp, PointMap.read(lp.map)
 
     async def __aenter__(self):
-        from parallel_eplus.deploy import bacnet
-
+        from parallel_eplus.deploy.bacnet import app as bacnet
         self.app = await bacnet.start(f"{HOST}:{self.lp.ports['client']}", 597, "test client")
         return self
 
     async def __aexit__(self, *exc):
-        from parallel_eplus.deploy import bacnet
-
+        from parallel_eplus.deploy.bacnet import app as bacnet
         await bacnet.stop(self.app)
 
     def _point(self, name: str):

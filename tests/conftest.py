@@ -49,7 +49,7 @@ def _started_by_us(pid: str) -> bool:
 
 def our_processes() -> list[str]:
     """EnergyPlus-side processes this test session started that are still alive (a leak)."""
-    out = subprocess.run(["pgrep", "-af", "parallel_eplus.engine.eplus_callback"], capture_output=True, text=True)
+    out = subprocess.run(["pgrep", "-af", "parallel_eplus.engine.eplus_side.callback"], capture_output=True, text=True)
     return [ln for ln in out.stdout.splitlines() if ln.strip() and _started_by_us(ln.split()[0])]
 
 
@@ -69,7 +69,7 @@ def _held_by_another_run(path: str) -> bool:
 
 
 def _owned_by_another_run(path: str) -> bool:
-    """Whether the directory names its owner (engine/pipe_sweep.py) and that owner is not this session's."""
+    """Whether the directory names its owner (engine/pipes/leftovers.py) and that owner is not this session's."""
     try:
         pid = (Path(path) / "owner").read_text().split()[0]
     except (OSError, IndexError):
@@ -104,7 +104,7 @@ def no_leaks():
 @pytest.fixture
 def broken_weather(tmp_path) -> Path:
     """An EPW cut after its header: EnergyPlus starts, then stops on its first weather line."""
-    from parallel_eplus.buildings.weather import resolve_weather
+    from parallel_eplus.buildings.weather.files import resolve_weather
 
     broken = tmp_path / "Broken.epw"
     broken.write_text("".join(resolve_weather("CA").read_text(encoding="latin-1").splitlines(True)[:8]))

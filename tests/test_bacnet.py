@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.deploy.export import export
-from parallel_eplus.deploy.point_map import PointMap
+from parallel_eplus.deploy.bacnet.point_map import PointMap
+from parallel_eplus.deploy.export.policy import export
 
 from .bacnet_loop import HOST, Client, Loop
 
@@ -44,7 +44,7 @@ def loop(tmp_path, no_leaks):
 def in_process(controller: Path, tmp: Path) -> pd.DataFrame:
     """The exported controller acting in process on the device's simulation (the building's own controls under
     the actuators), its setpoints as a BACnet REAL carries them (float32), normalized as the device does."""
-    from parallel_eplus.deploy.contract import Contract, load_session
+    from parallel_eplus.deploy.serve.contract import Contract, load_session
     from parallel_eplus.engine.config import SimulationConfig
     from parallel_eplus.engine.simulation import Simulation
 
@@ -255,7 +255,7 @@ def test_the_point_map_is_checked_against_the_contract(tmp_path):
 
 @pytest.mark.parametrize("priority", [1, 7, 17])
 def test_a_supervisor_priority_outside_8_to_16_is_refused(priority, tmp_path):
-    from parallel_eplus.deploy.bacnet_supervisor import SupervisorConfig
+    from parallel_eplus.deploy.bacnet.supervisor import SupervisorConfig
 
     with pytest.raises(ValueError, match="8-16"):
         SupervisorConfig(tmp_path, f"{HOST}:47808", tmp_path / "points.toml", priority=priority)

@@ -1,4 +1,4 @@
-"""An exported planner as the BACnet supervisor's controller (deploy/bacnet_planner.py), in lockstep with a
+"""An exported planner as the BACnet supervisor's controller (deploy/bacnet/planner.py), in lockstep with a
 simulated device."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.deploy.export import export
+from parallel_eplus.deploy.export.policy import export
 
 from .bacnet_loop import Loop
 
@@ -32,8 +32,8 @@ def loop(tmp_path, no_leaks):
 def in_process_planner(controller: Path, tmp: Path) -> pd.DataFrame:
     """The exported planner acting in process on the device's simulation, each step's request as the supervisor
     makes it (its state carried from answer to answer), its setpoints as a BACnet REAL carries them."""
-    from parallel_eplus.deploy.bacnet_planner import PlannerSteps
-    from parallel_eplus.deploy.contract import Contract
+    from parallel_eplus.deploy.bacnet.planner import PlannerSteps
+    from parallel_eplus.deploy.serve.contract import Contract
     from parallel_eplus.engine.config import SimulationConfig
     from parallel_eplus.engine.simulation import Simulation
 
@@ -62,7 +62,7 @@ def in_process_planner(controller: Path, tmp: Path) -> pd.DataFrame:
 def test_a_planner_supervises_a_day_over_bacnet_as_it_answers_in_process(loop, tmp_path):
     """An exported planner (`--persistence`: no forecast comes over BACnet) in lockstep: every reading and setpoint
     of the day equal to its answers in process; one that needs a forecast is refused, naming the export's option."""
-    from parallel_eplus.deploy.bacnet_supervisor import Supervisor, SupervisorConfig
+    from parallel_eplus.deploy.bacnet.supervisor import Supervisor, SupervisorConfig
 
     planner = tmp_path / "planner"
     export(PLANNER, planner, record_days=1, persistence=True)
@@ -74,8 +74,8 @@ def test_a_planner_supervises_a_day_over_bacnet_as_it_answers_in_process(loop, t
     assert len(over_bacnet) == 96 and "acted on 96 steps (0 fallbacks)" in loop.log("supervisor")
     pd.testing.assert_frame_equal(in_process_planner(planner, tmp_path / "reference"), over_bacnet, check_exact=True)
 
-    from parallel_eplus.deploy.bacnet_planner import PlannerSteps
-    from parallel_eplus.deploy.contract import Contract
+    from parallel_eplus.deploy.bacnet.planner import PlannerSteps
+    from parallel_eplus.deploy.serve.contract import Contract
 
     steps = PlannerSteps(planner, Contract.read(planner))  # a reading it cannot take: the building's own controls
     assert steps.answer({"outdoor_temp_c": 12.0}, {}, "2017-07-01T14:00:00", 5) is None

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.bench import BenchConfig, _physical, format_table, raw_rate, run
-from parallel_eplus.buildings.model import ACTIONS
+from parallel_eplus.buildings.datacenter import ACTIONS
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import read_steps
 from parallel_eplus.engine.simulation import Simulation
@@ -66,8 +66,7 @@ def _env_day(tmp_path, actions: np.ndarray, building: str | None = None):
 def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, bridge, monkeypatch):
     """The floor the benchmark measures against: replaying an env run's actions in raw EnergyPlus gives
     the very same simulation, timestep by timestep (so raw and env do the same work)."""
-    from parallel_eplus.engine import native
-
+    from parallel_eplus.engine.eplus_side import native
     if bridge == "python":
         monkeypatch.setattr(native, "bridge_library", lambda: None)
     elif native.bridge_library() is None:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from parallel_eplus.buildings.check import check_spec, require_checked
+from parallel_eplus.buildings.check.names import check_spec, require_checked
 from parallel_eplus.buildings.resources import model_file, spec_dir
-from parallel_eplus.buildings.spec import SpecError
+from parallel_eplus.buildings.spec.load import SpecError
 from parallel_eplus.cli import main
 
 SHIPPED = spec_dir() / "datacenter-2zone.toml"

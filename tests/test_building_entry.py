@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 import parallel_eplus
-from parallel_eplus.buildings import model
+from parallel_eplus.buildings import datacenter as model
 from parallel_eplus.cli import main
 from parallel_eplus.envs.env import EnergyPlusEnv
 

@@ -60,7 +60,7 @@ def test_rule_based_controller_comes_from_the_spec(tmp_path):
     with pytest.raises(ValueError, match="4 actions"):  # the data center's, but only two of its actions
         Controller(RBC_LABEL, "rbc").make("datacenter-2zone-temp")
     assert len(Controller(RBC_LABEL, "rbc").make("datacenter-2zone").temperatures) == 2
-    reset = Controller(RBC_LABEL, "rbc", rule="parallel_eplus.buildings.air_reset:SupplyAirReset")
+    reset = Controller(RBC_LABEL, "rbc", rule="parallel_eplus.buildings.rules.air_reset:SupplyAirReset")
     with pytest.raises(ValueError, match="no supply-air action"):  # a rule named (--rbc CLASS) acts, on any building
         reset.make(None)
     assert not list(tmp_path.iterdir())  # nothing ran
@@ -134,7 +134,7 @@ def test_a_building_policys_features_are_read_beside_its_sensors(tmp_path, no_le
 def test_the_medium_offices_rule_resets_its_supply_air_and_leaves_its_thermostats_to_their_schedules(
     tmp_path, no_leaks
 ):
-    """`--rbc` on the medium office: Guideline 36's supply-air reset (buildings/air_reset.py) on the three loops'
+    """`--rbc` on the medium office: Guideline 36's supply-air reset (buildings/rules/air_reset.py) on the three loops'
     node, every thermostat released to the building's own schedules. In San Francisco's January (outdoor air below
     16 C) the reset sits at its 18 C top; the zones stay on their own setpoints, so the episode is the building's
     own controls but for warmer supply air: the reheat it saves shows in the HVAC energy (a sunny zone's requests
@@ -154,7 +154,7 @@ def test_the_medium_offices_rule_resets_its_supply_air_and_leaves_its_thermostat
 
 
 def test_pre_cooling_follows_the_tariffs_peak_window_and_releases_the_rest(tmp_path, no_leaks):
-    """`--rbc parallel_eplus.buildings.precool:PreCool` on the small office under its example tariff, a July
+    """`--rbc parallel_eplus.buildings.rules.precool:PreCool` on the small office under its example tariff, a July
     Wednesday: the cooling setpoints 2 K below their own schedule's 24 C from 4 h before the summer peak window
     (weekdays 12-18 h) and back to it by the window's end, clipped at the spec's 23 C floor; released (NaN: the own
     schedules) at every other hour and for the heating setpoints. The zones enter the window cooler than under
@@ -162,9 +162,9 @@ def test_pre_cooling_follows_the_tariffs_peak_window_and_releases_the_rest(tmp_p
     from parallel_eplus.buildings.building import load_building
     from parallel_eplus.evaluation.scenarios import Period
 
-    rule = "parallel_eplus.buildings.precool:PreCool"
+    rule = "parallel_eplus.buildings.rules.precool:PreCool"
     with pytest.raises(ValueError, match="cannot be imported"):
-        load_building("office-small").controller_class("parallel_eplus.buildings.precool:Nothing")
+        load_building("office-small").controller_class("parallel_eplus.buildings.rules.precool:Nothing")
     base, pre = Controller(BASELINE_LABEL, "baseline"), Controller("pre-cool", "rbc", rule=rule)
     assert pre.relinquishes("office-small")
     july = Period("summer weekday", day=185, start_day=186, weekday="Wednesday", run_days=1, warmup_days=0)

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.buildings import model
+from parallel_eplus.buildings import datacenter as model
 from parallel_eplus.envs.env import EnergyPlusEnv
 
 FIXTURE = Path(__file__).parent / "data" / "datacenter_2zone_ca_2days.csv"

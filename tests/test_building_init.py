@@ -10,9 +10,9 @@ import pytest
 from pyenergyplus import dataset
 
 from parallel_eplus.buildings import resources
-from parallel_eplus.buildings.init import init_spec
-from parallel_eplus.buildings.spec import load_spec
-from parallel_eplus.buildings.survey import survey
+from parallel_eplus.buildings.spec.load import load_spec
+from parallel_eplus.buildings.starter.survey import survey
+from parallel_eplus.buildings.starter.write import init_spec
 from parallel_eplus.cli import main
 
 PROTOTYPE = Path(dataset.modeldir) / "ASHRAE901_OfficeSmall_STD2019_Denver.idf"
@@ -128,7 +128,7 @@ def test_init_offers_the_air_loops_supply_air_ready_to_uncomment_and_check_prove
     supply, oa = load_spec(out).actions
     assert (supply.name, supply.low, supply.high, len(supply.actuators)) == ("supply_air_c", 12.0, 18.0, 3)
     assert oa.readback == ("System Node Mass Flow Rate", "VAV_1_OAInlet Node") and 0 <= oa.low < oa.high
-    from parallel_eplus.buildings.check import check_spec
+    from parallel_eplus.buildings.check.names import check_spec
 
     result = check_spec(out, use_cache=False)
     assert result.ok, result.problems

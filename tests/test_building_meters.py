@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.buildings import model
-from parallel_eplus.buildings.check import check_building
+from parallel_eplus.buildings import datacenter as model
+from parallel_eplus.buildings.check.names import check_building
 from parallel_eplus.buildings.resources import model_file
-from parallel_eplus.buildings.spec import SpecError
+from parallel_eplus.buildings.spec.load import SpecError
 from parallel_eplus.envs.env import EnergyPlusEnv
 
 CRAC = (Path(model.__file__).parent / "specs" / "datacenter-crac.toml").read_text()

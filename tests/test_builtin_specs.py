@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from parallel_eplus.buildings import resources
-from parallel_eplus.buildings.idf_prep import prepare_idf
-from parallel_eplus.buildings.spec import BuildingSpec, load_spec
-from parallel_eplus.buildings.survey import RUN_PERIOD_WEATHER
+from parallel_eplus.buildings.idf.prepare import prepare_idf
+from parallel_eplus.buildings.spec.load import BuildingSpec, load_spec
+from parallel_eplus.buildings.starter.survey import RUN_PERIOD_WEATHER
 
 SPECS = sorted(resources.spec_dir().glob("*.toml"))
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from parallel_eplus.deploy.contract import Contract
-from parallel_eplus.deploy.export import export, reference_actions
-from parallel_eplus.deploy.parity import observations, replay
+from parallel_eplus.deploy.export.parity import observations, replay
+from parallel_eplus.deploy.export.policy import export, reference_actions
+from parallel_eplus.deploy.serve.contract import Contract
 from parallel_eplus.evaluation.controllers import http_controller, policy_controller
 from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.settings import SACSettings
@@ -41,7 +41,7 @@ def controller(tmp_path_factory) -> Path:
 def client(controller):
     from fastapi.testclient import TestClient
 
-    from parallel_eplus.deploy.server import create_app
+    from parallel_eplus.deploy.serve.server import create_app
 
     with TestClient(create_app(controller)) as c:
         yield c
@@ -134,7 +134,7 @@ def test_wrong_content_type_and_huge_body_are_refused(client):
 
 
 def test_requests_are_logged(client, caplog):
-    with caplog.at_level("INFO", logger="parallel_eplus.deploy.server"):
+    with caplog.at_level("INFO", logger="parallel_eplus.deploy.serve.server"):
         act(client, {"time": "2013-07-02T14:15:00", "sensors": READINGS})
         act(client, {"sensors": {}})
     lines = [r.getMessage() for r in caplog.records]
@@ -160,7 +160,7 @@ def test_a_policy_observing_forecasts_is_refused_with_the_reason(tmp_path):
 
 
 def test_a_controller_edited_after_export_is_refused(controller, tmp_path):
-    from parallel_eplus.deploy.server import create_app
+    from parallel_eplus.deploy.serve.server import create_app
 
     copy = tmp_path / "copy"
     copy.mkdir()
@@ -260,7 +260,7 @@ def test_a_policy_whose_thermostats_cross_is_exported_and_served_uncrossed(tmp_p
     its cooling one; the env lowers it to the cooling setpoint, and the exported graph and the served answer must
     too: the contract names the pair, and the graph replays the recorded (uncrossed) setpoints within 1e-5."""
     from parallel_eplus.buildings.resources import spec_file
-    from parallel_eplus.deploy.runtime import load_runtime
+    from parallel_eplus.deploy.serve.runtime import load_runtime
 
     text = spec_file("office-small").read_text()
     text = text.replace("low = 23.0\nhigh = 30.0\ninitial = 24.0", "low = 20.0\nhigh = 24.0\ninitial = 24.0", 1)

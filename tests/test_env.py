@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env
 
 import parallel_eplus
 from parallel_eplus import EnergyPlusEnv
-from parallel_eplus.buildings.model import SENSOR_NAMES, STEPS_PER_DAY
+from parallel_eplus.buildings.datacenter import SENSOR_NAMES, STEPS_PER_DAY
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import read_steps
 from parallel_eplus.engine.simulation import Simulation
@@ -235,7 +235,7 @@ def _controlled_episode(out: Path, act, **env_kwargs) -> pd.DataFrame:
 
 @pytest.mark.slow
 def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
-    from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
+    from parallel_eplus.buildings.rules.datacenter import RBCConfig, RuleBasedController
 
     def records(name: str, residual: float, act) -> pd.DataFrame:
         return _controlled_episode(tmp_path / name, act, residual_scale=residual, rbc_target_c=23.2)
@@ -254,7 +254,7 @@ def test_residual_action_corrects_the_rule_based_controller(tmp_path, no_leaks):
 
 @pytest.mark.slow
 def test_demand_residual_corrects_the_controllers_flow_demand(tmp_path, no_leaks):
-    from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
+    from parallel_eplus.buildings.rules.datacenter import RBCConfig, RuleBasedController
 
     cfg = RBCConfig(target_c=22.5)
     env = EnergyPlusEnv(residual_scale=1.0, residual_space="demand")

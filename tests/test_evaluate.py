@@ -221,7 +221,7 @@ def test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder(tmp_
     import signal
     import time
 
-    from parallel_eplus.engine.pipe_sweep import owner_alive
+    from parallel_eplus.engine.pipes.leftovers import owner_alive
 
     def scratch() -> set[Path]:
         return set(Path(tempfile.gettempdir()).glob("parallel-eplus-eval-*"))

@@ -1,4 +1,4 @@
-"""Forked episodes (engine/fork.py, fork_side.py): each episode forked from an EnergyPlus parked at its first step."""
+"""Forked episodes (episodes/fork.py, fork_side.py): each episode forked from an EnergyPlus parked at its first step."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from parallel_eplus import EnergyPlusEnv, EnergyPlusError
-from parallel_eplus.engine import fork
-from parallel_eplus.engine.fork import ForkedEpisode
+from parallel_eplus.engine.episodes import fork
+from parallel_eplus.engine.episodes.fork import ForkedEpisode
 
 from .conftest import our_processes
 from .test_prepared import ZERO, _episode, _parked

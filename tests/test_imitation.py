@@ -13,8 +13,8 @@ import torch as th
 
 from parallel_eplus.buildings import resources
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.check import check_spec
-from parallel_eplus.buildings.spec import load_spec
+from parallel_eplus.buildings.check.names import check_spec
+from parallel_eplus.buildings.spec.load import load_spec
 from parallel_eplus.learning.imitation import clone, readbacks, record_baseline
 from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ComfortConstraint, ImitationSettings

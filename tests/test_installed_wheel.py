@@ -107,7 +107,7 @@ def test_the_wheel_installed_outside_the_checkout_trains_evaluates_exports_and_s
     assert list(dist.glob(f"parallel_eplus-{VERSION}.tar.gz"))
     names = set(zipfile.ZipFile(wheel).namelist())
     models = ("2ZoneDataCenterHVAC_wEconomizer.idf", "2ZoneDataCenterHVAC_wEconomizer_agent.idf")
-    shipped = ["buildings/specs/datacenter-2zone.toml", "engine/eplus_callback.c"]
+    shipped = ["buildings/specs/datacenter-2zone.toml", "engine/eplus_side/eplus_callback.c"]
     shipped += [f"buildings/models/{m}" for m in models]
     for name in shipped:
         assert f"parallel_eplus/{name}" in names, name

@@ -1,4 +1,4 @@
-"""BOPTEST's figures on real short episodes of the small office (buildings/thermostat.py, kpis.py, comfort.py).
+"""BOPTEST's figures on real short episodes of the small office (buildings/idf/thermostat.py, kpis.py, comfort.py).
 
 The office's thermostats follow HTGSETP_SCH and CLGSETP_SCH (RefBldgSmallOfficeNew2004_Chicago.idf): 21.0 and
 24.0 °C while the building is in use (weekdays 06-22 h), 15.6 and 26.7 °C set back otherwise.
@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.resources import model_file, spec_file
-from parallel_eplus.buildings.spec import SpecError, load_spec
+from parallel_eplus.buildings.spec.load import SpecError, load_spec
 from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
 from parallel_eplus.evaluation.sweep import run_sweep
 

@@ -12,10 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.deploy.export import export
+from parallel_eplus.deploy.export.policy import export
 from parallel_eplus.learning.algorithms import ALGORITHMS
-from parallel_eplus.learning.model_based import mbpo, mbpo_state
-from parallel_eplus.learning.model_based.model_buffer import ModelMixBuffer
+from parallel_eplus.learning.model_based.mbpo import algorithm as mbpo
+from parallel_eplus.learning.model_based.mbpo import state as mbpo_state
+from parallel_eplus.learning.model_based.mbpo.buffer import ModelMixBuffer
 from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
 from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ComfortConstraint, SACSettings, TrainConfig

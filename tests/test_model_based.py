@@ -22,9 +22,9 @@ from parallel_eplus.buildings.resources import builtin_specs
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
-from parallel_eplus.learning.model_based.saved_planner import planner_controller
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
+from parallel_eplus.learning.model_based.model.dataset import ORIGINS, Transitions
 from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.runs.policy_files import load_policy
 from parallel_eplus.training.config import ComfortConstraint, TrainConfig
@@ -143,7 +143,7 @@ def test_eval_every_measures_the_frozen_planner_keeps_the_best_and_records_the_t
 @pytest.mark.parametrize("name", sorted(builtin_specs()))
 def test_the_models_state_reads_only_what_the_agent_observes_and_its_parts_sum_to_the_energy(name):
     """The office's HVAC gas is a meter the agent does not observe: splitting on it read past the observation."""
-    from parallel_eplus.learning.model_based.dataset import Layout
+    from parallel_eplus.learning.model_based.runtime.layout import Layout
 
     building = load_building(name)
     layout = Layout.of(building, n_exogenous=5)
@@ -197,7 +197,7 @@ def test_the_planner_reads_the_thermostats_by_date_across_daylight_saving_time(t
     earlier on the simulation's standard-time clock); by weekday and time alone, the planner's bounds at either end
     of its day blended both weeks, and it let the zones go an hour early."""
     from parallel_eplus.evaluation.scenarios import Period
-    from parallel_eplus.learning.model_based.calendar import Calendar, ComfortTimes
+    from parallel_eplus.learning.model_based.runtime.calendar import Calendar, ComfortTimes
 
     march = Period("test", day=64, start_day=65, weekday="Monday", run_days=14, warmup_days=0)  # March 6-19
     df = run_sweep([Controller("Baseline", "baseline")], ["CA"], 14, 1, tmp_path, False, building="office-small",

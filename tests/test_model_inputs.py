@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.dataset import Transitions
-from parallel_eplus.learning.model_based.saved_planner import PlannerOptions
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions
+from parallel_eplus.learning.model_based.model.dataset import Transitions
 from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.training.train import train
 
@@ -19,8 +19,8 @@ def test_with_occupancy_input_the_model_sees_whether_the_building_is_occupied(tm
     """`occupancy_input`: one more exogenous input, whether the office is occupied at the step's end. In its data it
     is each step's own (the band applied or not), in its plans the calendar's for those dates, and the exported
     planner reads the calendar's too (the export's own check: served answers equal the in-process ones)."""
-    from parallel_eplus.deploy.contract import Contract
-    from parallel_eplus.deploy.export import export
+    from parallel_eplus.deploy.export.policy import export
+    from parallel_eplus.deploy.serve.contract import Contract
 
     settings = MPCSettings(explore_steps=96, refit_every=96, epochs=5, candidates=64, distill=False,
                            occupancy_input=True)  # fmt: skip

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from parallel_eplus.buildings.model import AGENT_IDF, BASELINE_IDF, ROOT
+from parallel_eplus.buildings.datacenter import AGENT_IDF, BASELINE_IDF, ROOT
 
 SOURCE = ROOT.parent / "shared" / "reference" / "2ZoneDataCenterHVAC_wEconomizer-baseline-22.2.idf"
 
@@ -43,7 +43,7 @@ def test_agent_variant_differs_only_by_the_zone_setpoint_managers():
 @pytest.mark.slow
 def test_baseline_year_runs_without_severe_input_errors(tmp_path):
     """A short baseline run: no Severe at input processing, DX coils read their curves."""
-    from parallel_eplus.buildings.idf_prep import prepare_idf
+    from parallel_eplus.buildings.idf.prepare import prepare_idf
 
     idf = tmp_path / "model.idf"
     prepare_idf(BASELINE_IDF, idf, run_days=2)

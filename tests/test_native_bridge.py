@@ -1,17 +1,16 @@
-"""The two EnergyPlus-side bridges (the Python callback and the C one, engine/native.py) against real EnergyPlus."""
+"""The two EnergyPlus-side bridges (the Python callback and the C one, eplus_side/native.py) against real EnergyPlus."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
 
 
 def _bridges() -> list:
     """Both EnergyPlus-side bridges; the C one only where it compiles (it does wherever CI runs)."""
-    from parallel_eplus.engine import native
-
+    from parallel_eplus.engine.eplus_side import native
     c = pytest.param(True, id="c-bridge")
     if native.bridge_library() is None:
         c = pytest.param(True, id="c-bridge", marks=pytest.mark.skip(reason="no C compiler"))
@@ -26,9 +25,9 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
     it (an env slower than EnergyPlus's work before the actuators: it then waits at them)."""
     import time
 
-    from parallel_eplus.engine import native
     from parallel_eplus.engine.config import SimulationConfig
     from parallel_eplus.engine.episode import bridge_counters
+    from parallel_eplus.engine.eplus_side import native
     from parallel_eplus.engine.simulation import Simulation
 
     if native.bridge_library() is None:
@@ -60,8 +59,8 @@ def test_c_and_python_bridges_step_identical_trajectories(no_leaks):
 @pytest.mark.slow
 @pytest.mark.parametrize("use_c", _bridges())
 def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_leaks):
-    from parallel_eplus.engine import frames
     from parallel_eplus.engine.config import SimulationConfig
+    from parallel_eplus.engine.pipes import frames
     from parallel_eplus.engine.simulation import Simulation
     from parallel_eplus.errors import EnergyPlusError
 
@@ -79,8 +78,7 @@ def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_lea
 
 
 def test_the_c_bridge_compiles_into_a_fresh_cache_or_falls_back_with_a_warning(tmp_path, monkeypatch, caplog):
-    from parallel_eplus.engine import native
-
+    from parallel_eplus.engine.eplus_side import native
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     native.bridge_library.cache_clear()
     try:

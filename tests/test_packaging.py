@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from parallel_eplus.buildings import resources
-from parallel_eplus.buildings.spec import load_spec
+from parallel_eplus.buildings.spec.load import load_spec
 
 ROOT = resources.SOURCE_ROOT
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
@@ -130,7 +130,7 @@ def test_wheel_installs_and_runs_an_episode_from_another_directory(wheel, tmp_pa
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     where = subprocess.run(
-        [py, "-c", "import parallel_eplus.buildings.model as m; print(m.__file__); print(m.AGENT_IDF)"],
+        [py, "-c", "import parallel_eplus.buildings.datacenter as m; print(m.__file__); print(m.AGENT_IDF)"],
         cwd=elsewhere, env=env, capture_output=True, text=True, check=True,
     ).stdout.split()  # fmt: skip
     assert all(w.startswith(site) for w in where), where
@@ -146,7 +146,7 @@ def test_wheel_installs_and_runs_an_episode_from_another_directory(wheel, tmp_pa
 def test_the_energyplus_side_process_imports_no_data_or_learning_libraries():
     """Every episode starts a fresh EnergyPlus-side process: pandas and pyarrow alone cost it 0.2 s of start-up and
     ~70 MB of its peak memory (a worker's 245 MB against 313 MB), torch or Ray far more."""
-    probe = "import sys, parallel_eplus.engine.eplus_callback; print(' '.join(sorted(sys.modules)))"
+    probe = "import sys, parallel_eplus.engine.eplus_side.callback; print(' '.join(sorted(sys.modules)))"
     loaded = set(
         subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()
     )
@@ -187,8 +187,8 @@ def _free_port() -> int:
 def test_a_serve_only_install_serves_a_controller_and_other_commands_name_the_extra(wheel, tmp_path):
     """A fresh venv with only the wheel's [serve] extra (from PyPI): `parallel-eplus serve` answers POST /act with
     the setpoints the in-process policy gives, with no torch in the process; `simulate` says which extra it needs."""
-    from parallel_eplus.deploy.contract import Contract
-    from parallel_eplus.deploy.export import export, reference_actions
+    from parallel_eplus.deploy.export.policy import export, reference_actions
+    from parallel_eplus.deploy.serve.contract import Contract
 
     model = ROOT / "results" / "paper" / "models" / "paper-ca-co-fl-time"
     controller = tmp_path / "controller"

@@ -13,9 +13,9 @@ import pytest
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.learning.imitation import record_baseline
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.features import step_times
-from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_file
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions, planner_file
+from parallel_eplus.learning.model_based.runtime.features import step_times
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -72,10 +72,10 @@ def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_a
     import json
     import shutil
 
-    from parallel_eplus.buildings.weather_forecast import WEATHER
-    from parallel_eplus.deploy.contract import Contract
-    from parallel_eplus.deploy.export import export
-    from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+    from parallel_eplus.buildings.weather.forecast import WEATHER
+    from parallel_eplus.deploy.export.policy import export
+    from parallel_eplus.deploy.serve.contract import Contract
+    from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 
     mpc = PlannerOptions.parse("comfort_reference=own,comfort_hours=occupied").apply(MPC.load(planner_file(OFFICE)))
     folder = tmp_path / "run" / "planner"
@@ -123,7 +123,7 @@ def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(t
     2017: a Sunday, then workdays with cold mornings)."""
     from parallel_eplus.evaluation.controllers import Controller
     from parallel_eplus.evaluation.sweep import run_sweep
-    from parallel_eplus.learning.model_based.own_level import BatchComfort, OwnLevel
+    from parallel_eplus.learning.model_based.model.own_level import BatchComfort, OwnLevel
 
     office = load_building("office-small")
     comfort = office.comfort

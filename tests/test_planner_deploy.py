@@ -15,14 +15,14 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.building import load_building, weather_path
-from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
-from parallel_eplus.deploy.contract import Contract
-from parallel_eplus.deploy.export import export
+from parallel_eplus.buildings.weather.forecast import WEATHER, PerfectForecast
+from parallel_eplus.deploy.export.policy import export
+from parallel_eplus.deploy.serve.contract import Contract
 from parallel_eplus.evaluation.controllers import http_controller
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.ensemble_graph import OnnxEnsemble, build_graph
-from parallel_eplus.learning.model_based.saved_planner import planner_controller
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
+from parallel_eplus.learning.model_based.runtime.ensemble_graph import OnnxEnsemble, build_graph
 
 from .serving import get, serving
 
@@ -47,7 +47,7 @@ def exported(tmp_path_factory) -> Path:
 def client(exported):
     from fastapi.testclient import TestClient
 
-    from parallel_eplus.deploy.server import create_app
+    from parallel_eplus.deploy.serve.server import create_app
 
     with TestClient(create_app(exported)) as c:
         yield c
@@ -165,7 +165,7 @@ def test_a_planner_exported_with_persistence_answers_without_a_forecast_and_says
     export(RUN, tmp_path, record_days=1, persistence=True)
     from fastapi.testclient import TestClient
 
-    from parallel_eplus.deploy.server import create_app
+    from parallel_eplus.deploy.serve.server import create_app
 
     with TestClient(create_app(tmp_path)) as c:
         answer = act(c, {k: v for k, v in body().items() if k != "forecast"}).json()
@@ -176,7 +176,7 @@ def test_a_planner_exported_with_persistence_answers_without_a_forecast_and_says
 def test_with_a_token_every_request_needs_it_and_the_log_never_shows_it(exported, caplog):
     from fastapi.testclient import TestClient
 
-    from parallel_eplus.deploy.server import create_app
+    from parallel_eplus.deploy.serve.server import create_app
 
     with caplog.at_level(logging.INFO), TestClient(create_app(exported, token=TOKEN)) as c:
         missing = act(c, body())

@@ -11,10 +11,10 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.building import weather_path
-from parallel_eplus.buildings.weather_forecast import ErroredForecast, GivenForecast, PerfectForecast
+from parallel_eplus.buildings.weather.forecast import ErroredForecast, GivenForecast, PerfectForecast
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.features import exogenous, step_times
-from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_controller
+from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions, planner_controller
+from parallel_eplus.learning.model_based.runtime.features import exogenous, step_times
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANNER = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0/best/planner"

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.features import step_times
-from parallel_eplus.learning.model_based.guard import GuardState, discomfort
-from parallel_eplus.learning.model_based.planner import _follow
-from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_file
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions, planner_file
+from parallel_eplus.learning.model_based.runtime.features import step_times
+from parallel_eplus.learning.model_based.runtime.guard import GuardState, discomfort
+from parallel_eplus.learning.model_based.runtime.planner import _follow
 
 ROOT = Path(__file__).resolve().parents[1]
 OFFICE = ROOT / "results/model-based/office-small/runs/office-small-mpc-seed0/planner"
@@ -101,10 +101,10 @@ def test_the_served_planner_carries_the_guard_in_its_answers_and_acts_as_the_in_
     """Exported with `guard_k`, the stateless server returns the guard's state in each
     answer; sent back with the next request (as `plan` is), its setpoints equal the in-process planner's step by
     step, through a move off the own plan, a hot step that trips the guard and the steps it holds."""
-    from parallel_eplus.buildings.weather_forecast import WEATHER
-    from parallel_eplus.deploy.contract import Contract, InputError
-    from parallel_eplus.deploy.export import export
-    from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+    from parallel_eplus.buildings.weather.forecast import WEATHER
+    from parallel_eplus.deploy.export.policy import export
+    from parallel_eplus.deploy.serve.contract import Contract, InputError
+    from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 
     options = "guard_k=0.1,guard_steps=2"
     office(options).save(tmp_path / "planner" / "planner.pt")
@@ -164,10 +164,10 @@ def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_pr
     """With `band_thermostats=own` and `own_margin`, a July morning's cooling setpoint is its own less the margin and
     its heating setpoint its own plus the margin, in K; the served planner sets the same; refused outside [0, 1] K
     or without the own plan."""
-    from parallel_eplus.buildings.weather_forecast import WEATHER
-    from parallel_eplus.deploy.contract import Contract
-    from parallel_eplus.deploy.export import export
-    from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+    from parallel_eplus.buildings.weather.forecast import WEATHER
+    from parallel_eplus.deploy.export.policy import export
+    from parallel_eplus.deploy.serve.contract import Contract
+    from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 
     margin, info, obs = 0.05, {"time": JULY, "weather": "CA"}, observation(23.5, 25.0)
     at_own = office("band_thermostats=own")

@@ -14,18 +14,18 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.building import load_building, weather_path
-from parallel_eplus.deploy.planner_runtime import calendar_arrays
+from parallel_eplus.deploy.serve.planner_runtime import calendar_arrays
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.imitation import record_baseline
-from parallel_eplus.learning.model_based.calendar import Calendar, own_reference
-from parallel_eplus.learning.model_based.control import MPC, thermostat_sides
-from parallel_eplus.learning.model_based.dataset import Transitions
-from parallel_eplus.learning.model_based.features import step_times
-from parallel_eplus.learning.model_based.planner import _follow
-from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_controller, planner_file
+from parallel_eplus.learning.model_based.control.mpc import MPC, thermostat_sides
+from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions, planner_controller, planner_file
+from parallel_eplus.learning.model_based.model.dataset import Transitions
+from parallel_eplus.learning.model_based.model.sources import add_baseline
+from parallel_eplus.learning.model_based.runtime.calendar import Calendar, own_reference
+from parallel_eplus.learning.model_based.runtime.features import step_times
+from parallel_eplus.learning.model_based.runtime.planner import _follow
 from parallel_eplus.learning.model_based.settings import MPCSettings
-from parallel_eplus.learning.model_based.sources import add_baseline
 from parallel_eplus.training.config import ComfortConstraint, TrainConfig
 from parallel_eplus.training.train import train
 
@@ -205,8 +205,8 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
     off = np.abs(steps["supply_air_c"].to_numpy()[1:] - ruled_c[:-1])  # each step's action, from the step before
     assert off.max() <= 0.6 + 1e-3, off.max()
     assert (ruled_c > 14.0).mean() > 0.5  # far from the building's own 12.8 C: January in Golden
-    # served, the rule rides along (deploy/served_rule.py): a day in closed loop over HTTP equals the in-process one
-    from parallel_eplus.deploy.export import export
+    # served, the rule rides along (serve/served_rule.py): a day in closed loop over HTTP equals the in-process one
+    from parallel_eplus.deploy.export.policy import export
     from parallel_eplus.evaluation.controllers import http_controller
 
     from .serving import serving
@@ -229,10 +229,10 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
     pd.testing.assert_frame_equal(here, there, check_exact=True)  # every setpoint, every step: the rule's state too
 
     # falling back, it sends the rule's supply air (and the own thermostats); what the rule reads is required
-    from parallel_eplus.buildings.air_reset import advance
-    from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
-    from parallel_eplus.deploy.contract import Contract, InputError
-    from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+    from parallel_eplus.buildings.rules.air_reset import advance
+    from parallel_eplus.buildings.weather.forecast import WEATHER, PerfectForecast
+    from parallel_eplus.deploy.serve.contract import Contract, InputError
+    from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 
     runtime = PlannerRuntime(out, Contract.read(out))
     row = here.iloc[30]

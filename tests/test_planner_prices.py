@@ -15,20 +15,20 @@ import pandas as pd
 import pytest
 import torch as th
 
-from parallel_eplus.buildings.bill import DemandTracker
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.pricing.bill import DemandTracker
+from parallel_eplus.buildings.pricing.tariff import Tariff
 from parallel_eplus.buildings.resources import model_file, spec_file, tariff_file
-from parallel_eplus.buildings.tariff import Tariff
-from parallel_eplus.deploy.contract import Contract, InputError
-from parallel_eplus.deploy.export import export
-from parallel_eplus.deploy.planner_runtime import PlannerRuntime
+from parallel_eplus.deploy.export.policy import export
+from parallel_eplus.deploy.serve.contract import Contract, InputError
+from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 from parallel_eplus.evaluation.controllers import http_controller
 from parallel_eplus.evaluation.sweep import run_sweep
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.dataset import Layout
-from parallel_eplus.learning.model_based.demand import DemandOutlook
-from parallel_eplus.learning.model_based.energy_weights import EnergyWeights
-from parallel_eplus.learning.model_based.saved_planner import planner_controller
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
+from parallel_eplus.learning.model_based.runtime.demand import DemandOutlook
+from parallel_eplus.learning.model_based.runtime.energy_weights import EnergyWeights
+from parallel_eplus.learning.model_based.runtime.layout import Layout
 
 from .serving import serving
 

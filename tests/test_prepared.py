@@ -1,4 +1,4 @@
-"""Prepared episodes (engine/prepared.py): the next episode started while one runs, swapped in by `reset()`."""
+"""Prepared episodes (engine/episodes/prepared.py): the next episode started while one runs, swapped in by `reset()`."""
 
 from __future__ import annotations
 
@@ -150,7 +150,7 @@ def test_the_energyplus_side_imports_no_gymnasium():
     """It registers no env: Gymnasium would cost each EnergyPlus-side process ~50 ms of start-up."""
     from parallel_eplus import ENGINE_SIDE
 
-    code = "import sys, parallel_eplus.engine.eplus_callback; print('gymnasium' in sys.modules)"
+    code = "import sys, parallel_eplus.engine.eplus_side.callback; print('gymnasium' in sys.modules)"
     for marked, expected in ((True, "False"), (False, "True")):
         env = {k: v for k, v in os.environ.items() if k != ENGINE_SIDE} | ({ENGINE_SIDE: "1"} if marked else {})
         out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)

@@ -16,7 +16,7 @@ import pytest
 
 from parallel_eplus import EnergyPlusEnv
 from parallel_eplus.buildings.resources import SOURCE_ROOT
-from parallel_eplus.engine.pipe_sweep import sweep
+from parallel_eplus.engine.pipes.leftovers import sweep
 
 from .conftest import our_processes
 from .test_prepared import ZERO, _episode, _parked
@@ -31,7 +31,7 @@ def _state(pid: int) -> str:
 
 def test_a_process_whose_main_thread_is_gone_is_not_handed_out():
     """Killed while its other threads still exit: not reapable yet (`poll()` says running), but never to step."""
-    from parallel_eplus.engine.prepared import _exiting
+    from parallel_eplus.engine.episodes.prepared import _exiting
 
     code = "import ctypes, threading, time; threading.Thread(target=time.sleep, args=(30,)).start(); " \
            "ctypes.CDLL(None).pthread_exit(None)"  # fmt: skip
@@ -53,9 +53,10 @@ def test_a_long_lived_process_still_tearing_down_is_not_usable(tmp_path):
     """The path a reset takes (`usable` -> `Episode.poll`), deterministically: a killed process whose main thread is
     gone while another still exits holds its stdout open (no EOF) and is not reapable (`poll()` None), so only its
     main thread's state says it will never step. Under load this lasted tens of ms: the intermittent failure."""
-    from parallel_eplus.engine.prepared import EpisodePlan, PreparedEpisode
-    from parallel_eplus.engine.process import EnergyPlusProcess
-    from parallel_eplus.engine.warm_process import Episode
+    from parallel_eplus.engine.episode import EpisodePlan
+    from parallel_eplus.engine.episodes.prepared import PreparedEpisode
+    from parallel_eplus.engine.episodes.process import EnergyPlusProcess
+    from parallel_eplus.engine.episodes.warm import Episode
 
     code = "import ctypes, threading, time; threading.Thread(target=time.sleep, args=(30,)).start(); " \
            "ctypes.CDLL(None).pthread_exit(None)"  # fmt: skip

@@ -9,7 +9,7 @@ import struct
 import numpy as np
 import pytest
 
-from parallel_eplus.engine import frames, pipe, spin
+from parallel_eplus.engine.pipes import frames, pipe, spin
 from parallel_eplus.errors import ProtocolError
 
 

@@ -6,7 +6,7 @@ import datetime as dt
 
 import numpy as np
 
-from parallel_eplus.buildings.idf_prep import _run_period, idf_objects
+from parallel_eplus.buildings.idf.prepare import _run_period, idf_objects
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.setup import WorkerSetup
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv

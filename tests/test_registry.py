@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.engine.pipes import leftovers
 from parallel_eplus.runs import registry
 from parallel_eplus.runs.run_files import STATUS_FILE
 from parallel_eplus.runs.run_status import TRIAL_VARIABLE, now_iso
@@ -47,7 +47,7 @@ def _run_folder(root: Path, name: str, status: dict | None, model: bool = False)
 
 def _status(**changes) -> dict:
     me = os.getpid()
-    base = {"state": "running", "pid": me, "pid_started": pipe_sweep.start_time(me), "host": socket.gethostname(),
+    base = {"state": "running", "pid": me, "pid_started": leftovers.start_time(me), "host": socket.gethostname(),
             "trial": None, "updated": now_iso(), "steps": 192, "planned": 1000, "wall_s": 5.0}  # fmt: skip
     return base | changes
 
@@ -135,7 +135,7 @@ def test_runs_stop_ends_a_running_training_with_a_checkpoint_and_nothing_left(tm
     assert "live: stopped at step" in stop.stdout and "no EnergyPlus process or pipe left" in stop.stdout
     info = registry.read_run(tmp_path / "runs" / "live")
     assert info.state == "stopped" and info.checkpoint.name == f"model_{info.steps}_steps.zip"
-    assert our_processes() == [] and not [d for d in pipe_sweep.pipe_dirs() if f"-{proc.pid}-" in d.name]
+    assert our_processes() == [] and not [d for d in leftovers.pipe_dirs() if f"-{proc.pid}-" in d.name]
 
 
 @pytest.mark.slow
@@ -160,7 +160,7 @@ def test_a_trainer_killed_with_sigkill_is_listed_as_failed_not_running(tmp_path,
         deadline = time.monotonic() + 30
         while our_processes() and time.monotonic() < deadline:
             time.sleep(0.2)
-        pipe_sweep.sweep()
+        leftovers.sweep()
 
 
 def test_a_scratch_folder_whose_owner_is_gone_is_swept_and_a_live_ones_kept(tmp_path):
@@ -171,7 +171,7 @@ def test_a_scratch_folder_whose_owner_is_gone_is_swept_and_a_live_ones_kept(tmp_
     gone, alive = tmp_path / "parallel-eplus-eval-gone", tmp_path / "parallel-eplus-eval-alive"
     for folder in (gone, alive):
         (folder / "episodes").mkdir(parents=True)
-    pipe_sweep.write_owner(alive)
-    (gone / pipe_sweep.OWNER_FILE).write_text(f"{dead.pid} 1\n")  # a process that ended
-    assert pipe_sweep.sweep(tmp_path) == [gone]
+    leftovers.write_owner(alive)
+    (gone / leftovers.OWNER_FILE).write_text(f"{dead.pid} 1\n")  # a process that ended
+    assert leftovers.sweep(tmp_path) == [gone]
     assert alive.is_dir() and not gone.exists()

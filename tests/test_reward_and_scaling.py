@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from parallel_eplus.buildings.model import ACTIONS
-from parallel_eplus.buildings.reward import RewardConfig, reward
+from parallel_eplus.buildings.datacenter import ACTIONS
+from parallel_eplus.buildings.scoring.reward import RewardConfig, reward
 from parallel_eplus.engine.actions import scale_action
 
 

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
 from parallel_eplus.engine.episode import SUMMARY_FILE
 
 

@@ -10,7 +10,7 @@ from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import VecNormalize
 
-from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.env import action_space, observation_space
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv

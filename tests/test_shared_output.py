@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from parallel_eplus import EnergyPlusEnv
-from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
 from parallel_eplus.engine.episode import SUMMARY_FILE, claim_episode_dir
 
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from parallel_eplus.buildings import model
-from parallel_eplus.buildings.reward import RewardConfig
-from parallel_eplus.buildings.spec import SpecError, load_spec, reward_config
+from parallel_eplus.buildings import datacenter as model
+from parallel_eplus.buildings.scoring.reward import RewardConfig, reward_config
+from parallel_eplus.buildings.spec.load import SpecError, load_spec
 
 SPEC = Path(model.__file__).parent / "specs" / "datacenter-2zone.toml"
 

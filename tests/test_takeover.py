@@ -1,5 +1,5 @@
 """Node setpoints taken over from the model's own setpoint managers in the prepared copy, and proved to reach their
-nodes by `building check` (buildings/takeover.py, reach.py): the DOE medium office from the EnergyPlus wheel, as it
+nodes by `building check` (buildings/idf/takeover.py, reach.py): the DOE medium office from the EnergyPlus wheel, as it
 ships, its first air loop's supply-air temperature owned by the agent."""
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.buildings import reach
-from parallel_eplus.buildings.check import check_spec
-from parallel_eplus.buildings.idf_prep import prepare_idf
+from parallel_eplus.buildings.check import reach
+from parallel_eplus.buildings.check.names import check_spec
+from parallel_eplus.buildings.idf.prepare import prepare_idf
 from parallel_eplus.buildings.resources import weather_file
-from parallel_eplus.buildings.spec import load_spec
+from parallel_eplus.buildings.spec.load import load_spec
 
 SUPPLY = "VAV_1 Supply Equipment Outlet Node"
 
@@ -75,11 +75,11 @@ def private_cache(tmp_path, monkeypatch):
 
 def test_the_prepared_copy_drops_the_node_from_its_manager_and_keeps_the_followers(tmp_path):
     spec = load_spec(office_spec(tmp_path, action("supply_c", SUPPLY.upper(), 12.0, 18.0, 13.0)))
-    from parallel_eplus.buildings.takeover import taken_setpoints
+    from parallel_eplus.buildings.idf.takeover import taken_setpoints
 
     report = prepare_idf(medium_office(), tmp_path / "model.idf", 1, takeover=taken_setpoints(spec.actions))
     text = (tmp_path / "model.idf").read_text(encoding="latin-1")
-    from parallel_eplus.buildings.idf_text import idf_objects
+    from parallel_eplus.buildings.idf.objects import idf_objects
 
     managers = {o.fields[0]: o for o in idf_objects(text) if o.kind.lower().startswith("setpointmanager:")}
     assert "VAV_1 SAT setpoint" not in managers  # commented out: the only node it set is the agent's
@@ -137,7 +137,8 @@ def test_check_proves_the_supply_air_follows_the_action_and_names_a_node_that_do
     request = reach._request(spec) | {"takeover": []}  # the model's own manager left in: it wins
     (tmp_path / "r").mkdir()
     (tmp_path / "r" / "request.json").write_text(json.dumps(request))
-    cmd = [sys.executable, "-m", "parallel_eplus.buildings.reach", "--probe", str(tmp_path / "r" / "request.json"),
+    cmd = [sys.executable, "-m", "parallel_eplus.buildings.check.reach",
+           "--probe", str(tmp_path / "r" / "request.json"),
            "--weather", str(epw)]  # fmt: skip
     subprocess.run(cmd, cwd=tmp_path / "r", check=True, capture_output=True, timeout=reach.TIMEOUT_S)
     samples = json.loads((tmp_path / "r" / "samples.json").read_text())

@@ -1,5 +1,5 @@
 """Prices and peaks: time-of-use periods, demand charges, the monthly bill and the cost objective's per-step share of
-the demand charges (buildings/tariff.py, bill.py), on a real episode of the small office across a month's end."""
+the demand charges (pricing/tariff.py, bill.py), on a real episode of the small office across a month's end."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.buildings.spec import SpecError, load_spec
-from parallel_eplus.buildings.tariff import price_outlook
+from parallel_eplus.buildings.pricing.tariff import price_outlook
+from parallel_eplus.buildings.spec.load import SpecError, load_spec
 
 from .test_kpis import office_spec
 

@@ -1,4 +1,4 @@
-"""A policy learned through the planner's model (learning/model_based/through_model.py), from real states of a
+"""A policy learned through the planner's model (learning/model_based/students/through_model.py), from real states of a
 short EnergyPlus run of the paper's data center: the rollouts branch from those states and stay within the data's
 support, and gradient steps on the planner's cost lower it."""
 
@@ -12,9 +12,9 @@ from sb3_contrib import TRPO
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.envs.env import EnergyPlusEnv
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.exogenous import model_schedule
-from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts, train, widen
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.model.exogenous import model_schedule
+from parallel_eplus.learning.model_based.students.through_model import Clock, Rollouts, Starts, train, widen
 from parallel_eplus.learning.saved_models import load_model
 from parallel_eplus.runs.norm_stats import read_stats
 from parallel_eplus.runs.policy_files import normalization_file

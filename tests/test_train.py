@@ -17,7 +17,7 @@ import pytest
 import torch as th
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.buildings.scoring.reward import RewardConfig
 from parallel_eplus.runs.policy_files import _latest_checkpoint, _saved_policy, load_policy
 from parallel_eplus.training.callbacks import episodes_per_weather
 from parallel_eplus.training.config import TrainConfig

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from parallel_eplus.buildings.model import STEPS_PER_DAY
+from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError

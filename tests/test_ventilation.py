@@ -1,4 +1,4 @@
-"""The outdoor air on demand (`ventilation = "demand"`, buildings/ventilation.py): the DOE small office as the
+"""The outdoor air on demand (`ventilation = "demand"`, buildings/idf/ventilation.py): the DOE small office as the
 EnergyPlus wheel ships it, one packaged unit per zone, each holding its outdoor air at the design occupancy's while
 it runs. In the controller's copy each unit's air follows the people present; the building's own controls keep
 the model as it is."""
@@ -10,13 +10,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from parallel_eplus.buildings.idf_prep import prepare_idf
+from parallel_eplus.buildings.idf.prepare import prepare_idf
 from parallel_eplus.buildings.resources import spec_dir
-from parallel_eplus.buildings.spec import SpecError, load_spec
+from parallel_eplus.buildings.spec.load import SpecError, load_spec
 from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
 from parallel_eplus.evaluation.sweep import run_sweep
 
-RULE = "parallel_eplus.buildings.on_demand:OnDemand"
+RULE = "parallel_eplus.buildings.rules.on_demand:OnDemand"
 ROOT = Path(__file__).resolve().parents[1]
 MEDIUM_PLANNER = ROOT / "results/model-based/office-medium/runs/office-medium-mpc-seed0/planner"  # committed
 OUTDOOR_AIR = """
@@ -90,7 +90,7 @@ def test_the_outdoor_air_follows_the_people_and_the_own_controls_keep_theirs(tmp
 def test_a_planner_acts_in_a_variant_of_its_building_and_nowhere_else(tmp_path, caplog, no_leaks):
     """A spec with the building's observations and actions but another copy (the medium office with its outdoor air
     on demand) takes the planners trained on the building, with a warning; another building still refuses them."""
-    from parallel_eplus.learning.model_based.saved_planner import planner_controller
+    from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
 
     planner = planner_controller(f"{MEDIUM_PLANNER}=Planner", "band_thermostats=own")
     variant = tmp_path / "office-medium-dcv.toml"

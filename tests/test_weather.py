@@ -11,10 +11,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from parallel_eplus.buildings.epw import HEADER_LINES, read_epw
-from parallel_eplus.buildings.forecast import Forecaster, ForecastSpec, ar1_temperature_error, outdoor_forecast
-from parallel_eplus.buildings.weather import ALL_WEATHERS, parse_weathers, resolve_weather, weather_label
-from parallel_eplus.buildings.weather_noise import ou_noise, parse_noise, perturb_epw
+from parallel_eplus.buildings.weather.epw import HEADER_LINES, read_epw
+from parallel_eplus.buildings.weather.files import ALL_WEATHERS, parse_weathers, resolve_weather, weather_label
+from parallel_eplus.buildings.weather.forecast_features import (
+    Forecaster,
+    ForecastSpec,
+    ar1_temperature_error,
+    outdoor_forecast,
+)
+from parallel_eplus.buildings.weather.noise import ou_noise, parse_noise, perturb_epw
 
 CA = resolve_weather("CA")
 
@@ -122,8 +127,8 @@ def test_forecast_error_is_zero_when_off_and_seeded_when_on():
 
 def test_a_spec_observation_can_be_a_forecast(tmp_path):
     from parallel_eplus.buildings.building import load_building
-    from parallel_eplus.buildings.model import AGENT_IDF, BASELINE_IDF
-    from parallel_eplus.buildings.spec import SpecError, load_spec
+    from parallel_eplus.buildings.datacenter import AGENT_IDF, BASELINE_IDF
+    from parallel_eplus.buildings.spec.load import SpecError, load_spec
     from parallel_eplus.envs.env import observation_space
 
     text = (Path(load_building().spec.path)).read_text()
@@ -156,7 +161,7 @@ def test_episodes_seeded_alike_see_the_same_weather_and_the_forecast_reads_it(tm
     forecast observation, and the planner's future weather (model-based control), are the episode's own
     (perturbed) file, hour by hour."""
     from parallel_eplus.envs.env import EnergyPlusEnv
-    from parallel_eplus.learning.model_based.exogenous import Forecasts
+    from parallel_eplus.learning.model_based.model.exogenous import Forecasts
 
     env = EnergyPlusEnv(run_days=1, weather_noise="drybulb=3:0:24", forecast_hours=4, output_dir=tmp_path)
     outdoor, forecasts, planned, planner = {}, {}, {}, Forecasts(None)

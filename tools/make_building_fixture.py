@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from parallel_eplus.buildings.model import observation_names
+from parallel_eplus.buildings.datacenter import observation_names
 from parallel_eplus.envs.env import EnergyPlusEnv
 
 OUT = Path(__file__).resolve().parents[1] / "tests" / "data" / "datacenter_2zone_ca_2days.csv"

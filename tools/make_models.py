@@ -22,7 +22,7 @@ It also derives the CRAC data center's agent variant from its committed model in
    it active the supply-node actuator has no effect (docs/notes/new-buildings.md); its two design days commented
    out too (without them the CO weather year starts; see crac_agent).
 Running the weather year rather than the design days, and the run period, are not model edits: the engine
-prepares every run's copy of any model (parallel_eplus/buildings/idf_prep.py).
+prepares every run's copy of any model (parallel_eplus/buildings/idf/prepare.py).
 """
 
 from __future__ import annotations

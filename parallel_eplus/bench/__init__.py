@@ -47,7 +47,7 @@ __all__ = ["BenchConfig", "_physical", "format_table", "raw_rate", "replay_run",
 def run(cfg: BenchConfig, out: Path | None = None) -> dict:
     """Every measurement, back to back, on this machine; written to `out` as JSON when given."""
     if cfg.building:  # a typo fails here, in seconds, not in the first EnergyPlus worker
-        from parallel_eplus.buildings.check import check_building
+        from parallel_eplus.buildings.check.names import check_building
 
         cfg = replace(cfg, building=str(check_building(cfg.building).path))
     results: dict = {"config": asdict(cfg), "machine": {"cores": os.cpu_count()}}

@@ -17,8 +17,8 @@ import time
 from pathlib import Path
 
 from parallel_eplus.buildings.building import Building
-from parallel_eplus.buildings.idf_prep import prepare_idf
-from parallel_eplus.buildings.takeover import taken_setpoints
+from parallel_eplus.buildings.idf.prepare import prepare_idf
+from parallel_eplus.buildings.idf.takeover import taken_setpoints
 
 
 def _name(i: int, j: int) -> str:
@@ -99,7 +99,7 @@ def alone_seconds(cfg, workdir: Path, days: int | None = None, runs: int = 1) ->
     and `raw_seconds` are timed."""
     from parallel_eplus.bench.config import bench_building
     from parallel_eplus.bench.raw import _physical
-    from parallel_eplus.buildings.weather import resolve_weather
+    from parallel_eplus.buildings.weather.files import resolve_weather
 
     building = bench_building(cfg)
     action = _physical([cfg.action] * len(building.actions), cfg.building)

@@ -50,8 +50,8 @@ def decisions(run: Path, days: int = 2, repeats: int = 3, options: str | None = 
     import torch as th
 
     from parallel_eplus.buildings.resources import saved_building
-    from parallel_eplus.learning.model_based.control import MPC
-    from parallel_eplus.learning.model_based.saved_planner import PlannerOptions, planner_source
+    from parallel_eplus.learning.model_based.control.mpc import MPC
+    from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions, planner_source
     from parallel_eplus.runs.policy_files import load_policy
 
     th.set_num_threads(1)

@@ -14,13 +14,13 @@ import numpy as np
 
 from parallel_eplus.bench.config import BenchConfig, bench_building
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.idf_prep import prepare_idf
-from parallel_eplus.buildings.model import control_model
-from parallel_eplus.buildings.takeover import taken_setpoints
-from parallel_eplus.buildings.weather import resolve_weather
-from parallel_eplus.engine import native
+from parallel_eplus.buildings.datacenter import control_model
+from parallel_eplus.buildings.idf.prepare import prepare_idf
+from parallel_eplus.buildings.idf.takeover import taken_setpoints
+from parallel_eplus.buildings.weather.files import resolve_weather
 from parallel_eplus.engine.actions import scale_action
 from parallel_eplus.engine.episode import MODEL_FILE
+from parallel_eplus.engine.eplus_side import native
 
 
 def _physical(action, building: str | None = None) -> list[float]:
@@ -62,13 +62,14 @@ def _raw_runs(jobs: list[RawJob], workdir: Path) -> tuple[float, list[float]]:
         out.mkdir(parents=True, exist_ok=True)
         np.save(out / "replay.npy", job.actions)
         cmds.append([
-            sys.executable, "-m", "parallel_eplus.engine.eplus_callback", "--idf", str(job.idf), "--epw", str(job.epw),
+            sys.executable, "-m", "parallel_eplus.engine.eplus_side.callback",
+            "--idf", str(job.idf), "--epw", str(job.epw),
             "--output-dir", str(out), "--steps", str(len(job.actions)), *job.args(),
             "--replay", str(out / "replay.npy"),
             *(["--native", lib] if lib else []),  # the env's own callbacks, minus the pipes
         ])  # fmt: skip
     t0 = time.perf_counter()
-    # Each in a session of its own, as training starts its workers (engine/process.py): with the kernel's autogroups
+    # Each in a session of its own, as training starts its workers (episodes/process.py): with the kernel's autogroups
     # a session is what the scheduler shares the CPU between, so on a shared machine both get the same weight.
     procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True) for cmd in cmds]
     try:

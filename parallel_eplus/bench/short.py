@@ -2,7 +2,7 @@
 rate by episode length. `parallel-eplus bench --short` and studies/short-episodes/short_episodes.py run these.
 
 1. `consecutive`: N episodes through one `EnergyPlusEnv` (a constant action, resets included, from constructing the
-   env to closing it), prepared ahead (the default: forked from a template parked at the first step, engine/fork.py),
+   env to closing it), prepared ahead (the default: forked from a template parked at the first step, episodes/fork.py),
    prepared in long-lived processes (`fork_episodes=False`) and cold (`prepare_next=False`), against EnergyPlus alone
    running the same N periods one after another in one process (alone.py: the same prepared model, the action held
    by EnergyPlus's own EMS, a new API state per run). Interleaved alone / prepared / long-lived / cold, `pairs`
@@ -25,7 +25,7 @@ import numpy as np
 from parallel_eplus.bench.alone import alone_model, run_alone
 from parallel_eplus.bench.raw import _physical
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.weather import resolve_weather
+from parallel_eplus.buildings.weather.files import resolve_weather
 from parallel_eplus.envs.env import EnergyPlusEnv
 
 log = logging.getLogger(__name__)

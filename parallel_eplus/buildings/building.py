@@ -12,11 +12,11 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from parallel_eplus.buildings import model
-from parallel_eplus.buildings.comfort import Comfort
-from parallel_eplus.buildings.model import ActionElement, ControlModel, Sensor, action_elements
-from parallel_eplus.buildings.spec import BuildingSpec, load_spec
-from parallel_eplus.buildings.takeover import NODE_SETPOINT
+from parallel_eplus.buildings import datacenter
+from parallel_eplus.buildings.datacenter import ActionElement, ControlModel, Sensor, action_elements
+from parallel_eplus.buildings.idf.takeover import NODE_SETPOINT
+from parallel_eplus.buildings.scoring.comfort import Comfort
+from parallel_eplus.buildings.spec.load import BuildingSpec, load_spec
 
 # The actuators the zone predictor reads, component types (EnergyPlus's EMS calling point for them:
 # BeginTimestepBeforePredictor).
@@ -41,7 +41,7 @@ class Building:
     def node_schedules(self) -> tuple[tuple[str | None, ...], ...]:
         """Per action, per actuator: the sensor of the schedule a node setpoint's own `SetpointManager:Scheduled`
         follows (`own` on node actuators only), None elsewhere. The prepared copy takes such a node even under
-        `relinquish` (engine/supply.py), and a released one gets the schedule back (engine/bridge.py): one place
+        `relinquish` (episodes/supply.py), and a released one gets the schedule back (eplus_side/bridge.py): one place
         decides which nodes those are."""
         none = tuple((None,) * len(a.actuators) for a in self.actions)
         own = self.own if len(self.own) == len(self.actions) else none
@@ -90,7 +90,7 @@ class Building:
 
     @functools.cached_property
     def comfort(self) -> Comfort:
-        """Its reward signals: zones, band, when the band applies, power and energy (buildings/comfort.py)."""
+        """Its reward signals: zones, band, when the band applies, power and energy (buildings/scoring/comfort.py)."""
         return Comfort.of(self.spec, self.steps_per_day // 24, self.zone_bounds, self.hvac)
 
     def bounds(self) -> tuple[list[float], list[float]]:
@@ -121,13 +121,13 @@ class Building:
 
 def applies_before_predictor(spec: BuildingSpec) -> bool:
     """Whether every actuator is one the zone predictor reads (a thermostat's setpoints) or a node setpoint taken
-    over from the model's managers (buildings/takeover.py). EnergyPlus's EMS guide sets thermostats before the
+    over from the model's managers (buildings/idf/takeover.py). EnergyPlus's EMS guide sets thermostats before the
     predictor; set after it, as node setpoints and fan flows otherwise are (after the HVAC managers, whose setpoint
     managers would overwrite them), a thermostat setpoint acts a zone timestep late. A node no manager sets any more
     is set before them too, so the managers that follow it (MixedAir: the coils' setpoints) see it in the same
     timestep; after them, the medium office's supply air followed the action one zone timestep late."""
-    from parallel_eplus.buildings.idf_prep import takeover_report
-    from parallel_eplus.buildings.takeover import NODE_SETPOINT
+    from parallel_eplus.buildings.idf.prepare import takeover_report
+    from parallel_eplus.buildings.idf.takeover import NODE_SETPOINT
 
     kinds = {a.component.lower() for action in spec.actions for a in action.actuators}
     if not kinds or not kinds <= PREDICTOR_ACTUATORS | {NODE_SETPOINT}:
@@ -147,7 +147,7 @@ def timesteps_per_hour(idf: Path) -> int:
 
 @functools.cache
 def _load(path: Path) -> Building:
-    spec = model.DEFAULT if path == model.DEFAULT_SPEC else load_spec(path)
+    spec = datacenter.DEFAULT if path == datacenter.DEFAULT_SPEC else load_spec(path)
     sensors = tuple(
         Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high, o.meter is not None, o.scale)
         for o in spec.observations
@@ -179,9 +179,9 @@ _OWN_SIDE = {("zone temperature control", "heating setpoint"): "heating",
 def _own_schedules(spec: BuildingSpec, actions, hidden: list[Sensor]) -> tuple[tuple[str | None, ...], ...]:
     """Per action, per actuator: the hidden sensor of the schedule the model's own controls follow there (the
     value the built-in controls would set; read each step, as the thermostat bounds are), None elsewhere."""
-    from parallel_eplus.buildings.idf_text import idf_objects
-    from parallel_eplus.buildings.takeover import scheduled_setpoints
-    from parallel_eplus.buildings.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
+    from parallel_eplus.buildings.idf.objects import idf_objects
+    from parallel_eplus.buildings.idf.takeover import scheduled_setpoints
+    from parallel_eplus.buildings.idf.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
 
     kinds = [[_OWN_SIDE.get((a.component_type.lower(), a.control_type.lower())) for a in e.actuators] for e in actions]
     if not any(k for ks in kinds for k in ks):
@@ -205,8 +205,8 @@ def _own_schedules(spec: BuildingSpec, actions, hidden: list[Sensor]) -> tuple[t
 
 def _thermostat_bounds(spec: BuildingSpec, hidden: list[Sensor]) -> tuple[tuple[str, str], ...]:
     """Each reward zone's bounds: its thermostat's heating and cooling setpoint schedules, read each step."""
-    from parallel_eplus.buildings.spec import SpecError
-    from parallel_eplus.buildings.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
+    from parallel_eplus.buildings.idf.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
+    from parallel_eplus.buildings.spec.load import SpecError
 
     setpoints = zone_setpoints(spec.idf)
     by_name = {o.name: o for o in spec.observations}
@@ -252,12 +252,12 @@ def load_building(path: str | Path | None = None) -> Building:
     """The building a spec file declares; None: the data center (specs/datacenter-2zone.toml)."""
     from parallel_eplus.buildings.resources import spec_file
 
-    return _load(spec_file(path) if path else model.DEFAULT_SPEC)
+    return _load(spec_file(path) if path else datacenter.DEFAULT_SPEC)
 
 
 def weather_path(building: str | None, weather: str) -> Path:
     """The .epw of a weather as a building's spec names it (its short names, the paper's codes, or a path)."""
-    from parallel_eplus.buildings.weather import resolve_weather
+    from parallel_eplus.buildings.weather.files import resolve_weather
 
     named = load_building(building).spec.weathers
     return Path(named.get(weather) or resolve_weather(weather))

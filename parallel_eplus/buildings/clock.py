@@ -1,11 +1,13 @@
 """The clock features a policy may observe, computed from a date and time alone: a controller server (the `serve`
-extra, deploy/contract.py) derives them for each request without loading a building spec or EnergyPlus's files.
+extra, deploy/serve/contract.py) derives them for each request without loading a building spec or EnergyPlus's files.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import math
+
+WEEKDAYS = ("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun")  # a spec's and a tariff's day names, Monday first
 
 # Opt-in observation features (off for the paper's reproduction): the IT load follows a fixed daily
 # schedule with steps at 00:00, 06:00, 08:00 and 18:00 that the six sensors cannot anticipate. They

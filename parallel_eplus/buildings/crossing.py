@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from parallel_eplus.buildings.model import ActionElement
+    from parallel_eplus.buildings.datacenter import ActionElement
 
 
 def thermostat_pairs(elements: tuple[ActionElement, ...]) -> tuple[tuple[int, int], ...]:

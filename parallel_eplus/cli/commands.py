@@ -38,7 +38,7 @@ def _format_summary(summary: dict) -> str:
         else (f" (where comfort applies: {summary['comfort_steps_pct']:.1f} % of steps)")
     )
     lines.append(f"samples in band       {summary['in_band_pct']:8.2f} %{where}")
-    if "energy_kwh" in summary:  # BOPTEST's figures (buildings/comfort.py)
+    if "energy_kwh" in summary:  # BOPTEST's figures (buildings/scoring/comfort.py)
         lines.append(f"discomfort            {summary['discomfort_kh']:8.2f} K·h per zone")
         lines.append(f"energy, every fuel    {summary['energy_kwh']:8.1f} kWh")
         lines.append(f"peak electric power   {summary['peak_power_kw']:8.1f} kW")
@@ -85,7 +85,7 @@ def _simulate_bacnet(args: argparse.Namespace) -> int:
     from parallel_eplus.cli.deploy import needs_bacnet
 
     needs_bacnet()
-    from parallel_eplus.deploy.bacnet_device import DeviceConfig, simulate
+    from parallel_eplus.deploy.bacnet.device import DeviceConfig, simulate
 
     summary = simulate(DeviceConfig(
         args.bacnet, args.device_id, args.building, args.weather, args.days, args.step_seconds, args.point_map,
@@ -100,8 +100,8 @@ def _simulate_bacnet(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from parallel_eplus.buildings.reward import RewardConfig
-    from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.buildings.scoring.reward import RewardConfig
+    from parallel_eplus.buildings.weather.files import parse_weathers
     from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
     from parallel_eplus.runs.policy_files import normalization_file
     from parallel_eplus.training.config import (
@@ -206,7 +206,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_building_init(args: argparse.Namespace) -> int:
-    from parallel_eplus.buildings.init import init_spec
+    from parallel_eplus.buildings.starter.write import init_spec
 
     out, summary = init_spec(args.idf, args.weather, args.output, args.name)
     print("\n".join(summary))
@@ -215,9 +215,9 @@ def cmd_building_init(args: argparse.Namespace) -> int:
 
 
 def cmd_building_check(args: argparse.Namespace) -> int:
-    from parallel_eplus.buildings.check import check_spec
+    from parallel_eplus.buildings.check.names import check_spec
     from parallel_eplus.buildings.resources import spec_file
-    from parallel_eplus.buildings.spec import load_spec
+    from parallel_eplus.buildings.spec.load import load_spec
 
     spec = load_spec(spec_file(args.spec))  # a path, or a built-in spec's name
     result = check_spec(spec, args.weather, use_cache=not args.no_cache)
@@ -270,18 +270,17 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def cmd_clean(args: argparse.Namespace) -> int:
-    from parallel_eplus.engine import pipe_sweep
-
-    leftovers = pipe_sweep.leftover_processes()
+    from parallel_eplus.engine.pipes import leftovers
+    leftovers = leftovers.leftover_processes()
     for p in leftovers:
         print(f"leftover EnergyPlus process {p.pid} (its trainer is gone; pipe {p.pipe_dir})")
     if leftovers and args.kill:
-        pipe_sweep.kill(leftovers)
+        leftovers.kill(leftovers)
         print(f"killed {len(leftovers)} leftover EnergyPlus process(es)")
     elif leftovers:
         print("stop them with: parallel-eplus clean --kill")
-    stale = pipe_sweep.stale_pipe_dirs(unowned=True)
-    for d in stale if args.dry_run else pipe_sweep.sweep(unowned=True):
+    stale = leftovers.stale_pipe_dirs(unowned=True)
+    for d in stale if args.dry_run else leftovers.sweep(unowned=True):
         print(f"{'stale' if args.dry_run else 'removed'} pipe directory: {d}")
     if not leftovers and not stale:
         print("nothing to clean: no pipe directory or EnergyPlus process of a process that is gone")

@@ -63,7 +63,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         import onnxruntime  # noqa: F401
     except ImportError as e:
         raise _needs("export", e) from None
-    from parallel_eplus.deploy.export import export
+    from parallel_eplus.deploy.export.policy import export
 
     path = export(args.policy, args.out, workers=args.workers, max_input_z=args.fallback_input_z,
                   max_spread_k=args.fallback_spread_k, persistence=args.persistence,
@@ -83,14 +83,14 @@ def needs_bacnet() -> None:
 def cmd_serve(args: argparse.Namespace) -> int:
     if args.bacnet:
         needs_bacnet()
-        from parallel_eplus.deploy.bacnet_supervisor import SupervisorConfig, supervise
+        from parallel_eplus.deploy.bacnet.supervisor import SupervisorConfig, supervise
 
         return supervise(SupervisorConfig(
             args.controller, args.bacnet, args.point_map, args.priority, args.local, args.device_id, args.bbmd,
             args.bbmd_ttl, advance=args.advance, step_seconds=args.step_seconds,
         ))  # fmt: skip
     try:
-        from parallel_eplus.deploy.server import serve  # no torch: onnxruntime, FastAPI and the contract only
+        from parallel_eplus.deploy.serve.server import serve  # no torch: onnxruntime, FastAPI and the contract only
     except ImportError as e:
         raise _needs("serve", e) from None
 

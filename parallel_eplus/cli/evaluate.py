@@ -17,8 +17,8 @@ def _temperatures(text: str, flag: str) -> list[float]:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from parallel_eplus import io
     from parallel_eplus.buildings.building import load_building
-    from parallel_eplus.buildings.reward import RewardConfig
-    from parallel_eplus.buildings.weather import parse_weathers
+    from parallel_eplus.buildings.scoring.reward import RewardConfig
+    from parallel_eplus.buildings.weather.files import parse_weathers
     from parallel_eplus.errors import EnergyPlusError
     from parallel_eplus.evaluation.controllers import (
         BASELINE_LABEL,
@@ -50,7 +50,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers[-1].make(args.building)  # the spec's settings for its rule: a wrong one fails here
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    from parallel_eplus.learning.model_based.saved_planner import planner_controller
+    from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
 
     for path in args.policy or []:  # a model-based run's planner, else a policy or a folder of runs (seeds)
         planner = planner_controller(path, args.planner)

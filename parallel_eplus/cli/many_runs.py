@@ -34,9 +34,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _run_sweep(spec, ray_address: str | None, overwrite: bool) -> int:
-    from parallel_eplus.experiments.sweep import format_outcomes, run_sweep
+    from parallel_eplus.experiments.sweep import format_outcomes, run_tune_sweep
 
-    outcomes = run_sweep(spec, ray_address, overwrite)
+    outcomes = run_tune_sweep(spec, ray_address, overwrite)
     print(format_outcomes(outcomes, spec))
     root = outcomes[0].run_dir.parent if outcomes else spec.runs_dir
     print(f"runs: {root}/<trial>/   TensorBoard: {Path(sys.executable).parent / 'tensorboard'} --logdir "

@@ -75,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--rbc", nargs="?", const=True, default=False, metavar="MODULE:CLASS",
         help="include the rule-based controller: the spec's `controller`, or the class named here (e.g. "
-        "parallel_eplus.buildings.precool:PreCool, pre-cooling ahead of the tariff's peak)",
+        "parallel_eplus.buildings.rules.precool:PreCool, pre-cooling ahead of the tariff's peak)",
     )  # fmt: skip
     ev.add_argument(
         "--rbc-targets", metavar="C,C,...",

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from parallel_eplus.buildings.model import (
+from parallel_eplus.buildings.datacenter import (
     control_model,
 )
-from parallel_eplus.buildings.rbc import DEMAND_CORRECTIONS
-from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.buildings.rules.datacenter import DEMAND_CORRECTIONS
+from parallel_eplus.buildings.scoring.reward import RewardConfig
 
 
 @dataclass
@@ -17,14 +17,14 @@ class SimulationConfig:
 
     weather: str = "CA"  # code or .epw path; a list cycles episode by episode
     model: str = "temp_fan"
-    # A building spec (TOML, buildings/spec.py): its IDF, sensors, actions and reward signals replace the
+    # A building spec (TOML, buildings/spec/load.py): its IDF, sensors, actions and reward signals replace the
     # data center's and `model`'s. None: the data center (buildings/specs/datacenter-2zone.toml).
     building: str | None = None
     run_days: int = 365
     output_dir: str | None = None  # None: a temporary directory removed on close
     keep_episodes: int | None = None  # this env's newest full episode directories kept; None keeps all
     # EnergyPlus's own eplusout.csv in each episode (where the model asks for one): training turns it off,
-    # its cost being memory and time (buildings/idf_prep.py), its content ours in steps.parquet.
+    # its cost being memory and time (buildings/idf/prepare.py), its content ours in steps.parquet.
     energyplus_csv: bool = True
     reward: RewardConfig = field(default_factory=RewardConfig)
     start_timeout_s: float = 180.0  # sizing and warmup come before the first observation
@@ -45,10 +45,10 @@ class SimulationConfig:
     residual_space: str = "action"
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     # Envs and vector envs: fork each episode's process from a warm interpreter and start the next episode while
-    # one runs, so a reset finds it parked at its first step (engine/prepared.py). A lone Simulation never does.
+    # one runs, so a reset finds it parked at its first step (episodes/prepared.py). A lone Simulation never does.
     prepare_next: bool = True
     # With prepare_next: episodes forked from an EnergyPlus parked at the run period's first control step, one per
-    # weather file, so input processing, sizing and warm-up are paid once, not per episode (engine/fork.py). Not
+    # weather file, so input processing, sizing and warm-up are paid once, not per episode (episodes/fork.py). Not
     # with weather noise (a new weather file each episode): those start as without it.
     fork_episodes: bool = True
     native_bridge: bool = True  # EnergyPlus's side of each step in C (native.py) where a C compiler works
@@ -58,7 +58,7 @@ class SimulationConfig:
     # Read-back output variables (key, variable) added to the model's EnergyPlus CSV, every timestep: what the
     # building's own controls chose, for `train --init-from-baseline` (learning/imitation.py).
     extra_outputs: tuple[tuple[str, str], ...] = ()
-    # What the reward's energy term counts (energy, hvac, cost, emissions; buildings/kpis.py). None: the spec's.
+    # What the reward's energy term counts (energy, hvac, cost, emissions; buildings/scoring/kpis.py). None: the spec's.
     objective: str | None = None
     # A test period (evaluation/scenarios.py): the run starts on this day of the year, on this weekday (None: the
     # model's own), and its first `warmup_days` are simulated but left out of the episode's figures.
@@ -68,15 +68,15 @@ class SimulationConfig:
     # Training across the seasons (BOPTEST-Gym's random start time): each episode starts on a day of the year drawn
     # for it (fixed by the seed, the worker and the episode's number), `run_days` long within the year.
     random_start: bool = False
-    # Weather that varies per episode (buildings/weather_noise.py's `parse_noise` form, e.g. "drybulb=1:0:24"):
+    # Weather that varies per episode (buildings/weather/noise.py's `parse_noise` form, e.g. "drybulb=1:0:24"):
     # each episode runs a perturbed copy of its EPW, written into its folder. None: the file as it is.
     weather_noise: str | None = None
     # Seeds each episode's noise and forecast error with (seed, worker, episode number); `reset(seed=)` sets one.
     seed: int = 0
     fixed_seed: bool = False  # every episode's seed is `seed` itself (evaluate's noisy year N: the same for all)
-    forecast_hours: int = 0  # > 0: the outdoor dry bulb's next N hours end the observation (buildings/forecast.py)
+    forecast_hours: int = 0  # > 0: the outdoor dry bulb's next N hours end the observation (weather/forecast_features)
     forecast_error: str | None = None  # BOPTEST's "low", "medium" or "high" error on that forecast; None: exact
-    # The model's own controls under the actions (the BACnet device, deploy/bacnet_device.py): the building's
+    # The model's own controls under the actions (the BACnet device, deploy/bacnet/device.py): the building's
     # `baseline_idf` runs with the actions' actuators, and an action element that is NaN releases them to its own
     # setpoint managers and fan controls for that step. `initial_action` NaN: warm-up under its own controls too.
     relinquish: bool = False
@@ -88,7 +88,7 @@ RESIDUAL_SPACES = ("action", "demand", "builtin")
 def forecast_specs(config: SimulationConfig):
     """The forecasts ending the observation: the building spec's own, then `forecast_hours`' outdoor one."""
     from parallel_eplus.buildings.building import load_building
-    from parallel_eplus.buildings.forecast import outdoor_forecast
+    from parallel_eplus.buildings.weather.forecast_features import outdoor_forecast
 
     extra = (outdoor_forecast(config.forecast_hours, config.forecast_error),) if config.forecast_hours else ()
     return load_building(config.building).spec.forecasts + extra

@@ -8,14 +8,15 @@ import os
 import re
 import shutil
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from parallel_eplus.buildings.comfort import APPLIES, Comfort
-from parallel_eplus.buildings.kpis import floor_area, per_area
-from parallel_eplus.buildings.model import SENSOR_NAMES
+from parallel_eplus.buildings.datacenter import SENSOR_NAMES
+from parallel_eplus.buildings.scoring.comfort import APPLIES, Comfort
+from parallel_eplus.buildings.scoring.kpis import floor_area, per_area
 
 STEPS_FILE = "steps.parquet"  # binary: a year writes in ~0.1 s where CSV takes ~0.8 s
 SUMMARY_FILE = "summary.json"
@@ -101,7 +102,7 @@ def read_steps(episode_dir: str | Path) -> pd.DataFrame:
 def summarize(steps: pd.DataFrame, comfort: Comfort | None = None) -> dict[str, float]:
     """The paper's episode statistics (Section 5) and BOPTEST's figures, for any building (`comfort`: its reward
     signals; None: the data center's): power in kW, zone temperatures and the share in band where the band
-    applies, discomfort (K·h per zone), energy (kWh, every fuel) and peak electric power (buildings/comfort.py)."""
+    applies, discomfort (K·h per zone), energy (kWh, every fuel) and peak electric power (scoring/comfort.py)."""
     out: dict[str, float] = {"steps": float(len(steps))}
     if steps.empty:
         return out
@@ -193,3 +194,22 @@ def claim_episode_dir(output_dir: Path, label: str, number: int = 1) -> tuple[Pa
             return path, number
         except FileExistsError:  # another env took it between the scan and the mkdir
             number += 1
+
+
+@dataclass(frozen=True)
+class EpisodePlan:
+    """What one episode runs, decided before its process starts: its weather (the rotation's pick, or the
+    reset's `weather_index`) and the reset's seed and options it was planned for. Everything drawn per episode
+    (a perturbed weather file, say) belongs here, drawn when the plan is made, so a prepared episode and a cold
+    one with the same plan are the same episode."""
+
+    weather_index: int
+    weather: str
+    epw: Path
+    seed: int | None = None
+    options: tuple = field(default=())  # the reset's options as sorted (key, value) pairs
+    start_day: int | None = None  # the run's first day of the year (`random_start`); None: the config's
+
+    @staticmethod
+    def options_key(options: dict | None) -> tuple:
+        return tuple(sorted((options or {}).items(), key=lambda kv: kv[0]))

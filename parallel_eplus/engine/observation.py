@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from parallel_eplus.buildings.forecast import Forecaster
-from parallel_eplus.buildings.model import schedule_features, time_features
-from parallel_eplus.engine import frames
+from parallel_eplus.buildings.datacenter import schedule_features, time_features
+from parallel_eplus.buildings.weather.forecast_features import Forecaster
+from parallel_eplus.engine.pipes import frames
 from parallel_eplus.engine.setup import WorkerSetup
 
 

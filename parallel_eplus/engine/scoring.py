@@ -1,13 +1,13 @@
 """What one step is worth: the reward and, with comfort as a constraint, its cost, from the building's comfort object.
 
 One place for the per-step arithmetic every learner reads through `info`: the energy the objective counts (with
-demand charges, the running month's share of them, buildings/bill.py), the reward (buildings/reward.py) and the
+demand charges, the running month's share of them, pricing/bill.py), the reward (scoring/reward.py) and the
 comfort cost beside it (`--comfort-margin`).
 """
 
 from __future__ import annotations
 
-from parallel_eplus.buildings.reward import reward
+from parallel_eplus.buildings.scoring.reward import reward
 
 
 class StepScorer:

@@ -16,16 +16,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from parallel_eplus.buildings.building import Building, load_building
-from parallel_eplus.buildings.comfort import Comfort
-from parallel_eplus.buildings.forecast import Forecaster, ForecastSpec
-from parallel_eplus.buildings.model import ACTIONS, ActionElement, ControlModel, control_model, it_load_schedule
-from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
-from parallel_eplus.buildings.spec import OBJECTIVES
-from parallel_eplus.buildings.weather import resolve_weather
-from parallel_eplus.buildings.weather_noise import parse_noise, perturb_epw
+from parallel_eplus.buildings.datacenter import ACTIONS, ActionElement, ControlModel, control_model, it_load_schedule
+from parallel_eplus.buildings.rules.datacenter import RBCConfig, RuleBasedController
+from parallel_eplus.buildings.scoring.comfort import Comfort
+from parallel_eplus.buildings.spec.load import OBJECTIVES
+from parallel_eplus.buildings.weather.files import resolve_weather
+from parallel_eplus.buildings.weather.forecast_features import Forecaster, ForecastSpec
+from parallel_eplus.buildings.weather.noise import parse_noise, perturb_epw
 from parallel_eplus.engine.config import SimulationConfig, forecast_specs, policy_action_names
-from parallel_eplus.engine.episode import link_or_copy
-from parallel_eplus.engine.prepared import EpisodePlan
+from parallel_eplus.engine.episode import EpisodePlan, link_or_copy
 
 if TYPE_CHECKING:  # the EnergyPlus side imports no pandas (tests/test_packaging.py)
     import pandas as pd
@@ -38,13 +37,13 @@ class WorkerSetup:
     config: SimulationConfig
     building: Building
     model: ControlModel
-    comfort: Comfort  # zones, band, when it applies, energy under the run's objective (buildings/comfort.py)
+    comfort: Comfort  # zones, band, when it applies, energy under the run's objective (buildings/scoring/comfort.py)
     idf: Path
     obs_low: np.ndarray  # float32
     obs_high: np.ndarray
     observed: int  # the sensors after these are read for the figures only (thermostat schedules, HVAC meters)
     schedule: object | None  # the IT-load schedule, for the schedule features
-    noise: object | None  # the weather noise (buildings/weather_noise.py)
+    noise: object | None  # the weather noise (buildings/weather/noise.py)
     forecasts: tuple[ForecastSpec, ...]
     weathers: list[str]
     weather_paths: list[Path]

@@ -17,19 +17,20 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.forecast import Forecaster
-from parallel_eplus.buildings.weather import weather_label
-from parallel_eplus.engine import frames, native
+from parallel_eplus.buildings.weather.files import weather_label
+from parallel_eplus.buildings.weather.forecast_features import Forecaster
 from parallel_eplus.engine.actions import ActionMap
-from parallel_eplus.engine.at_exit import close_at_exit
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.engine.episode import StepRecorder, err_tail, write_records
+from parallel_eplus.engine.episode import EpisodePlan, StepRecorder, err_tail, write_records
+from parallel_eplus.engine.episodes.prepared import PreparedEpisode
+from parallel_eplus.engine.episodes.process import EnergyPlusProcess, wait_any
+from parallel_eplus.engine.episodes.supply import EpisodeSupply
+from parallel_eplus.engine.eplus_side import native
 from parallel_eplus.engine.observation import Observer
-from parallel_eplus.engine.prepared import EpisodePlan, PreparedEpisode
-from parallel_eplus.engine.process import EnergyPlusProcess, wait_any
+from parallel_eplus.engine.pipes import frames
+from parallel_eplus.engine.pipes.at_exit import close_at_exit
 from parallel_eplus.engine.scoring import StepScorer
 from parallel_eplus.engine.setup import WorkerSetup
-from parallel_eplus.engine.supply import EpisodeSupply
 from parallel_eplus.errors import EnergyPlusError, ProtocolError
 
 log = logging.getLogger(__name__)

@@ -10,9 +10,8 @@ import gymnasium as gym
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES
-from parallel_eplus.buildings.reward import RewardConfig
-from parallel_eplus.buildings.spec import reward_config
+from parallel_eplus.buildings.datacenter import SCHEDULE_FEATURES, TIME_FEATURES
+from parallel_eplus.buildings.scoring.reward import RewardConfig, reward_config
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.simulation import Simulation
 
@@ -24,8 +23,8 @@ def observation_space(
     forecast_hours: int = 0,
 ) -> gym.spaces.Box:
     """The building's sensors (None: the data center), the opt-in features, which lie in [-1, 1], then its
-    forecasts and `forecast_hours` of the outdoor dry bulb (buildings/forecast.py; the EPW's bounds)."""
-    from parallel_eplus.buildings.forecast import outdoor_forecast
+    forecasts and `forecast_hours` of the outdoor dry bulb (weather/forecast_features.py; the EPW's bounds)."""
+    from parallel_eplus.buildings.weather.forecast_features import outdoor_forecast
 
     spec = load_building(building).spec
     low, high = load_building(building).bounds()
@@ -48,11 +47,11 @@ class EnergyPlusEnv(gym.Env):
     EnergyPlus's two-zone data center (`2ZoneDataCenterHVAC_wEconomizer`, West and East zones, each with
     its own air loop) with the built-in setpoint managers and fan control replaced by the agent
     (Moriyama et al. 2018). `reset()` starts the next episode on the next weather file (prepared while the
-    last one ran, so it is already at its first step: engine/prepared.py), over a private pair of named pipes;
+    last one ran, so it is already at its first step: engine/episodes/prepared.py), over a private pair of named pipes;
     every `step()` runs one zone timestep (15 minutes) under the action.
 
     ## Action Space
-    `Box(-1, 1, (4,))`, scaled linearly to physical units (`buildings/model.py` `ACTIONS`): West and
+    `Box(-1, 1, (4,))`, scaled linearly to physical units (`buildings/datacenter.py` `ACTIONS`): West and
     East supply-air setpoints (10–40 °C, written to four setpoint nodes per zone), West and East supply
     fan mass flow (1.75–7.0 kg/s). `model="temp"`: the two setpoints only. With `residual_scale > 0`
     the action corrects the rule-based controller's (`residual_space="action"`: each element;
@@ -70,7 +69,7 @@ class EnergyPlusEnv(gym.Env):
 
     ## Rewards
     The paper's: a Gaussian plus a trapezoid around 23.5 °C (band 23–24 °C) per zone, minus
-    λ_P × total power (`buildings/reward.py`, constants in `RewardConfig`; `reward=` overrides them).
+    λ_P × total power (`buildings/scoring/reward.py`, constants in `RewardConfig`; `reward=` overrides them).
 
     ## Starting State
     The weather file's January 1, 00:00, after EnergyPlus's sizing and warmup under each action's
@@ -86,15 +85,15 @@ class EnergyPlusEnv(gym.Env):
     `run_days`; `output_dir` and `keep_episodes` for episode records (envs sharing one `output_dir`, in one process
     or several, each get their own `episode-NNNNNN-<weather>` directories); `energyplus_csv=False` drops
     EnergyPlus's own `eplusout.csv` from them (training does: it costs memory and time); `prepare_next=False`
-    starts every episode cold instead of preparing the next while one runs (engine/prepared.py); `fork_episodes=False`
-    prepares each in a long-lived process instead of forking it from one parked at its first step (engine/fork.py);
+    starts every episode cold instead of preparing the next while one runs (episodes/prepared.py); `fork_episodes=False`
+    prepares each in a long-lived process instead of forking it from one parked at its first step (episodes/fork.py);
     `reward`; `idf` to override the model file; `start_timeout_s`, `step_timeout_s`; `time_features`,
     `schedule_features` (None: the spec's); `residual_scale`, `residual_space`, `rbc_target_c`; `building`: a spec
     file or a built-in spec's name
-    (buildings/spec.py) whose model, sensors, actions and reward replace the data center's (`model` then does
+    (buildings/spec/load.py) whose model, sensors, actions and reward replace the data center's (`model` then does
     not apply; its reward parameters are the default `reward`; it is checked against its model first);
     `name`: the `worker` its episodes' summaries name (`rllib_env` names RLlib's env runners).
-    `weather_noise` ("drybulb=1:0:24", buildings/weather_noise.py): each episode runs a perturbed copy of its
+    `weather_noise` ("drybulb=1:0:24", buildings/weather/noise.py): each episode runs a perturbed copy of its
     weather file, seeded by `reset(seed=)` (same seed, same year) or else by `seed`, the worker and the episode;
     `forecast_hours`: the outdoor dry bulb's next N hours end the observation, with BOPTEST's `forecast_error`
     ("low", "medium", "high"; None: exact) (docs/weather.md).
@@ -130,7 +129,7 @@ class EnergyPlusEnv(gym.Env):
     ):
         weathers = [str(w) for w in weather] if isinstance(weather, (list, tuple)) else [str(weather)]
         if building is not None:  # a typo costs seconds and a message naming it, not a hung worker
-            from parallel_eplus.buildings.check import check_building
+            from parallel_eplus.buildings.check.names import check_building
 
             check_building(building)
         spec = load_building(building).spec  # its opt-in features unless given here (the data center's: off)

@@ -1,5 +1,5 @@
 """The electricity bill's parts in results.md: energy and demand charges per controller and weather, then per month
-(buildings/bill.py computes them from each episode's step table; results.csv has every figure)."""
+(buildings/pricing/bill.py computes them from each episode's step table; results.csv has every figure)."""
 
 from __future__ import annotations
 

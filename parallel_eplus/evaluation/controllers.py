@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.rbc import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.resources import saved_building
-from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.buildings.rules.datacenter import RBCConfig, RuleBasedController
+from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.errors import EnergyPlusError
 
@@ -35,7 +35,7 @@ class Controller:
 
     label: str
     # "baseline", "policy", "rbc", "http" (a served controller: `url`) or "planner" (a model-based run's:
-    # learning/model_based/control.py)
+    # learning/model_based/control/mpc.py)
     kind: str
     path: Path | None = None
     time_features: bool = False  # the policy observes model.TIME_FEATURES
@@ -60,12 +60,12 @@ class Controller:
 
     def relinquishes(self, building: str | None) -> bool:
         """Whether its NaN action elements release their actuators to the building's own control (a rule-based
-        controller that says so: buildings/air_reset.py); the episode then runs with `relinquish`."""
+        controller that says so: buildings/rules/air_reset.py); the episode then runs with `relinquish`."""
         return self._rule_says(building, "relinquishes")
 
     def residual(self, building: str | None) -> tuple[float, str]:
         """(residual_scale, residual_space) for its episodes: a policy's as trained, or, for a rule-based controller
-        whose actions correct the building's own schedules (`corrects_own`: buildings/own_margin.py), "builtin" at
+        whose actions correct the building's own schedules (`corrects_own`: buildings/rules/own_margin.py), "builtin" at
         scale 1, so EnergyPlus's side adds them to each schedule at the step it applies to."""
         if self._rule_says(building, "corrects_own"):
             return 1.0, "builtin"

@@ -17,11 +17,11 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from parallel_eplus.buildings.bill import DemandTracker
 from parallel_eplus.buildings.building import load_building, weather_path
-from parallel_eplus.buildings.model import DEFAULT
+from parallel_eplus.buildings.datacenter import DEFAULT
+from parallel_eplus.buildings.pricing.bill import DemandTracker
 from parallel_eplus.buildings.scaling import to_unit
-from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
+from parallel_eplus.buildings.weather.forecast import WEATHER, PerfectForecast
 
 
 class HttpController:

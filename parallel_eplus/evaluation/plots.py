@@ -16,9 +16,9 @@ import pandas as pd  # noqa: E402
 
 from parallel_eplus import io  # noqa: E402
 from parallel_eplus.buildings.building import load_building  # noqa: E402
-from parallel_eplus.buildings.model import COMFORT_BAND_C  # noqa: E402
-from parallel_eplus.buildings.reward import RewardConfig  # noqa: E402
-from parallel_eplus.buildings.weather import WEATHER_FILES  # noqa: E402
+from parallel_eplus.buildings.datacenter import COMFORT_BAND_C  # noqa: E402
+from parallel_eplus.buildings.scoring.reward import RewardConfig  # noqa: E402
+from parallel_eplus.buildings.weather.files import WEATHER_FILES  # noqa: E402
 from parallel_eplus.engine.episode import (  # noqa: E402
     REWARD_PARTS,
     STEP_FLAGS,

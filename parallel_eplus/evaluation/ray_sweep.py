@@ -54,7 +54,7 @@ def _episode(controller, cfg: SimulationConfig, files: dict[str, bytes] | None, 
              key: int = 0) -> tuple[dict, dict[str, bytes]]:  # fmt: skip
     """One whole episode on a node; returns (its results row, the files the figures read). `progress`: the
     driver's `_Steps`, told every PROGRESS_STEPS steps."""
-    from parallel_eplus.engine.pipe_sweep import write_owner
+    from parallel_eplus.engine.pipes.leftovers import write_owner
     from parallel_eplus.engine.simulation import Simulation
 
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-eval-") as tmp:
@@ -146,6 +146,6 @@ def run_jobs(
         if owns:
             ray.shutdown()
             if pending:  # its workers were killed outright: their episodes' folders are this run's to remove
-                from parallel_eplus.engine.pipe_sweep import sweep
+                from parallel_eplus.engine.pipes.leftovers import sweep
 
                 sweep()

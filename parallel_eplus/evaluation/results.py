@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 
 from parallel_eplus import io
-from parallel_eplus.buildings.model import COMFORT_BAND_C
+from parallel_eplus.buildings.datacenter import COMFORT_BAND_C
 from parallel_eplus.engine.episode import STEPS_FILE
 from parallel_eplus.evaluation.building_table import comparable
 from parallel_eplus.evaluation.controllers import BASELINE_LABEL
@@ -72,7 +72,7 @@ def table_markdown(df: pd.DataFrame) -> str:
     for c in controllers:
         change = "–" if base is None or c == BASELINE_LABEL else f"{100 * (avg[c] / base - 1):+.1f} %"
         lines.append(f"| {c} | {avg[c]:.1f} | {change} | {share[c]:.2f} % |")
-    if "energy_kwh" in shared.columns:  # BOPTEST's figures (buildings/comfort.py), per weather's year, averaged
+    if "energy_kwh" in shared.columns:  # BOPTEST's figures (buildings/scoring/comfort.py), per weather's year, averaged
         kpi = shared.groupby("controller", sort=False)[["energy_kwh", "peak_power_kw", "discomfort_kh"]].mean()
         lines += [
             "",
@@ -98,7 +98,7 @@ def failures_markdown(failures: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-# BOPTEST's figures in a summary (buildings/kpis.py), kept in results.csv beside the paper's columns
+# BOPTEST's figures in a summary (buildings/scoring/kpis.py), kept in results.csv beside the paper's columns
 KPI_PREFIXES = ("hvac_", "cost", "emissions_kg", "energy_kwh_m2", "floor_area_m2")
 
 

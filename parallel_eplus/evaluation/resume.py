@@ -15,7 +15,7 @@ import json
 import logging
 from pathlib import Path
 
-from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import FAILURE_FILE, SUMMARY_FILE
 

@@ -118,7 +118,7 @@ def find_periods(
 ) -> dict[str, Period]:
     """Each weather's period for `scenario`, from a year of the built-in controls (run once per weather and kept in
     `out_dir/scenarios.json` with every scenario's day, so other scenarios reuse it)."""
-    from parallel_eplus.buildings.weather import weather_label
+    from parallel_eplus.buildings.weather.files import weather_label
     from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
     from parallel_eplus.evaluation.sweep import run_sweep
 

@@ -17,12 +17,12 @@ from scipy import stats
 # What the seed tables summarise, with how each reads (higher or lower is better is the reader's call).
 METRICS = {
     "energy_change_pct": "energy vs built-in (%)",
-    "hvac_energy_change_pct": "HVAC energy vs built-in (%)",  # BOPTEST's figures (buildings/kpis.py)
+    "hvac_energy_change_pct": "HVAC energy vs built-in (%)",  # BOPTEST's figures (buildings/scoring/kpis.py)
     "cost_change_pct": "cost vs built-in (%)",
     "emissions_change_pct": "emissions vs built-in (%)",
     "in_band_pct": "in band (%)",
     "discomfort_kh": "discomfort (K·h/zone)",
-    "occupied_discomfort_kh": "occupied discomfort (K·h/zone)",  # thermostat bounds (buildings/comfort.py)
+    "occupied_discomfort_kh": "occupied discomfort (K·h/zone)",  # thermostat bounds (buildings/scoring/comfort.py)
     "power_kw": "power (kW)",
     "energy_kwh": "energy (kWh)",
 }
@@ -61,7 +61,7 @@ def with_changes(df: pd.DataFrame, baseline: str) -> pd.DataFrame:
     if "weather_seed" in df.columns and df["weather_seed"].notna().all():
         keys.append("weather_seed")
     for key in ("energy_kwh" if "energy_kwh" in df.columns else "power_kw", "hvac_energy_kwh", "cost", "emissions_kg"):
-        if key not in df.columns:  # BOPTEST's figures (buildings/kpis.py), where the rows have them
+        if key not in df.columns:  # BOPTEST's figures (buildings/scoring/kpis.py), where the rows have them
             continue
         name = "energy" if key in ("energy_kwh", "power_kw") else key.removesuffix("_kwh").removesuffix("_kg")
         df[f"{name}_change_pct"] = 100 * (df[key] / _paired(df, baseline, key, keys) - 1)

@@ -15,8 +15,8 @@ import pandas as pd
 from tqdm import tqdm
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.reward import RewardConfig
-from parallel_eplus.buildings.weather import parse_weathers, weather_label
+from parallel_eplus.buildings.scoring.reward import RewardConfig
+from parallel_eplus.buildings.weather.files import parse_weathers, weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.simulation import Simulation, wait_any
 from parallel_eplus.errors import EnergyPlusError
@@ -53,7 +53,7 @@ def run_sweep(
     `periods`: weather -> a test period (evaluation/scenarios.py) run instead of `run_days` from January 1;
     `extra_outputs`: (key, variable) pairs EnergyPlus reports every step in each episode's eplusout.csv.
 
-    `weather_noise` (buildings/weather_noise.py): instead, `noisy_years` episodes per (controller, weather), year k
+    `weather_noise` (buildings/weather/noise.py): instead, `noisy_years` episodes per (controller, weather), year k
     the weather perturbed with seed k for every controller; each year is a `run` of the row's controller, so the
     results give the mean over years and its interval (seeds.py).
 
@@ -68,7 +68,7 @@ def run_sweep(
     `resume`: the jobs whose episode a previous sweep into `out_dir` finished are not run again (resume.py)."""
     known = None
     if building:
-        from parallel_eplus.buildings.check import check_building
+        from parallel_eplus.buildings.check.names import check_building
 
         spec = check_building(building)  # a path, or a built-in spec's name
         building, known = str(spec.path), spec.weathers
@@ -90,7 +90,7 @@ def run_sweep(
             c.make(building)
     controllers = unique_labels(controllers)
     if weather_noise is not None:
-        from parallel_eplus.buildings.weather_noise import parse_noise
+        from parallel_eplus.buildings.weather.noise import parse_noise
 
         parse_noise(weather_noise)  # a malformed option fails before anything runs
         if noisy_years < 1:

@@ -19,7 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import Logger
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.weather import parse_weathers, weather_label
+from parallel_eplus.buildings.weather.files import parse_weathers, weather_label
 from parallel_eplus.evaluation.controllers import Controller, slug
 
 log = logging.getLogger(__name__)

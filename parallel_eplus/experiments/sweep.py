@@ -103,7 +103,7 @@ def _claim(spec: SweepSpec, root: Path, tb_root: Path, overwrite: bool) -> bool:
     return same
 
 
-def run_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool = False) -> list[TrialOutcome]:
+def run_tune_sweep(spec: SweepSpec, ray_address: str | None = None, overwrite: bool = False) -> list[TrialOutcome]:
     """Run every trial of `spec` (queued by cores, on this machine or the cluster at `ray_address`)."""
     import importlib.util
 

@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from parallel_eplus.buildings.reward import RewardConfig
+from parallel_eplus.buildings.scoring.reward import RewardConfig
 from parallel_eplus.training.config import TrainConfig
 
 # Where a trial runs is the sweep's business: each trial trains with the local backend on its node.

@@ -123,7 +123,7 @@ def _finished(cfg) -> dict | None:
 def _has_save(cfg) -> bool:
     """Whether the trial's folder holds a save to continue from: SB3's, or a model-based run's (its own files)."""
     if cfg.algorithm == "mpc":
-        from parallel_eplus.learning.model_based.checkpoint import newest_checkpoint
+        from parallel_eplus.learning.model_based.control.checkpoint import newest_checkpoint
 
         try:
             newest_checkpoint(cfg.run_dir)

@@ -9,7 +9,7 @@ statistics start from them, and reinforcement learning starts there. The first p
 built-in controls, and learning improves on them instead of rediscovering them.
 
 Timing: observation k (the state after timestep k) is paired with what the controls set during timestep k+1,
-as an action chosen on observation k acts during timestep k+1 in the env (engine/bridge.py).
+as an action chosen on observation k acts during timestep k+1 in the env (engine/eplus_side/bridge.py).
 
 The temperatures the controls regulate (the spec's comfort temperatures) barely move in their record: the
 data center's zones stay within 23-24.5 °C all year. A plain clone then learns whatever the temperature happens
@@ -35,7 +35,7 @@ from tqdm import tqdm
 
 from parallel_eplus.buildings.building import load_building
 from parallel_eplus.buildings.scaling import from_unit
-from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import reported_rows
 from parallel_eplus.learning.settings import ImitationSettings
@@ -113,7 +113,7 @@ def record_baseline(
     spec = load_building(building)
     recorded: dict[str, list[np.ndarray]] = {}
     times: dict[str, list] = {}
-    bounds: dict[str, list] = {}  # the thermostat's bounds (buildings/comfort.py), where they move
+    bounds: dict[str, list] = {}  # the thermostat's bounds (buildings/scoring/comfort.py), where they move
     comfort = spec.comfort
     empty = np.zeros(0, dtype=np.float32)
 

@@ -174,7 +174,7 @@ class NumpyPolicy:
 
 def squashed_mean(policy):
     """SAC's deterministic action (tanh of its actor's mean, mapped onto the action space as SB3's `predict` does) in
-    numpy float64, as the on-policy mean above: the same arithmetic an exported controller runs (deploy/graph.py),
+    numpy float64, as the on-policy mean above: the same arithmetic an exported controller runs (export/graph.py),
     so both give the same setpoints. None for anything but a plain MLP actor (torch then acts)."""
     from stable_baselines3.sac.policies import SACPolicy
 

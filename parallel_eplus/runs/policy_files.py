@@ -8,7 +8,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.vec_env import VecNormalize
 
-from parallel_eplus.buildings.model import observation_names
+from parallel_eplus.buildings.datacenter import observation_names
 from parallel_eplus.runs.norm_stats import read_stats
 from parallel_eplus.runs.run_files import MODEL_FILE, saves_newest_first
 
@@ -156,7 +156,7 @@ def policy_features(model_zip: str | Path, building: str | None = None) -> tuple
     the size of its observation statistics beside the sensors of its building (None: the data center), its
     spec's forecasts and its run's `--forecast` hours (`policy_forecast`)."""
     from parallel_eplus.buildings.building import load_building
-    from parallel_eplus.buildings.model import SCHEDULE_FEATURES, TIME_FEATURES
+    from parallel_eplus.buildings.datacenter import SCHEDULE_FEATURES, TIME_FEATURES
 
     n = read_stats(normalization_file(Path(model_zip))).n_observations
     spec = load_building(building).spec

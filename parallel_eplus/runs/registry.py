@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.engine.pipes import leftovers
 from parallel_eplus.runs.run_files import (
     MODEL_FILE,
     TARGET_FILE,
@@ -87,7 +87,7 @@ def process_alive(status: dict) -> bool | None:
     if status.get("host") != socket.gethostname():
         return None
     pid = int(status.get("pid", 0))
-    try:  # /proc/PID/stat: the state is field 3, the start time field 22 (pipe_sweep.start_time)
+    try:  # /proc/PID/stat: the state is field 3, the start time field 22 (leftovers.start_time)
         fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split() if pid > 0 else []
     except OSError:
         return False
@@ -196,18 +196,18 @@ def _energyplus_of(run_dir: Path) -> list[int]:
         if proc.name.isdigit():
             with contextlib.suppress(OSError):
                 args = (proc / "cmdline").read_bytes().decode(errors="replace").split("\0")
-                if pipe_sweep.CALLBACK_MODULE in args and any(a.startswith(inside) for a in args):
+                if leftovers.CALLBACK_MODULE in args and any(a.startswith(inside) for a in args):
                     found.append(int(proc.name))
     return found
 
 
 def _left_behind(pid: int, run_dir: Path, wait_s: float = 10.0) -> list[str]:
     """The run's EnergyPlus processes and the trainer's pipe directories still there (after `wait_s` of grace)."""
-    prefix = f"{pipe_sweep.PREFIX}{pid}-"
+    prefix = f"{leftovers.PREFIX}{pid}-"
     deadline = time.monotonic() + wait_s
     while True:
         left = [f"EnergyPlus process {p}" for p in _energyplus_of(run_dir)]
-        left += [f"pipe directory {d}" for d in pipe_sweep.pipe_dirs() if d.name.startswith(prefix)]
+        left += [f"pipe directory {d}" for d in leftovers.pipe_dirs() if d.name.startswith(prefix)]
         if not left or time.monotonic() > deadline:
             return left
         time.sleep(0.5)

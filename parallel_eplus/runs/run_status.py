@@ -20,7 +20,7 @@ from pathlib import Path
 from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus import io
-from parallel_eplus.engine.pipe_sweep import start_time
+from parallel_eplus.engine.pipes.leftovers import start_time
 from parallel_eplus.runs.run_files import STATUS_FILE, read_status
 
 log = logging.getLogger(__name__)

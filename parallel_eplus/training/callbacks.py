@@ -93,10 +93,10 @@ class EpisodeMetrics(BaseCallback):
         "power_kw": "power_kw",
         "it_power_kw": "it_power_kw",
         "hvac_power_kw": "hvac_power_kw",
-        "energy_kwh": "energy_kwh",  # BOPTEST's figures (buildings/comfort.py)
+        "energy_kwh": "energy_kwh",  # BOPTEST's figures (buildings/scoring/comfort.py)
         "peak_power_kw": "peak_power_kw",
         "discomfort_kh": "discomfort_kh",
-        "hvac_energy_kwh_m2": "hvac_energy_kwh_m2",  # BOPTEST's ener_tot, cost_tot, emis_tot (buildings/kpis.py)
+        "hvac_energy_kwh_m2": "hvac_energy_kwh_m2",  # BOPTEST's ener_tot, cost_tot, emis_tot (scoring/kpis.py)
         "energy_kwh_m2": "energy_kwh_m2",
         "cost_m2": "cost_m2",
         "emissions_kg_m2": "emissions_kg_m2",

@@ -9,9 +9,9 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from parallel_eplus.buildings.model import STEPS_PER_DAY
-from parallel_eplus.buildings.reward import RewardConfig
-from parallel_eplus.buildings.weather import parse_weathers
+from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
+from parallel_eplus.buildings.scoring.reward import RewardConfig
+from parallel_eplus.buildings.weather.files import parse_weathers
 from parallel_eplus.engine.config import RESIDUAL_SPACES
 from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
 from parallel_eplus.learning.settings import (
@@ -37,8 +37,8 @@ class TrainConfig:
     timesteps: int = 1_000_000
     run_days: int = 365
     random_start: bool = False  # each episode from a day of the year drawn for it (every season), not January 1
-    prepare_next: bool = True  # each worker prepares its next episode while one runs (engine/prepared.py)
-    fork_episodes: bool = True  # ...forked from an EnergyPlus parked at its first step (engine/fork.py)
+    prepare_next: bool = True  # each worker prepares its next episode while one runs (engine/episodes/prepared.py)
+    fork_episodes: bool = True  # ...forked from an EnergyPlus parked at its first step (engine/episodes/fork.py)
     batch_size: int = 16384  # the paper's timesteps_per_batch, split evenly across workers
     seed: int = 0
     run_name: str | None = None
@@ -67,8 +67,8 @@ class TrainConfig:
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
     reward: RewardConfig = field(default_factory=RewardConfig)
     comfort: ComfortConstraint = field(default_factory=ComfortConstraint)  # --comfort-target (learning/lagrangian.py)
-    objective: str | None = None  # --objective: energy, hvac, cost, emissions (buildings/kpis.py); None: the spec's
-    # Weather noise per episode (buildings/weather_noise.py's form, "drybulb=1:0:24"; None: the files as they are)
+    objective: str | None = None  # --objective: energy, hvac, cost, emissions (scoring/kpis.py); None: the spec's
+    # Weather noise per episode (buildings/weather/noise.py's form, "drybulb=1:0:24"; None: the files as they are)
     # and the outdoor dry bulb's next `forecast_hours` as observations, with BOPTEST's `forecast_error` level.
     weather_noise: str | None = None
     forecast_hours: int = 0
@@ -80,14 +80,14 @@ class TrainConfig:
     sac: SACSettings = field(default_factory=SACSettings)
     evaluation: EvalSettings = field(default_factory=EvalSettings)  # --eval-every (training/periodic_eval.py)
     mpc: MPCSettings = field(default_factory=MPCSettings)  # `--algorithm mpc` (learning/model_based/)
-    mbpo: MBPOSettings = field(default_factory=MBPOSettings)  # `--algorithm mbpo` (learning/model_based/mbpo.py)
+    mbpo: MBPOSettings = field(default_factory=MBPOSettings)  # `--algorithm mbpo` (mbpo/algorithm.py)
 
     def resolved(self) -> TrainConfig:
         """Validate, and fill in the run name."""
         if self.building:
-            from parallel_eplus.buildings.check import check_building
+            from parallel_eplus.buildings.check.names import check_building
             from parallel_eplus.buildings.resources import builtin_specs
-            from parallel_eplus.buildings.spec import reward_config
+            from parallel_eplus.buildings.scoring.reward import reward_config
 
             spec = check_building(self.building)  # a path, or a built-in spec's name
             # A built-in spec is saved by name: the run's config.json then works from another checkout, an
@@ -130,8 +130,8 @@ class TrainConfig:
             raise ValueError(f"--residual-space {self.residual_space} needs --residual SCALE")
         self.comfort.check()
         self.evaluation.check(self.weathers)
-        from parallel_eplus.buildings.forecast import ERROR_LEVELS
-        from parallel_eplus.buildings.weather_noise import parse_noise
+        from parallel_eplus.buildings.weather.forecast_features import ERROR_LEVELS
+        from parallel_eplus.buildings.weather.noise import parse_noise
 
         parse_noise(self.weather_noise)
         if self.forecast_hours < 0 or (self.forecast_error is not None and self.forecast_error not in ERROR_LEVELS):

@@ -1,5 +1,5 @@
 """`train --algorithm mbpo`'s ensemble beside SAC: where it starts from (a resumed run, a planner run, or the
-building's own controls recorded first). The rollouts themselves are learning/model_based/mbpo.py."""
+building's own controls recorded first). The rollouts themselves are learning/model_based/mbpo/algorithm.py."""
 
 from __future__ import annotations
 
@@ -8,17 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.learning.model_based import mbpo, mbpo_state
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.dataset import Transitions
-from parallel_eplus.learning.model_based.through_model import Starts
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.mbpo import algorithm as mbpo
+from parallel_eplus.learning.model_based.mbpo import state as mbpo_state
+from parallel_eplus.learning.model_based.model.dataset import Transitions
+from parallel_eplus.learning.model_based.students.through_model import Starts
 from parallel_eplus.training.config import TrainConfig
 
 log = logging.getLogger(__name__)
 
 
 def model_rollouts(cfg: TrainConfig, venv, checkpoint: Path | None, progress: bool):
-    """`--algorithm mbpo`'s ensemble beside SAC (learning/model_based/mbpo.py): a resumed run's own, a planner run's
+    """`--algorithm mbpo`'s ensemble beside SAC (mbpo/algorithm.py): a resumed run's own, a planner run's
     (`--init-from`), or fitted on the building's own controls recorded first."""
     state_dir = cfg.run_dir / mbpo_state.STATE_DIR
     n = venv.num_envs

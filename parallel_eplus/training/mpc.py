@@ -30,15 +30,15 @@ from tqdm import tqdm
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.errors import EnergyPlusError, Interrupts
 from parallel_eplus.learning.lagrangian import Lagrangian
-from parallel_eplus.learning.model_based.checkpoint import Checkpoint, newest_checkpoint
-from parallel_eplus.learning.model_based.control import MPC, PLANNER_FILE
-from parallel_eplus.learning.model_based.dataset import ORIGINS, Transitions
-from parallel_eplus.learning.model_based.own_level import BatchComfort, OwnLevel
-from parallel_eplus.learning.model_based.saved_planner import planner_controller
-from parallel_eplus.learning.model_based.sources import Explorer, record_own_controls
+from parallel_eplus.learning.model_based.control.checkpoint import Checkpoint, newest_checkpoint
+from parallel_eplus.learning.model_based.control.mpc import MPC, PLANNER_FILE
+from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
+from parallel_eplus.learning.model_based.model.dataset import ORIGINS, Transitions
+from parallel_eplus.learning.model_based.model.own_level import BatchComfort, OwnLevel
+from parallel_eplus.learning.model_based.model.sources import Explorer, record_own_controls
 from parallel_eplus.runs.run_files import BEST_DIR
 from parallel_eplus.runs.run_status import RunStatus
 from parallel_eplus.training.callbacks import CallbackHost, EpisodeMetrics, tensorboard_logger

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus import io
-from parallel_eplus.learning.model_based.dynamics import summary
+from parallel_eplus.learning.model_based.model.dynamics import summary
 
 log = logging.getLogger(__name__)
 

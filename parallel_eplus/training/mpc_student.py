@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus import io
-from parallel_eplus.learning.model_based.distill import act, distill, fit
-from parallel_eplus.learning.model_based.through_model import Starts, train_student
+from parallel_eplus.learning.model_based.students.distill import act, distill, fit
+from parallel_eplus.learning.model_based.students.through_model import Starts, train_student
 from parallel_eplus.runs.checkpoints import save_checkpoint
 from parallel_eplus.runs.run_files import MODEL_FILE
 from parallel_eplus.training.config import TrainConfig

@@ -30,7 +30,7 @@ import pandas as pd
 from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus import io
-from parallel_eplus.buildings.weather import weather_label
+from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
 from parallel_eplus.evaluation.sweep import _job_config, run_local

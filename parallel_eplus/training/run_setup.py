@@ -67,10 +67,10 @@ def _refuse_a_live_run(path: Path) -> None:
 
 
 def _resume_point(path: Path) -> Path:
-    """The checkpoint `--resume` names: an SB3 save, or a model-based run's (learning/model_based/checkpoint.py)."""
+    """The checkpoint `--resume` names: an SB3 save, or a model-based run's (control/checkpoint.py)."""
     config = (path if path.is_dir() else run_dir_of(path)) / "config.json"
     if config.is_file() and TrainConfig.from_json(config.read_text()).algorithm == "mpc":
-        from parallel_eplus.learning.model_based.checkpoint import newest_checkpoint
+        from parallel_eplus.learning.model_based.control.checkpoint import newest_checkpoint
 
         return newest_checkpoint(path)
     return resume_point(path)

@@ -263,7 +263,7 @@ def _algorithm(cfg: TrainConfig, env: VecNormalize):
         buffer = {"replay_buffer_class": CostReplayBuffer} if cfg.constrained else {}
         learning_starts, gradient_steps = s.learning_starts, s.gradient_steps
         if cfg.algorithm == "mbpo":  # the model's rollouts are data from the first step; more updates per step
-            from parallel_eplus.learning.model_based.model_buffer import ModelMixBuffer
+            from parallel_eplus.learning.model_based.mbpo.buffer import ModelMixBuffer
 
             buffer = {"replay_buffer_class": ModelMixBuffer,
                       "replay_buffer_kwargs": {"model_size": cfg.mbpo.model_buffer}}  # fmt: skip

@@ -68,7 +68,7 @@ class Requests:
         self.planner, self.start = planner, dt.datetime(2013, 1, 1)
         if planner:
             from parallel_eplus.buildings.building import weather_path
-            from parallel_eplus.buildings.weather_forecast import WEATHER, PerfectForecast
+            from parallel_eplus.buildings.weather.forecast import WEATHER, PerfectForecast
 
             self.names, self.file = WEATHER, PerfectForecast(weather_path("datacenter-2zone", "CA"))
         self.plan, self.fallbacks = None, 0
@@ -103,7 +103,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     args.out = args.out or ROOT / "results" / "deploy" / ("planner_latency.md" if args.planner else "latency.md")
-    from parallel_eplus.deploy.export import export
+    from parallel_eplus.deploy.export.policy import export
 
     requests = Requests(args.planner)
     with tempfile.TemporaryDirectory(prefix="deploy-latency-") as tmp:
@@ -170,7 +170,7 @@ def main() -> None:
 
 def alone(folder: Path, requests: Requests, args) -> np.ndarray:
     """Milliseconds of the controller itself per request, in this process (no HTTP)."""
-    from parallel_eplus.deploy.server import load_runtime
+    from parallel_eplus.deploy.serve.server import load_runtime
 
     runtime = load_runtime(folder)
     requests.plan = None

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from parallel_eplus.deploy.export import export
-from parallel_eplus.deploy.parity import replay
+from parallel_eplus.deploy.export.parity import replay
+from parallel_eplus.deploy.export.policy import export
 from parallel_eplus.evaluation.controllers import http_controller, policy_controller
 from parallel_eplus.evaluation.sweep import run_sweep
 

@@ -35,9 +35,9 @@ from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.evaluation.controllers import Controller
 from parallel_eplus.evaluation.sweep import run_local
 from parallel_eplus.learning.algorithms import ALGORITHMS
-from parallel_eplus.learning.model_based.control import MPC
-from parallel_eplus.learning.model_based.exogenous import model_schedule
-from parallel_eplus.learning.model_based.through_model import Clock, Rollouts, Starts, train, widen
+from parallel_eplus.learning.model_based.control.mpc import MPC
+from parallel_eplus.learning.model_based.model.exogenous import model_schedule
+from parallel_eplus.learning.model_based.students.through_model import Clock, Rollouts, Starts, train, widen
 from parallel_eplus.learning.saved_models import load_model
 from parallel_eplus.runs.norm_stats import read_stats
 from parallel_eplus.runs.policy_files import normalization_file, stats_target

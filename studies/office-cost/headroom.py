@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from parallel_eplus.buildings.bill import monthly_bill
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.pricing.bill import monthly_bill
 
 WEATHERS = ["CA", "CO", "FL", "IL", "VA"]
 INSIDE_K = 0.3  # a zone this far inside both of its bounds calls for neither heating nor cooling

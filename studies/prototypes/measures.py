@@ -23,7 +23,7 @@ from study import (
 
 
 def rule(study: Study, names: list[str], minutes: float) -> None:
-    """Guideline 36's supply-air reset (buildings/air_reset.py) against each building's own controls, where the
+    """Guideline 36's supply-air reset (buildings/rules/air_reset.py) against each building's own controls, where the
     starter takes over air loops: what the air side holds without learning. Its spec is the study's with the rule
     named; the csvs go to OUT/<name>/rule/."""
     deadline = time.time() + 60 * minutes
@@ -41,10 +41,10 @@ def rule(study: Study, names: list[str], minutes: float) -> None:
 
 def ventilation(study: Study, names: list[str], minutes: float) -> None:
     """The building's own controls with the outdoor air on demand (`ventilation = "demand"`, the starter's offer;
-    buildings/on_demand.py's OnDemand), where the model holds a fixed minimum of outdoor air; its own controls' rows
+    rules/on_demand.py's OnDemand), where the model holds a fixed minimum of outdoor air; its own controls' rows
     from the table's csvs. The csvs go to OUT/<name>/ventilation/; where the starter takes over supply air,
     Guideline 36's reset with it to OUT/<name>/rule-ventilation/; where every action has a schedule of the building's
-    own, each thermostat 0.02 K inside it (buildings/own_margin.py) to OUT/<name>/margin-ventilation/."""
+    own, each thermostat 0.02 K inside it (buildings/rules/own_margin.py) to OUT/<name>/margin-ventilation/."""
     deadline = time.time() + 60 * minutes
     for model in sorted(models(), key=lambda m: m.stat().st_size):
         name = short_name(model)

@@ -90,12 +90,12 @@ PLAYED = {"banded": ("hedged", "band_thermostats=own"), "ruled": ("hedged-rule",
 
 # Recipes trained on a spec naming Guideline 36's reset as its rule (`spec-rule.toml`), so only on the buildings whose
 # starter takes over air loops; the others keep `FALLBACK`'s row (the same planner: no air side to ride).
-RULE = "parallel_eplus.buildings.air_reset:SupplyAirReset"
+RULE = "parallel_eplus.buildings.rules.air_reset:SupplyAirReset"
 # The building's own controls with the outdoor air on demand (`ventilation = "demand"`): `prototypes.py ventilation`
-ON_DEMAND = "parallel_eplus.buildings.on_demand:OnDemand"
+ON_DEMAND = "parallel_eplus.buildings.rules.on_demand:OnDemand"
 # ... and each thermostat 0.02 K inside its own schedule, where every action has one (the comfort the measure costs,
 # bought back)
-MARGIN = "parallel_eplus.buildings.own_margin:OwnMargin"
+MARGIN = "parallel_eplus.buildings.rules.own_margin:OwnMargin"
 ON_RULE = {"hedged-rule", "hedged-rule-demand"}
 # Recipes trained in the copy with the outdoor air on demand, so only where the model holds a fixed minimum of it; the
 # others keep `FALLBACK`'s row too.

@@ -147,7 +147,8 @@ def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
     if rows:
         lines += ["", "## The air side without learning: Guideline 36's supply-air reset", "",
                   "`prototypes.py rule`: the buildings whose starter takes over supply air, `evaluate --rbc` with",
-                  "`parallel_eplus.buildings.air_reset:SupplyAirReset` named in the spec (ASHRAE Guideline 36's reset",
+                  "`parallel_eplus.buildings.rules.air_reset:SupplyAirReset` named in the spec",
+                  "(ASHRAE Guideline 36's reset",
                   "of the supply air on outdoor air and the zones' cooling requests; every thermostat on its own",
                   "schedule), on the same 20 fortnights. Ratios to the building's own controls as above; the last",
                   "column is the planner's.", "", *_measure_table(rows, "rule"), *ruled_lines(study)]  # fmt: skip
@@ -157,7 +158,7 @@ def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
                   "`prototypes.py ventilation`: every building whose model holds a fixed minimum of outdoor air, its",
                   'spec with `ventilation = "demand"` (each outdoor-air controller\'s flow follows the people present:',
                   "EnergyPlus's demand-controlled ventilation in the copy, docs/buildings.md) and",
-                  "`parallel_eplus.buildings.on_demand:OnDemand` (every action released to the building's own",
+                  "`parallel_eplus.buildings.rules.on_demand:OnDemand` (every action released to the building's own",
                   "controls), on the same 20 fortnights; its own controls' rows are the table's. Ratios to the",
                   "building's own controls as above; the last column is the planner's.", "",
                   *_measure_table(rows, "on demand")]  # fmt: skip
@@ -169,7 +170,8 @@ def rule_lines(df: pd.DataFrame, study: Study) -> list[str]:
         margin = measure_rows(df, study, "margin-ventilation")
         if margin:
             lines += ["", "With each thermostat 0.02 K inside its own schedule (the spec naming",
-                      "`parallel_eplus.buildings.own_margin:OwnMargin`, with `ventilation = \"demand\"`), where every",
+                      "`parallel_eplus.buildings.rules.own_margin:OwnMargin`, with `ventilation = \"demand\"`),",
+                      "where every",
                       "action has a schedule of the building's own: the comfort the measure costs, bought back.", "",
                       *_measure_table(margin, "margin")]  # fmt: skip
         lines += best_lines(df, study) if len(df) == len(models()) else []  # the goal's count: every row

@@ -93,12 +93,12 @@ def applies(study: Study, name: str) -> bool:
 
 
 def demand_controllers(study: Study, name: str) -> int:
-    """How many outdoor-air controllers the copy with the outdoor air on demand changes (buildings/ventilation.py),
+    """How many outdoor-air controllers the copy with the outdoor air on demand changes (buildings/idf/ventilation.py),
     kept in the building's status.json."""
     status = read_status(study, name)
     if "demand_controllers" not in status:
-        from parallel_eplus.buildings.idf_text import idf_objects
-        from parallel_eplus.buildings.ventilation import plan_ventilation
+        from parallel_eplus.buildings.idf.objects import idf_objects
+        from parallel_eplus.buildings.idf.ventilation import plan_ventilation
 
         text = next(m for m in models() if short_name(m) == name).read_text(encoding="latin-1")
         status = write_status(study, name, demand_controllers=len(plan_ventilation(text, idf_objects(text)).added))

@@ -45,7 +45,7 @@ FORECAST_ERROR=${FORECAST_ERROR:-}
 NOISY_YEARS=${NOISY_YEARS:-3}
 EXTRA=${EXTRA:-}
 PAPER=CA,CO,FL,IL,VA
-UNSEEN=$("$PY" -c "from parallel_eplus.buildings.weather import ALL_WEATHERS as A; print(','.join(A[5:]))")
+UNSEEN=$("$PY" -c "from parallel_eplus.buildings.weather.files import ALL_WEATHERS as A; print(','.join(A[5:]))")
 
 recipe() { bash "$REPO/studies/learned-controllers/learned_controllers.sh" recipe "$1"; }
 variant_options() {

@@ -24,11 +24,11 @@ PREPARED_EVERY = 4  # every 4th single env prepares its next episode (each costs
 
 def _energyplus_children() -> int:
     """EnergyPlus-side processes this process started that are alive, with the episodes forked from its templates
-    (engine/fork.py: their parent is the template)."""
+    (engine/episodes/fork.py: their parent is the template)."""
     parents = {}
     for proc in Path("/proc").iterdir():
         try:
-            if proc.name.isdigit() and b"parallel_eplus.engine.eplus_callback" in (proc / "cmdline").read_bytes():
+            if proc.name.isdigit() and b"parallel_eplus.engine.eplus_side.callback" in (proc / "cmdline").read_bytes():
                 parents[proc.name] = (proc / "stat").read_text().rsplit(")", 1)[1].split()[1]
         except (OSError, IndexError):  # gone meanwhile
             continue

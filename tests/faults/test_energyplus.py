@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from parallel_eplus import EnergyPlusEnv, EnergyPlusError
-from parallel_eplus.buildings.model import AGENT_IDF
+from parallel_eplus.buildings.datacenter import AGENT_IDF
 
 from ..conftest import our_processes
 
@@ -81,7 +81,7 @@ def test_the_energyplus_side_exits_when_its_env_died_before_it_opened_the_pipes(
     import subprocess
     import sys
 
-    from parallel_eplus.engine.pipe_sweep import CALLBACK_MODULE
+    from parallel_eplus.engine.pipes.leftovers import CALLBACK_MODULE
 
     act, obs = tmp_path / "act", tmp_path / "obs"
     os.mkfifo(act)

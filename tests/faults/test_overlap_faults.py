@@ -12,7 +12,7 @@ import threading
 
 import pytest
 
-from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.engine.pipes import leftovers
 from parallel_eplus.errors import EnergyPlusError, WorkerLostError
 from parallel_eplus.learning.algorithms import FastTRPO
 from parallel_eplus.training.config import TrainConfig
@@ -52,7 +52,7 @@ def _kill_one(pattern: str) -> None:
 
 def _kill_all(pattern: str) -> None:
     """Every match: EnergyPlus-side processes cannot be told apart by name, and one preparing an episode is
-    replaced without a failure (engine/prepared.py), so the running ones go too."""
+    replaced without a failure (engine/episodes/prepared.py), so the running ones go too."""
     for pid in _ours(pattern):
         os.kill(pid, signal.SIGKILL)
 
@@ -89,7 +89,7 @@ def test_ctrl_c_during_an_overlapped_update_saves_a_checkpoint_stops_the_collect
 def test_a_worker_lost_during_an_overlapped_update_ends_the_run_after_a_checkpoint(tmp_path, no_leaks, monkeypatch):
     cfg = small_config(tmp_path, "lost", run_days=1, batch_size=BATCH, timesteps=20 * BATCH, checkpoint_every=10**6,
                        overlap=True, max_restarts=0)  # fmt: skip
-    struck = _strike_at_first_update(monkeypatch, lambda: _kill_all(pipe_sweep.CALLBACK_MODULE))
+    struck = _strike_at_first_update(monkeypatch, lambda: _kill_all(leftovers.CALLBACK_MODULE))
     with pytest.raises(EnergyPlusError, match="failed 1 times in a row"):
         train(cfg, progress=False)
     assert struck

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.engine.pipes import leftovers
 from parallel_eplus.errors import WorkerLostError
 from parallel_eplus.learning.ray_vector_env import RayVectorEnv
 from parallel_eplus.training.config import TrainConfig
@@ -77,7 +77,7 @@ def test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run_
     cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=2, timesteps=1600, batch_size=320,
                        checkpoint_every=320, backend="ray", workers_per_actor=1, fork_episodes=False)  # fmt: skip
     hit: list[int] = []
-    _before_batch(monkeypatch, 2, lambda: _kill_first(pipe_sweep.CALLBACK_MODULE, hit))
+    _before_batch(monkeypatch, 2, lambda: _kill_first(leftovers.CALLBACK_MODULE, hit))
     final = train(cfg, progress=False)
     assert hit, "no EnergyPlus process to hit"
     assert final.is_file()

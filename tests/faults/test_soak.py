@@ -47,7 +47,7 @@ def test_soak_100_episodes_leave_descriptors_processes_pipes_and_memory_flat(tmp
     samples = json.loads(run.stdout.strip().splitlines()[-1])
     vector, single = samples["vector"], samples["single"]
     _report("2-worker vector env (-1: after close)", vector)
-    # per worker: the template its episodes are forked from, a running and a prepared episode (engine/fork.py)
+    # per worker: the template its episodes are forked from, a running and a prepared episode (engine/episodes/fork.py)
     _assert_flat(vector[:-1], envs=2, max_processes=6, max_pipes=4)
     _report(f"{SINGLE_ENVS} single envs in one process (-1: after close)", single)
     prepared = len(range(0, SINGLE_ENVS, PREPARED_EVERY))  # these prepare their next episode; the rest start cold

@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from parallel_eplus.engine import pipe_sweep
+from parallel_eplus.engine.pipes import leftovers
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.training.train import train
 
@@ -28,7 +28,7 @@ from .strikes import process_state, strike_after_step, wait_for_state
 
 def _private_env(tmp_path: Path) -> dict[str, str]:
     """The trainer's and `clean`'s environment, with a temp folder of the test's own: any process on this shared
-    machine sweeps dead owners' pipe directories under /tmp as it makes its first pipe (pipe_sweep.py), which
+    machine sweeps dead owners' pipe directories under /tmp as it makes its first pipe (leftovers.py), which
     would race with what the test checks it left behind."""
     private = tmp_path / "tmp"
     private.mkdir(exist_ok=True)
@@ -61,11 +61,11 @@ def _wait_for(predicate, timeout: float, what: str, proc: subprocess.Popen | Non
 
 
 def _pipe_dirs_of(pid: int, env: dict[str, str]) -> set[str]:
-    return {d for d in os.listdir(env["TMPDIR"]) if d.startswith(f"{pipe_sweep.PREFIX}{pid}-")}
+    return {d for d in os.listdir(env["TMPDIR"]) if d.startswith(f"{leftovers.PREFIX}{pid}-")}
 
 
 def _energyplus_children(pid: int) -> list[int]:
-    out = subprocess.run(["pgrep", "-P", str(pid), "-f", pipe_sweep.CALLBACK_MODULE], capture_output=True, text=True)
+    out = subprocess.run(["pgrep", "-P", str(pid), "-f", leftovers.CALLBACK_MODULE], capture_output=True, text=True)
     return [int(p) for p in out.stdout.split()]
 
 
@@ -89,7 +89,7 @@ def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_che
     else:
         assert proc.returncode == -signal.SIGKILL
         assert left, "a SIGKILLed trainer runs no cleanup: its pipe directories stay until the next start"
-        assert all(pipe_sweep.owner_alive(Path(env["TMPDIR"], d)) is False for d in left)
+        assert all(leftovers.owner_alive(Path(env["TMPDIR"], d)) is False for d in left)
         listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
         assert all(d in listed for d in left), listed
 
@@ -112,8 +112,8 @@ def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clea
     proc = subprocess.Popen(_train_cmd("frozen"), cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)  # fmt: skip
     try:
-        # Two workers, each with a template per weather its episodes are forked from (engine/fork.py) and a
-        # long-lived process for what was prepared before a template parked (engine/prepared.py)
+        # Two workers, each with a template per weather its episodes are forked from (engine/episodes/fork.py) and a
+        # long-lived process for what was prepared before a template parked (engine/episodes/prepared.py)
         _wait_for(lambda: (run / "episodes.csv").exists() and len(_energyplus_children(proc.pid)) >= 4, 600,
                   "a finished episode and four EnergyPlus-side processes", proc)  # fmt: skip
         # Freeze the trainer first: from here it starts no worker and reaps none, so the list below holds
@@ -127,7 +127,7 @@ def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clea
     finally:
         proc.kill()
         proc.wait()
-    _wait_for(lambda: [p.pid for p in pipe_sweep.leftover_processes() if p.pid in workers] == [stopped],
+    _wait_for(lambda: [p.pid for p in leftovers.leftover_processes() if p.pid in workers] == [stopped],
               60, "only the stopped worker left")  # fmt: skip
     listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
     assert f"leftover EnergyPlus process {stopped}" in listed and "clean --kill" in listed

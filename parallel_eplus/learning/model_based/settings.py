@@ -116,7 +116,7 @@ class MPCSettings(FromText):
     # With comfort_reference=own: where the own plan of an action no thermostat schedule sets comes from: what the
     # building's own controls set on that date ("building": the DOE VAV loops' constant 12.8 C), or the spec's rule
     # (its `controller`, `--rbc`), run beside the planner on each worker ("rule": Guideline 36's supply-air reset,
-    # buildings/air_reset.py). The actions the rule releases keep the building's plan. The planner then improves on
+    # rules/air_reset.py). The actions the rule releases keep the building's plan. The planner then improves on
     # the rule, as the data center's best policy corrects its rule, where against the constant it was held within
     # `own_radius` of 12.8 C, far from where the reset saves (docs/model-based.md).
     own_plan: str = "building"
