@@ -118,7 +118,17 @@ BAD = {
     "a short forecast": ({"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "outdoor_rh_pct": [50.0] * 3}},
                          "forecast.outdoor_rh_pct"),  # fmt: skip
     "a NaN in the forecast": ({"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)),
-                                            "outdoor_drybulb_c": [float("nan")] * 8}}, "forecast.outdoor_drybulb_c"),
+                                            "outdoor_drybulb_c": [float("nan")] * 8}}, "forecast.outdoor_drybulb_c[0]"),
+    "a forecast longer than the contract's horizon": ({"forecast": forecast(dt.datetime(2021, 1, 5, 10), steps=12)},
+                                                      "forecast.outdoor_drybulb_c"),  # fmt: skip
+    "a humidity no weather has, late in the forecast": (
+        {"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "outdoor_rh_pct": [50.0] * 7 + [130.0]}},
+        "forecast.outdoor_rh_pct[7]"),  # fmt: skip
+    "a sun brighter than the sun, late in the forecast": (
+        {"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "global_horizontal_w_m2": [0.0] * 6 + [5000.0] * 2}},
+        "forecast.global_horizontal_w_m2[6]"),  # fmt: skip
+    "a time with a UTC offset": ({"time": "2021-01-05T10:00:00+02:00"}, "time"),
+    "a time in UTC": ({"time": "2021-01-05T08:00:00Z"}, "time"),
     "no last setpoints": ({"last_setpoints": None}, "last_setpoints"),
     "a last setpoint out of range": ({"last_setpoints": {**LAST, "west_fan_kg_s": 70.0}},
                                      "last_setpoints.west_fan_kg_s"),  # fmt: skip
@@ -158,6 +168,61 @@ def test_a_forecast_that_contradicts_the_outdoor_sensor_falls_back(client):
     answer = act(client, body(forecast=hot)).json()
     assert answer["fallback"] is True and "the forecast's first dry bulb" in answer["reason"]
     assert client.get("/health").json()["fallback"] >= 1
+
+
+@pytest.mark.slow
+def test_a_forecast_that_jumps_late_in_its_horizon_falls_back_naming_the_step(client):
+    jumpy = forecast(dt.datetime(2021, 1, 5, 10))  # its first value agrees with the outdoor sensor
+    jumpy["outdoor_drybulb_c"][5:] = [v + 22 for v in jumpy["outdoor_drybulb_c"][5:]]
+    answer = act(client, body(forecast=jumpy)).json()
+    assert answer["fallback"] is True, answer
+    assert answer["reason"].startswith("forecast.outdoor_drybulb_c jumps 22.") and "to its value 5" in answer["reason"]
+
+
+@pytest.mark.slow
+def test_a_time_with_a_utc_offset_is_refused_saying_what_to_send(client):
+    r = act(client, body(time="2021-01-05T10:00:00+02:00"))
+    assert r.status_code == 422 and "UTC offset (+0200)" in r.json()["error"]
+    assert "local standard time without one" in r.json()["error"]
+
+
+@pytest.mark.slow
+def test_fallback_reasons_name_what_the_contract_names(client, exported):
+    """Every reason names a reading, a last setpoint or a forecast variable as the contract does, with its value in
+    the contract's units; never a variable of the model's own (non_hvac_w, outdoor_rh, global_horizontal_kw_m2)."""
+    contract = Contract.read(exported).data
+    names = {i["name"] for i in contract["inputs"]} | {f"last_setpoints.{o['name']}" for o in contract["outputs"]}
+    names |= {f"forecast.{v['name']} (its first value)" for v in contract["forecast"]["variables"]}
+    names.add("power_w - hvac_power_w")  # the power that is not HVAC's, from two readings
+    cold = forecast(dt.datetime(2021, 1, 5, 10))
+    cold["outdoor_drybulb_c"] = [-45.0] * 8
+    cases = {
+        "power_w - hvac_power_w is 225000 W": body(sensors={**READINGS, "power_w": 250000.0}),
+        "forecast.outdoor_drybulb_c (its first value) is -45 C": body(forecast=cold,
+                                                                       sensors={**READINGS, "outdoor_temp_c": -20.0}),
+        "west_temp_c is 35 C": body(sensors={**READINGS, "west_temp_c": 35.0}),
+    }  # fmt: skip
+    for expected, payload in cases.items():
+        answer = act(client, payload).json()
+        assert answer["fallback"] is True and answer["reason"].startswith(expected + ", "), answer
+        assert answer["reason"].split(" is ")[0] in names
+        for internal in ("non_hvac_w", "outdoor_rh ", "outdoor_rh,", "kw_m2", "last_west", "it_load"):
+            assert internal not in answer["reason"]
+
+
+@pytest.mark.slow
+def test_the_bearer_scheme_is_case_insensitive(exported):
+    """RFC 7235: `bearer`, `BEARER` and `Bearer` are one scheme; another scheme, or the token alone, is refused."""
+    from fastapi.testclient import TestClient
+
+    from parallel_eplus.deploy.serve.server import create_app
+
+    with TestClient(create_app(exported, token=TOKEN)) as c:
+        for scheme in ("Bearer", "bearer", "BEARER", "bEaReR"):
+            assert c.get("/health", headers={"authorization": f"{scheme} {TOKEN}"}).status_code == 200, scheme
+        for header in (f"Basic {TOKEN}", TOKEN, f"bearer {TOKEN}x", "bearer"):
+            r = c.get("/health", headers={"authorization": header})
+            assert r.status_code == 401 and r.json()["field"] == "authorization", header
 
 
 @pytest.mark.slow
@@ -208,12 +273,39 @@ def test_serving_off_loopback_needs_a_token_file_and_tls_needs_both_files(export
 
 
 @pytest.mark.slow
+def test_a_short_or_exposed_token_is_refused_and_plain_http_off_loopback_warns(exported, tmp_path, caplog):
+    """A token shorter than 16 characters, or in a file others may read, is refused before anything listens (on
+    loopback too); a token sent over plain HTTP off loopback is a loud warning. Never the token in the message."""
+    from parallel_eplus.deploy.serve.server import check_access
+
+    short, loose, good = tmp_path / "short", tmp_path / "loose", tmp_path / "good"
+    short.write_text("k\n")
+    short.chmod(0o600)
+    loose.write_text(TOKEN + "\n")
+    loose.chmod(0o644)
+    good.write_text(TOKEN + "\n")
+    good.chmod(0o600)
+    r = cli("serve", str(exported), "--token-file", str(short))
+    assert r.returncode == 2 and "the token has 1 characters; at least 16" in r.stderr, r.stderr
+    r = cli("serve", str(exported), "--token-file", str(loose))
+    assert r.returncode == 2 and "(mode 644): chmod 600" in r.stderr and TOKEN not in r.stderr, r.stderr
+    with caplog.at_level(logging.WARNING, logger="parallel_eplus.deploy.serve.server"):
+        assert check_access("0.0.0.0", good, tls=False) == TOKEN
+        assert "PLAIN HTTP on 0.0.0.0" in caplog.text and TOKEN not in caplog.text
+        caplog.clear()
+        assert check_access("0.0.0.0", good, tls=True) == TOKEN
+        assert check_access("127.0.0.1", None, tls=False) is None
+    assert "PLAIN HTTP" not in caplog.text
+
+
+@pytest.mark.slow
 def test_over_tls_with_a_token(exported, tmp_path):
     """uvicorn's TLS with a self-signed certificate (openssl), and the token, as a plant room would run it."""
     key, cert, token = tmp_path / "key.pem", tmp_path / "cert.pem", tmp_path / "token"
     subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", key, "-out", cert,
                     "-days", "1", "-subj", "/CN=127.0.0.1"], check=True, capture_output=True)  # fmt: skip
     token.write_text(TOKEN + "\n")
+    token.chmod(0o600)
     import ssl
     import urllib.error
     import urllib.request

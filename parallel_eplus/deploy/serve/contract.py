@@ -155,7 +155,10 @@ class Contract:
             when = dt.datetime.fromisoformat(text)
         except ValueError:
             raise InputError("time", f"{text[:40]!r} is not an ISO 8601 date and time") from None
-        return when.replace(tzinfo=None)
+        if when.tzinfo is not None:  # the contract knows no site's time zone, nor its daylight saving: never guess
+            raise InputError("time", f"{text[:40]!r} has a UTC offset ({when.strftime('%z') or 'Z'}); send the "
+                             "building's local standard time without one (e.g. 2021-01-05T10:00:00)")  # fmt: skip
+        return when
 
     @property
     def pairs(self) -> tuple[tuple[int, int], ...]:

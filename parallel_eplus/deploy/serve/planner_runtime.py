@@ -37,6 +37,11 @@ log = logging.getLogger("parallel_eplus.deploy.planner")
 
 PLANNER_ARRAYS = "planner.npz"
 ENSEMBLE_FILE = "ensemble.onnx"
+# What the weather can be anywhere on Earth: a forecast value outside is refused, naming it (the records: -89.2 °C,
+# 56.7 °C; the sun gives at most ~1361 W/m2 above the atmosphere, a little more on the ground under broken clouds).
+FORECAST_LIMITS = {"outdoor_drybulb_c": (-90.0, 60.0), "outdoor_rh_pct": (0.0, 100.0),
+                   "global_horizontal_w_m2": (0.0, 1500.0)}  # fmt: skip
+DEFAULT_FORECAST_GAP_C = 6.0  # a forecast's dry bulb jumping more than this between two steps: fallback
 
 
 class _Settings:
@@ -194,14 +199,23 @@ class PlannerRuntime:
             return np.tile(now, (h, 1)), "persistence"
         if not isinstance(given, dict):
             raise InputError("forecast", "must be an object of variable -> list of values")
+        unknown = sorted(set(given) - set(WEATHER))
+        if unknown:
+            raise InputError(f"forecast.{unknown[0]}", f"unknown; the forecast's variables are {', '.join(WEATHER)}")
         columns = []
         for name in WEATHER:
             values = given.get(name)
-            if not isinstance(values, list) or len(values) < h:
-                raise InputError(f"forecast.{name}", f"required: a list of {h} values (one per coming step)")
-            if not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values):
-                raise InputError(f"forecast.{name}", "every value must be a finite number")
-            columns.append(values[:h])
+            if not isinstance(values, list) or len(values) != h:
+                got = f"{len(values)} values" if isinstance(values, list) else "none"
+                raise InputError(f"forecast.{name}", f"{got}; the contract's horizon is {h} steps: a list of {h} "
+                                 "values, one at the end of each coming step (contract `forecast.steps`)")  # fmt: skip
+            low, high = FORECAST_LIMITS[name]
+            for k, v in enumerate(values):
+                if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                    raise InputError(f"forecast.{name}[{k}]", "every value must be a finite number")
+                if not low <= v <= high:
+                    raise InputError(f"forecast.{name}[{k}]", f"{v} is outside what the weather can be [{low}, {high}]")
+            columns.append(values)
         return np.array(columns, float).T, "given"
 
     def _persisted(self, i: int, sensors: dict) -> float:
@@ -227,10 +241,10 @@ class PlannerRuntime:
         f = self.fallback
         row = np.concatenate([s, a_last, a_last, exo[0]])
         z = np.abs(row - self.x_mean) / self.x_std
-        names = [*self.layout.state_names, *(f"last_{n}" for n in self.names), *self.names, *f["exogenous"]]
         worst = int(np.argmax(z))
         if z[worst] > f["max_input_z"]:
-            return (f"{names[worst]} is {z[worst]:.1f} standard deviations from the data the model learned from "
+            name, value = self._input_name(worst, row)
+            return (f"{name} is {value}{z[worst]:.1f} standard deviations from the data the model learned from "
                     f"(threshold {f['max_input_z']})")  # fmt: skip
         if self.outdoor and f.get("max_forecast_gap_c") is not None:
             reading = sensors.get(self.outdoor)
@@ -239,10 +253,42 @@ class PlannerRuntime:
             if gap > f["max_forecast_gap_c"]:
                 return (f"the forecast's first dry bulb ({weather[0, 0]:.1f} °C) is {gap:.1f} K from the outdoor "
                         f"sensor (threshold {f['max_forecast_gap_c']} K)")  # fmt: skip
+        jumps = np.abs(np.diff(weather[:, 0]))  # the forecast over its whole length, not only its first value
+        limit = f.get("max_forecast_gap_c") or DEFAULT_FORECAST_GAP_C
+        if len(jumps) and jumps.max() > limit:
+            k = int(np.argmax(jumps))
+            return (f"forecast.outdoor_drybulb_c jumps {jumps[k]:.1f} K from its value {k} ({weather[k, 0]:.1f} °C) "
+                    f"to its value {k + 1} ({weather[k + 1, 0]:.1f} °C) in one step (threshold {limit} K)")  # fmt: skip
         if spread_k > f["max_spread_k"]:
             return (f"the model's members disagree by {spread_k:.2f} K about a zone temperature along the plan "
                     f"(threshold {f['max_spread_k']} K)")  # fmt: skip
         return None
+
+    def _input_name(self, i: int, row: np.ndarray) -> tuple[str, str]:
+        """Model input `i` of `row` as the contract names what it comes from, and its value in the contract's units
+        ("" for the clock): a sensor (or `power_w - hvac_power_w`, the power that is not HVAC's),
+        `last_setpoints.NAME`, `forecast.NAME` (its first value) or `time` (the clock, or the building's schedule,
+        at the step's end)."""
+        layout, state, a = self.layout, self.layout.state_names, len(self.names)
+        if i < len(state):
+            units = {s["name"]: s["unit"] for s in self.contract.sensors}
+            name = state[i]
+            if name not in units:  # the total power less the HVAC's: not a sensor of its own
+                name, unit = f"{' + '.join(layout.energy)} - {' + '.join(layout.hvac)}", units[layout.energy[0]]
+            else:
+                unit = units[name]
+            return name, f"{row[i]:.6g} {unit}, "
+        k = i - len(state)
+        if k < 2 * a:  # the last setpoints, as both the model's previous and its current action
+            output = self.contract.outputs[k % a]
+            value = from_unit(row[len(state) : len(state) + a], self.low, self.high)[k % a]
+            return f"last_setpoints.{output['name']}", f"{value:.6g} {output['unit']}, "
+        k -= 2 * a
+        if k < len(WEATHER):  # the forecast's first value (or the persisted one)
+            variable = self.forecast["variables"][k]
+            value = row[i] / WEATHER_SCALE[k]
+            return f"forecast.{variable['name']} (its first value)", f"{value:.6g} {variable['unit']}, "
+        return "time (the clock's hour and weekday, or the building's schedule then, at the end of the step)", ""
 
 
 _CALENDAR = ("comfort_seen", "comfort_applied", "bound_sum", "bound_seen", "dated_runs", "dated_bounds",

@@ -69,19 +69,22 @@ class RequestLog:
 
 
 class BearerToken:
-    """Every request must carry `Authorization: Bearer <token>` (compared in constant time); anything else is a 401
-    that names the header. The token is never logged (RequestLog logs method, path, status and time only)."""
+    """Every request must carry `Authorization: Bearer <token>` (the scheme in any case, RFC 7235; the token
+    compared in constant time); anything else is a 401 that names the header. The token is never logged (RequestLog
+    logs method, path, status and time only)."""
 
     def __init__(self, app, token: str):
-        self.app, self.expected = app, f"Bearer {token}".encode()
+        self.app, self.expected = app, token.encode()
 
     async def __call__(self, scope, receive, send):
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
         given = dict(scope.get("headers") or []).get(b"authorization", b"")
-        if hmac.compare_digest(given, self.expected):
+        scheme, _, credential = given.strip().partition(b" ")
+        bearer = scheme.lower() == b"bearer"
+        if hmac.compare_digest(credential.strip() if bearer else b"", self.expected) and bearer:
             return await self.app(scope, receive, send)
-        field = "authorization: missing" if not given else "authorization: wrong token"
+        field = "authorization: " + ("missing" if not given else "wrong token" if bearer else "not a Bearer token")
         log.warning("refused %s %s: %s", scope.get("method"), scope.get("path"), field)
         response = JSONResponse({"error": f"{field}; send Authorization: Bearer <token>", "field": "authorization"},
                                 status_code=401, headers={"WWW-Authenticate": "Bearer"})  # fmt: skip
@@ -139,16 +142,48 @@ def create_app(directory: Path, token: str | None = None) -> FastAPI:
 
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
+MIN_TOKEN_CHARS = 16  # `secrets.token_urlsafe(32)` gives 43
+
+
+def loopback(host: str) -> bool:
+    return host in LOOPBACK or host.startswith("127.")
 
 
 def read_token(path: Path | None) -> str | None:
-    """The bearer token in `path` (its first line), or None; an empty file is refused."""
+    """The bearer token in `path` (its first line), or None. Refused, with the reason: an empty file, a token
+    shorter than MIN_TOKEN_CHARS, a file that others than its owner may read or write (as ssh refuses a key)."""
     if path is None:
         return None
     lines = Path(path).read_text().strip().splitlines()
     token = lines[0].strip() if lines else ""
     if not token:
         raise ValueError(f"--token-file {path} is empty: put the token on its first line")
+    if len(token) < MIN_TOKEN_CHARS:
+        raise ValueError(
+            f"--token-file {path}: the token has {len(token)} characters; at least {MIN_TOKEN_CHARS} are needed "
+            "(`python -c 'import secrets; print(secrets.token_urlsafe(32))'` makes one)"
+        )
+    mode = Path(path).stat().st_mode & 0o777
+    if mode & 0o077:
+        raise ValueError(f"--token-file {path} may be read or written by others than its owner (mode {mode:o}): "
+                         f"chmod 600 {path}")  # fmt: skip
+    return token
+
+
+def check_access(host: str, token_file: Path | None, tls: bool) -> str | None:
+    """The token `serve` requires (None: none), refusing what would expose the controller (off loopback without a
+    token; a weak or exposed token file: `read_token`) and warning, loudly, of a token sent in clear (plain HTTP
+    off loopback)."""
+    if not loopback(host) and token_file is None:
+        raise ValueError(
+            f"--host {host} lets other machines reach the controller: give --token-file FILE (a secret on its first "
+            "line; clients send Authorization: Bearer <it>), and --ssl-keyfile/--ssl-certfile for TLS"
+        )
+    token = read_token(token_file)
+    if not loopback(host) and not tls:
+        log.warning("PLAIN HTTP on %s: the bearer token and every reading cross the network in clear, readable by "
+                    "anyone on the path; give --ssl-keyfile and --ssl-certfile (TLS), or serve on 127.0.0.1 behind "
+                    "a TLS proxy", host)  # fmt: skip
     return token
 
 
@@ -157,14 +192,9 @@ def serve(directory: Path, host: str = "127.0.0.1", port: int = 8000, token_file
     """Run the controller's server until Ctrl-C or SIGTERM. Off loopback it needs a token (`token_file`)."""
     import uvicorn
 
-    if host not in LOOPBACK and not host.startswith("127.") and token_file is None:
-        raise ValueError(
-            f"--host {host} lets other machines reach the controller: give --token-file FILE (a secret on its first "
-            "line; clients send Authorization: Bearer <it>), and --ssl-keyfile/--ssl-certfile for TLS"
-        )
     if (ssl_keyfile is None) != (ssl_certfile is None):
         raise ValueError("TLS needs both --ssl-keyfile and --ssl-certfile")
-    app = create_app(directory, read_token(token_file))
+    app = create_app(directory, check_access(host, token_file, ssl_certfile is not None))
     scheme = "https" if ssl_certfile else "http"
     log.info("serving %s on %s://%s:%d (POST /act, GET /health, GET /contract%s)", directory, scheme, host, port,
              "; bearer token required" if token_file else "")  # fmt: skip
