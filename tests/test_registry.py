@@ -84,6 +84,19 @@ def test_states_from_status_files_and_from_an_older_versions_files(tmp_path):
         registry.stop_run(runs["done"])
 
 
+def test_a_model_based_run_shows_its_checkpoint(tmp_path):
+    """A model-based (mpc) run saves checkpoints/mpc_<steps>_steps.pt: `runs` shows the newest as its checkpoint
+    and counts its steps, as it does a model-free run's model_<steps>_steps.zip."""
+    run = _run_folder(tmp_path / "runs", "mpc", _status(state="stopped", steps=0))
+    for steps in (2500, 5000):
+        (run / "checkpoints" / f"mpc_{steps}_steps.pt").write_bytes(b"")
+    info = registry.read_run(run, tmp_path / "runs")
+    assert info.checkpoint == run / "checkpoints" / "mpc_5000_steps.pt" and info.steps == 5000
+    out = _runs(tmp_path)
+    line = next(row for row in out.splitlines() if row.startswith("mpc "))
+    assert "mpc_5000_steps.pt" in line, out
+
+
 @pytest.mark.slow
 def test_a_finished_run_and_the_same_run_as_an_older_version_left_it(tmp_path, no_leaks, monkeypatch):
     monkeypatch.setenv(TRIAL_VARIABLE, "trial-7")  # as a Ray Tune sweep sets it

@@ -40,8 +40,11 @@ def read_json(path: Path) -> dict | None:
 
 
 def saves_newest_first(run_dir: Path) -> list[Path]:
-    """A run's checkpoints and final model, the newest first (by steps, the final model by its time)."""
-    checkpoints = sorted((run_dir / "checkpoints").glob("model_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
+    """A run's checkpoints (SB3's model_N_steps.zip, a model-based run's mpc_N_steps.pt) and final model, the newest
+    first (by steps, the final model by its time)."""
+    folder = run_dir / "checkpoints"
+    checkpoints = sorted([*folder.glob("model_*_steps.zip"), *folder.glob("mpc_*_steps.pt")],
+                         key=lambda p: int(p.stem.split("_")[1]))  # fmt: skip
     final = run_dir / MODEL_FILE
     if final.is_file():  # after the last checkpoint when the run finished, before it when resumed past it
         newer = [c for c in checkpoints if c.stat().st_mtime_ns > final.stat().st_mtime_ns]
