@@ -273,6 +273,18 @@ def test_serving_off_loopback_needs_a_token_file_and_tls_needs_both_files(export
 
 
 @pytest.mark.slow
+def test_export_quiet_writes_no_progress_bar(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "parallel_eplus.cli", "export", str(RUN), "-o", str(tmp_path / "out"),
+                        "--record-days", "1", "--workers", "1", "--quiet"], capture_output=True, text=True,
+                       timeout=600)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out" / "controller.json").is_file()
+    output = r.stdout + r.stderr
+    assert "step/s" not in output and "\r" not in output and "%|" not in output, output[-2000:]
+    assert len(output) < 4000, output[-2000:]  # the log's lines, not a bar redrawn hundreds of times
+
+
+@pytest.mark.slow
 def test_a_short_or_exposed_token_is_refused_and_plain_http_off_loopback_warns(exported, tmp_path, caplog):
     """A token shorter than 16 characters, or in a file others may read, is refused before anything listens (on
     loopback too); a token sent over plain HTTP off loopback is a loud warning. Never the token in the message."""

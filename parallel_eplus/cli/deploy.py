@@ -24,6 +24,7 @@ def add_commands(sub) -> None:
     ex.add_argument("--workers", type=int, default=2, help="planner: EnergyPlus runs at once (own controls)")
     ex.add_argument("--planner-options", metavar="NAME=VALUE,...",
                     help="planner: settings overriding its own, as `evaluate --planner` (e.g. band_thermostats=own)")
+    ex.add_argument("--quiet", action="store_true", help="no progress bar (a log or CI's output stays readable)")
     ex.set_defaults(func=cmd_export, needs="export")
     se = sub.add_parser("serve", help="serve an exported controller over HTTP: POST /act, GET /health, GET /contract")
     se.add_argument("controller", type=Path, metavar="DIR", help="a folder written by `export`")
@@ -67,7 +68,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     path = export(args.policy, args.out, workers=args.workers, max_input_z=args.fallback_input_z,
                   max_spread_k=args.fallback_spread_k, persistence=args.persistence,
-                  record_days=args.record_days, options=args.planner_options)  # fmt: skip
+                  record_days=args.record_days, options=args.planner_options, progress=not args.quiet)  # fmt: skip
     files = ", ".join(sorted(p.name for p in path.parent.iterdir() if p.suffix in (".onnx", ".npz", ".json")))
     print(f"written: {path.parent}/ ({files})")
     return 0

@@ -44,13 +44,13 @@ PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 
-def own_controls(building: str | None, weathers: list[str], days: int, workers: int):
+def own_controls(building: str | None, weathers: list[str], days: int, workers: int, progress: bool = True):
     """([12, 24, actions], the run): the building's own setpoints (physical) by month and hour at the step's start,
     the mean over a run of its own controls on `weathers`; months the run did not reach take the nearest month's."""
     from parallel_eplus.learning.imitation import record_baseline
 
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-own-") as folder:
-        demos = record_baseline(building, weathers, days, workers, Path(folder), progress=True)
+        demos = record_baseline(building, weathers, days, workers, Path(folder), progress=progress)
     n = demos.physical.shape[1]
     total, count = np.zeros((12, 24, n)), np.zeros((12, 24, 1))
     for t, a in zip(demos.times, demos.physical, strict=True):
@@ -71,11 +71,12 @@ def _sha256(path: Path) -> str:
 
 def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: float = 6.0,
                    max_forecast_gap_c: float = 6.0, max_spread_k: float | None = None, persistence: bool = False,
-                   record_days: int | None = None, options: str | None = None) -> Path:  # fmt: skip
+                   record_days: int | None = None, options: str | None = None, progress: bool = True,
+                   ) -> Path:  # fmt: skip
     """Write the planner at `source` (planner.pt) into `out_dir`; returns the contract's path. `record_days`: how
     long the own controls are recorded for the fallback's setpoints (default: the run's episodes, up to a year).
     `options`: settings overriding the planner's own, as `evaluate --planner` gives them (not its forecast: the
-    served planner reads the one each request carries)."""
+    served planner reads the one each request carries). `progress`: a progress bar while recording."""
     from parallel_eplus.learning.model_based.control.mpc import MPC
     from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions
     from parallel_eplus.learning.model_based.runtime.ensemble_graph import build_graph
@@ -95,7 +96,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
     weathers = saved.get("weathers") or list(spec.weathers)[:1] or ["CA"]
     days = record_days or min(int(saved.get("run_days", 365)), 365)
     log.info("recording the building's own controls on %s (%d days) for the fallback's setpoints", weathers, days)
-    own, demos = own_controls(mpc.building, weathers, days, workers)
+    own, demos = own_controls(mpc.building, weathers, days, workers, progress)
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

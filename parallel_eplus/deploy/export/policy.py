@@ -240,7 +240,8 @@ def onnx_actions(path: Path, observations: np.ndarray) -> np.ndarray:
 
 def export(run_or_model: Path, out_dir: Path, **planner_options) -> Path:
     """Write controller.onnx and controller.json into `out_dir`; returns the contract's path. A model-based run (or
-    its planner) is exported as its planner (planner_export.py, `planner_options` its settings)."""
+    its planner) is exported as its planner (planner_export.py, `planner_options` its settings; `progress=False`:
+    no progress bar)."""
     import onnx
 
     from parallel_eplus.deploy.export.planner import export_planner
@@ -249,6 +250,7 @@ def export(run_or_model: Path, out_dir: Path, **planner_options) -> Path:
     planner = planner_source(run_or_model)
     if planner is not None:
         return export_planner(planner, out_dir, **planner_options)
+    planner_options.pop("progress", None)  # a policy's export runs no simulation
     if planner_options.get("options"):
         raise ValueError(f"--planner-options: {run_or_model} is a policy, not a planner (a model-based run's)")
     model_zip = model_file(run_or_model)
