@@ -6,6 +6,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import logging
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -334,6 +335,64 @@ def test_over_tls_with_a_token(exported, tmp_path):
         assert refused.value.code == 401
         refused.value.close()
     assert TOKEN not in (tmp_path / "server.log").read_text()
+
+
+@pytest.mark.slow
+def test_evaluate_sends_the_token_from_a_file_or_the_environment_and_never_shows_it(exported, tmp_path, monkeypatch):
+    from parallel_eplus.evaluation.http_controller import TOKEN_VARIABLE, client_token
+
+    token, wrong, log = tmp_path / "token", tmp_path / "wrong", tmp_path / "server.log"
+    token.write_text(TOKEN + "\n")
+    token.chmod(0o600)
+    wrong.write_text("not-the-token-0123456789\n")
+    env = {k: v for k, v in os.environ.items() if k != TOKEN_VARIABLE}
+    evaluate = ("evaluate", "--building", "datacenter-2zone", "--weathers", "CA", "--run-days", "1", "--workers", "1",
+                "--quiet")  # fmt: skip
+
+    def run(*args: str, **extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "parallel_eplus.cli", *evaluate, *args], capture_output=True,
+                              text=True, timeout=600, env={**env, **extra})  # fmt: skip
+
+    with serving(exported, log, "--token-file", str(token), headers={"Authorization": f"Bearer {TOKEN}"}) as url:
+        none = run("--controller-url", url, "--out", str(tmp_path / "none"))
+        assert none.returncode == 2 and "needs a token: give --token-file FILE" in none.stderr, none.stderr
+        assert TOKEN_VARIABLE in none.stderr
+        refused = run("--controller-url", url, "--token-file", str(wrong), "--out", str(tmp_path / "wrong"),
+                      **{TOKEN_VARIABLE: TOKEN})  # the flag, when given, is what is sent  # fmt: skip
+        assert refused.returncode == 2 and "refused the token given" in refused.stderr, refused.stderr
+        done = run("--controller-url", url, "--token-file", str(token), "--out", str(tmp_path / "done"))
+        assert done.returncode == 0, done.stderr[-3000:]
+        assert "MPC planner via HTTP (datacenter-2zone-mpc-seed0)" in done.stdout
+        monkeypatch.setenv(TOKEN_VARIABLE, TOKEN)  # the environment's, without the flag
+        assert client_token(None) == TOKEN
+        assert http_controller(url, client_token(None)).served["model"] == "planner.pt"
+        assert get(url + "/health", {"Authorization": f"Bearer {TOKEN}"})["act"] == 96
+    for r in (none, refused, done):
+        assert TOKEN not in r.stdout + r.stderr
+    assert TOKEN not in log.read_text() and log.read_text().count("POST /act 200") == 96
+
+
+@pytest.mark.slow
+def test_evaluate_refuses_a_policy_that_is_not_the_served_controller(exported, tmp_path, caplog):
+    """`--policy RUN` of a model-based run is its distilled network; `export RUN` serves its planner: side by side
+    they are refused, naming the --policy that is the served one; another run's policy beside it is a warning."""
+    from parallel_eplus.evaluation.controllers import check_same_controllers, policy_controllers
+
+    with serving(exported, tmp_path / "server.log") as url:
+        r = subprocess.run([sys.executable, "-m", "parallel_eplus.cli", "evaluate", "--policy", str(RUN),
+                            "--controller-url", url, "--building", "datacenter-2zone", "--weathers", "CA",
+                            "--run-days", "1", "--out", str(tmp_path / "out")], capture_output=True, text=True,
+                           timeout=300)  # fmt: skip
+        assert r.returncode == 2 and "is not the controller" in r.stderr, r.stderr
+        assert f"give --policy {RUN / 'best' / 'planner'} " in r.stderr
+        served = http_controller(url)
+        check_same_controllers([planner_controller(str(RUN / "best" / "planner"))], [served])  # the same: quiet
+        assert not caplog.records
+        paper = ROOT / "results/paper/models/paper-ca-co-fl-time"
+        with caplog.at_level(logging.WARNING, logger="parallel_eplus.evaluation.controllers"):
+            check_same_controllers(policy_controllers(str(paper)), [served])
+        assert "which no --policy names" in caplog.text
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
 @pytest.mark.slow

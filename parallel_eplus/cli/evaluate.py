@@ -24,6 +24,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         BASELINE_LABEL,
         RBC_LABEL,
         Controller,
+        check_same_controllers,
         http_controller,
         policy_controllers,
     )
@@ -55,7 +56,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     for path in args.policy or []:  # a model-based run's planner, else a policy or a folder of runs (seeds)
         planner = planner_controller(path, args.planner)
         controllers += [planner] if planner else policy_controllers(path)
-    controllers += [http_controller(url) for url in args.controller_url or []]
+    if args.controller_url:
+        from parallel_eplus.evaluation.http_controller import client_token
+
+        token = client_token(getattr(args, "token_file", None))  # --token-file, else $PARALLEL_EPLUS_TOKEN
+        served = [http_controller(url, token) for url in args.controller_url]
+        check_same_controllers(controllers, served)  # --policy beside the served controller: the same one
+        controllers += served
     if not controllers:
         raise ValueError(
             "nothing to evaluate: give --baseline, --rbc, --rbc-targets, --policy PATH and/or --controller-url URL"

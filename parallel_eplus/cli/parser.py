@@ -121,6 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--controller-url", action="append", metavar="URL",
         help="a controller served by `parallel-eplus serve` (e.g. http://127.0.0.1:8000): each step goes over HTTP",
     )  # fmt: skip
+    ev.add_argument("--token-file", type=Path, metavar="FILE", help="with --controller-url: the server's bearer "
+                    "token on the file's first line (default: $PARALLEL_EPLUS_TOKEN); never shown")  # fmt: skip
     ev.set_defaults(func=cmd_evaluate)
     deploy.add_commands(sub)
 

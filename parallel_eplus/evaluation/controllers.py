@@ -11,7 +11,7 @@ import json
 import logging
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +49,8 @@ class Controller:
     # A policy in memory, (observation, info) -> action: evaluation during training (training/periodic_eval.py)
     act: Callable[[np.ndarray, dict], np.ndarray] | None = None
     url: str | None = None  # "http": where `parallel-eplus serve` answers
+    token: str | None = field(default=None, repr=False)  # "http": the bearer token it asks for (never shown)
+    served: dict | None = None  # "http": the contract's `policy` block (what was exported: its file and sha256)
     forecast_hours: int = 0  # the policy observes the outdoor dry bulb's next hours (train --forecast)
     forecast_error: str | None = None
     # kind "planner": makes the episode's actor; given by the layer that knows the planner (picklable, for Ray)
@@ -99,7 +101,7 @@ class Controller:
         if self.kind == "http":
             from parallel_eplus.evaluation.http_controller import HttpController
 
-            return HttpController(self.url)
+            return HttpController(self.url, token=self.token)
         if self.factory is not None:
             return self.factory()
         from parallel_eplus.runs.policy_files import load_policy
@@ -165,18 +167,48 @@ def policy_controller(spec: str) -> Controller:
     )  # fmt: skip
 
 
-def http_controller(url: str) -> Controller:
+def http_controller(url: str, token: str | None = None) -> Controller:
     """A controller served at `url`, labelled by its contract's algorithm and run; it acts in the building it was
-    exported for (the features it observes are computed by the server from each step's time)."""
+    exported for (the features it observes are computed by the server from each step's time). `token`: the bearer
+    token the server asks for."""
     from parallel_eplus.evaluation.http_controller import HttpController
 
-    client = HttpController(url)
+    client = HttpController(url, token=token)
     try:
         policy = client.contract["policy"]
-        label = f"{policy['algorithm'].upper()} via HTTP ({policy['run']})"
-        return Controller(label, "http", building=client.building(), run=str(policy["run"]), url=url)
+        what = "MPC planner" if client.planner else policy["algorithm"].upper()
+        return Controller(f"{what} via HTTP ({policy['run']})", "http", building=client.building(),
+                          run=str(policy["run"]), url=url, token=token, served=dict(policy))  # fmt: skip
     finally:
         client.close()
+
+
+def check_same_controllers(local: list[Controller], served: list[Controller]) -> None:
+    """`evaluate --policy P --controller-url U` compares a controller in process with one served: refused when P
+    is of the run U was exported from but another of its files (a model-based run's distilled network beside its
+    served planner: `export` serves `best/planner`), with the --policy that is; a WARNING when no --policy is of
+    U's run at all (two different controllers side by side: fine if meant)."""
+    import hashlib
+
+    learned = [c for c in local if c.kind in ("policy", "planner") and c.path is not None]
+    for s in served:
+        ours = [c for c in learned if c.run == s.run]
+        same = [c for c in ours if hashlib.sha256(Path(c.path).read_bytes()).hexdigest() == s.served.get("sha256")]
+        if ours and not same:
+            c = ours[0]
+            planner = s.served.get("algorithm") == "mpc"
+            run_dir = next((d for d in Path(c.path).parents if d.name == s.run), Path(c.path).parent)
+            best = run_dir / "best" / "planner"
+            right = (best if best.is_dir() else run_dir / "planner") if planner else run_dir / s.served.get("model", "")
+            raise ValueError(
+                f"--policy {c.path} ({c.label}) is not the controller {s.url} serves, though both come from run "
+                f"{s.run}: the server serves its {s.served.get('model')} (sha256 {s.served.get('sha256', '')[:12]}…)"
+                f"{', the planner `export` wrote' if planner else ''}; give --policy {right} to compare the same "
+                "controller in process and served"
+            )
+        if learned and not ours:
+            log.warning("--controller-url %s serves run %s, which no --policy names (%s): the table puts different "
+                        "controllers side by side", s.url, s.run, ", ".join(c.run for c in learned))  # fmt: skip
 
 
 def unique_labels(controllers: list[Controller]) -> list[Controller]:

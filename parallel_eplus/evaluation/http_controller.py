@@ -11,7 +11,9 @@ import datetime as dt
 import hashlib
 import http.client
 import json
+import logging
 import math
+import os
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -23,15 +25,34 @@ from parallel_eplus.buildings.pricing.bill import DemandTracker
 from parallel_eplus.buildings.scaling import to_unit
 from parallel_eplus.buildings.weather.forecast import WEATHER, PerfectForecast
 
+log = logging.getLogger(__name__)
+
+TOKEN_VARIABLE = "PARALLEL_EPLUS_TOKEN"  # the bearer token a served controller asks for, when no --token-file
+
+
+def client_token(token_file: Path | None) -> str | None:
+    """The bearer token `evaluate --controller-url` sends: the first line of `token_file`, else the environment's
+    PARALLEL_EPLUS_TOKEN, else None. Never logged, never in an error message."""
+    if token_file is not None:
+        lines = Path(token_file).read_text().strip().splitlines()
+        if not lines or not lines[0].strip():
+            raise ValueError(f"--token-file {token_file} is empty: put the token on its first line")
+        return lines[0].strip()
+    return os.environ.get(TOKEN_VARIABLE, "").strip() or None
+
 
 class HttpController:
-    """Callable (observation, info) -> normalized action, asking the server at `url` for each step."""
+    """Callable (observation, info) -> normalized action, asking the server at `url` for each step (with
+    `Authorization: Bearer <token>` when given one)."""
 
-    def __init__(self, url: str, timeout_s: float = 30.0):
+    def __init__(self, url: str, timeout_s: float = 30.0, token: str | None = None):
         parts = urlsplit(url if "://" in url else f"http://{url}")
         if parts.scheme != "http" or not parts.hostname:
             raise ValueError(f"--controller-url {url!r}: give http://HOST:PORT (as `parallel-eplus serve` prints)")
         self.url, self.host, self.port, self.timeout_s = url, parts.hostname, parts.port or 80, timeout_s
+        self.auth = {"Authorization": f"Bearer {token}"} if token else {}
+        if token and not (self.host in ("localhost", "::1") or self.host.startswith("127.")):
+            log.warning("PLAIN HTTP to %s: the bearer token crosses the network in clear", self.host)
         self.conn: http.client.HTTPConnection | None = None
         self.contract = self._request("GET", "/contract")
         self.names = [i["name"] for i in self.contract["inputs"] if i["source"] == "sensor"]
@@ -56,7 +77,7 @@ class HttpController:
 
     def _request(self, method: str, path: str, body: dict | None = None) -> dict:
         payload = None if body is None else json.dumps(body).encode()
-        headers = {"Content-Type": "application/json"} if payload is not None else {}
+        headers = ({"Content-Type": "application/json"} if payload is not None else {}) | self.auth
         for attempt in (0, 1):  # a kept-alive connection the server closed is opened again, once
             if self.conn is None:
                 self.conn = http.client.HTTPConnection(self.host, self.port, timeout=self.timeout_s)
@@ -69,6 +90,10 @@ class HttpController:
                 self.close()
                 if attempt:
                     raise ValueError(f"controller at {self.url}: {method} {path} failed ({e}); is it serving?") from e
+        if response.status == 401:  # the server's words name the header, never the token
+            how = ("it refused the token given (--token-file, else $" + TOKEN_VARIABLE + ")" if self.auth else
+                   "it needs a token: give --token-file FILE (the token on its first line) or set " + TOKEN_VARIABLE)
+            raise ValueError(f"controller at {self.url} answered 401 to {method} {path}: {how} ({text[:200]!r})")
         if response.status != 200:
             raise ValueError(f"controller at {self.url} answered {response.status} to {method} {path}: {text[:300]!r}")
         return json.loads(text)
