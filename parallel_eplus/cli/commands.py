@@ -165,11 +165,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         mpc=MPCSettings.from_text(args.mpc),
         mbpo=MBPOSettings.from_text(args.mbpo),
     )
-    if args.init_from_baseline and "--log-std-init" in sys.argv:  # the cloned policy's exploration
+    given = set(getattr(args, "from_config", {}))  # what `--config FILE` set counts as given, as a flag does
+    if args.init_from_baseline and ("--log-std-init" in sys.argv or "log_std_init" in given):  # the clone's exploration
         cfg.imitation = ImitationSettings(log_std=args.log_std_init)
-    if args.resume and "--timesteps" not in sys.argv:
+    if args.resume and "--timesteps" not in sys.argv and "timesteps" not in given:
         cfg.timesteps = 0  # 0: keep the resumed run's own total
-    if "--batch-size" not in sys.argv and cfg.workers > 0:  # the default, split evenly across the workers
+    if "--batch-size" not in sys.argv and "batch_size" not in given and cfg.workers > 0:  # the default, split evenly
         cfg.batch_size = -(-cfg.batch_size // cfg.workers) * cfg.workers
     if args.seeds:
         from parallel_eplus.cli.many_runs import train_seeds

@@ -9,8 +9,9 @@ from pathlib import Path
 
 from parallel_eplus.cli import commands as c
 from parallel_eplus.cli import deploy, many_runs
+from parallel_eplus.cli.config_file import SettingsParser
 from parallel_eplus.cli.evaluate import cmd_evaluate
-from parallel_eplus.cli.train_parser import add_train, weather_options
+from parallel_eplus.cli.train_parser import MPC, SettingsText, add_train, weather_options
 
 
 def installed_version() -> str:
@@ -22,11 +23,18 @@ def installed_version() -> str:
 
 
 DESCRIPTION = "Train and evaluate RL controllers for buildings against parallel EnergyPlus simulations."
+# What `evaluate --planner help` and `bench --planner-options help` print before the planner's settings.
+PLANNER_OPTIONS = (
+    "forecast=perfect|low|medium|high: the weather forecast the planner reads (the file, or it with\n"
+    "    BOPTEST's forecast errors; default perfect)\n"
+    "seed=N: the planner's sampler's seed (default: its own)\n"
+    "and any of its settings, overriding the saved planner's:\n\n"
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Every subcommand with its options and defaults."""
-    parser = argparse.ArgumentParser(prog="parallel-eplus", description=DESCRIPTION)
+    """Every subcommand with its options and defaults (a SettingsParser: `train --config FILE` reads a TOML file)."""
+    parser = SettingsParser(prog="parallel-eplus", description=DESCRIPTION)
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -34,13 +42,17 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("simulate", help="run one episode and print the paper's episode statistics")
     sim.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or a path to an .epw (default CA)")
     sim.add_argument("--days", type=int, default=7, help="run period length from Jan 1 (default 7)")
-    sim.add_argument("--model", default="temp_fan", choices=["temp_fan", "temp"])
+    sim.add_argument(
+        "--model", default="temp_fan", choices=["temp_fan", "temp"],
+        help="the data center's actions: setpoints and fan flows (temp_fan, default) or setpoints alone (temp)",
+    )  # fmt: skip
     sim.add_argument("--building", help="a building spec (TOML path or built-in name); default: the data center")
-    sim.add_argument("--policy", default="constant", choices=["constant", "random"])
+    sim.add_argument("--policy", default="constant", choices=["constant", "random"],
+                     help="constant: --action every step (default); random: uniform random actions")  # fmt: skip
     sim.add_argument("--action", help="the constant action in [-1, 1], comma-separated (default all 0)")
     sim.add_argument("--output-dir", type=Path, help="keep the episode records here")
     sim.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
-    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--seed", type=int, default=0, help="seed of the random policy and the episode (default 0)")
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     bn = sim.add_argument_group("as a BACnet/IP device (docs/deploy.md#bacnet; needs the [bacnet] extra)")
     bn.add_argument("--bacnet", metavar="ADDRESS", help="serve the episode as a BACnet/IP device on host[/mask][:port]"
@@ -67,9 +79,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser("evaluate", help="controllers x weathers sweep: the paper's table and figures")
     ev.add_argument("--policy", action="append", help="a trained model.zip (or run dir); PATH=LABEL sets the label")
     ev.add_argument(
-        "--planner", metavar="forecast=perfect|low|medium|high,NAME=VALUE,...",
+        "--planner", metavar="forecast=perfect|low|medium|high,NAME=VALUE,...|help", action=SettingsText,
+        settings=MPC, preface=PLANNER_OPTIONS,
         help="how each --policy that is a planner (runs/<name>/planner) runs: its weather forecast (the file, or it "
-        "with BOPTEST's forecast errors) and planner settings overriding its own, e.g. candidates=128",
+        "with BOPTEST's forecast errors) and planner settings overriding its own, e.g. candidates=128; "
+        "`--planner help` lists them",
     )  # fmt: skip
     ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
     ev.add_argument(
@@ -93,14 +107,15 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--building", help="a building spec (TOML path or built-in name), checked first; default: the data center"
     )
-    ev.add_argument("--run-days", type=int, default=365)
+    ev.add_argument("--run-days", type=int, default=365, help="episode length in days from Jan 1 (default 365)")
     ev.add_argument(
         "--scenario", default="year", choices=("year", "peak_heat", "typical_heat", "peak_cool", "typical_cool"),
         help="BOPTEST's test periods: two weeks around each weather's peak or typical heating or cooling day of the "
         "built-in controls, after a one-week warm-up (evaluation/scenarios.py); default: the year (--run-days)",
     )  # fmt: skip
     ev.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="episodes run at once")
-    ev.add_argument("--out", type=Path, default=Path("results") / "latest")
+    ev.add_argument("--out", type=Path, default=Path("results") / "latest",
+                    help="folder for the table, figures and episodes (default results/latest)")  # fmt: skip
     ev.add_argument(
         "--resume", action="store_true",
         help="keep the episodes an interrupted run of this command finished in --out; run only the others",
@@ -136,9 +151,10 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument(
         "--vector-steps", type=int, help="vector steps per worker (default: the same simulated days as training)"
     )
-    be.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    be.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="EnergyPlus processes (default: cores)")
     be.add_argument("--repeats", type=int, default=3, help="repetitions; medians are reported")
-    be.add_argument("--out", type=Path, default=Path("results") / "bench.json")
+    be.add_argument("--out", type=Path, default=Path("results") / "bench.json",
+                    help="where to write the results (default results/bench.json)")  # fmt: skip
     be.add_argument("--no-ray", action="store_true", help="skip the Ray backend's row (a local Ray's training rate)")
     be.add_argument("--short", action="store_true", help="also short episodes: consecutive ones against EnergyPlus "
                     "alone, reset latency, TRPO steps/s at 1, 7, 14 and 365-day episodes (docs/speed.md)")  # fmt: skip
@@ -146,7 +162,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--planner", type=Path, metavar="RUN",
         help="instead: a model-based run's planner, ms per decision beside its distilled policy network's",
     )  # fmt: skip
-    be.add_argument("--planner-options", metavar="NAME=VALUE,...", help="with --planner: as evaluate --planner")
+    be.add_argument(
+        "--planner-options", metavar="NAME=VALUE,...|help", action=SettingsText, settings=MPC,
+        preface=PLANNER_OPTIONS, help="with --planner: as evaluate --planner (`help` lists them)",
+    )  # fmt: skip
     be.add_argument(
         "--replay-run", type=Path, metavar="RUN_DIR",
         help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",
@@ -156,7 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
     bd = sub.add_parser("building", help="building specs: start one from a model (init), check one against it (check)")
     bsub = bd.add_subparsers(dest="building_command", required=True)
     bi = bsub.add_parser("init", help="run MODEL.idf briefly and write a commented starter spec")
-    bi.add_argument("idf", type=Path, metavar="MODEL.idf")
+    bi.add_argument("idf", type=Path, metavar="MODEL.idf", help="the EnergyPlus model to start a spec from")
     bi.add_argument("--weather", default="CA", help="CA, CO, FL, IL, VA or an .epw path, for the run and the spec")
     bi.add_argument("-o", "--output", type=Path, help="the spec to write (default: MODEL.toml beside the model)")
     bi.add_argument("--name", help="the building's name in the spec (default: from the file name)")
@@ -170,7 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser(
         "plot", help="RUN_DIR: convergence; EPISODE_DIR: its time series; SWEEP_DIR: figures from results.csv"
     )
-    pl.add_argument("path", type=Path)
+    pl.add_argument("path", type=Path, help="a run, episode or sweep folder")
     pl.set_defaults(func=c.cmd_plot)
 
     ru = sub.add_parser("runs", help="list the runs under a folder: state, progress, latest results; show or stop one")

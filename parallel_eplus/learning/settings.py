@@ -1,46 +1,196 @@
-"""Each algorithm's settings and the learners' own knobs: plain data classes (a run saves them in its config.json)."""
+"""Each algorithm's settings and the learners' own knobs: plain data classes (a run saves them in its config.json).
+
+The settings a user types as `NAME=VALUE,...` (`--sac`, and `--mpc`/`--mbpo` in model_based/settings.py) are
+`FromText` data classes: each field's type annotation says how its text is read (a boolean, an integer, a number,
+one of a Literal's words, layer sizes as `64x64`, `none` where the type allows None), and its `setting(default,
+help)` carries the one line `--mpc help` prints. A value that does not fit its type is refused by name.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
-from typing import ClassVar
+import functools
+import math
+import types
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, ClassVar, Literal, Union, get_args, get_origin, get_type_hints
+
+# How a boolean setting may be written (case-insensitive); anything else is refused, never read as False.
+BOOLEANS = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
+
+
+def setting(default: Any, help: str) -> Any:
+    """A settings field with its one-line description: the one place `--mpc help` (and the docs) read it from."""
+    return field(default=default, metadata={"help": help})
+
+
+def _optional(hint) -> tuple[Any, bool]:
+    """(the type without None, whether None is allowed) for `X | None`."""
+    if get_origin(hint) in (Union, types.UnionType) and type(None) in get_args(hint):
+        rest = [a for a in get_args(hint) if a is not type(None)]
+        return (rest[0] if len(rest) == 1 else Union[tuple(rest)]), True  # noqa: UP007
+    return hint, False
+
+
+def _choices(hint) -> tuple[str, ...]:
+    """A Literal's words (empty for any other type)."""
+    hint, _ = _optional(hint)
+    return get_args(hint) if get_origin(hint) is Literal else ()
+
+
+def _words(choices) -> str:
+    return ", ".join(repr(c) for c in choices[:-1]) + f" or {choices[-1]!r}" if len(choices) > 1 else repr(choices[0])
+
+
+def type_name(hint) -> str:
+    """How `--mpc help` names a setting's type."""
+    hint, optional = _optional(hint)
+    if get_origin(hint) is Literal:
+        name = "|".join(get_args(hint))
+    elif get_origin(hint) is tuple:
+        name = "sizes (64x64)"
+    else:
+        name = {bool: "bool", int: "int", float: "float", str: "text"}.get(hint, str(hint))
+    return f"{name} or none" if optional else name
+
+
+def show(value) -> str:
+    """A setting's value as it is typed: `true`, `none`, `64x64`."""
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, tuple):
+        return "x".join(map(str, value))
+    return str(value)
 
 
 class FromText:
-    """`--sac`/`--mpc`/`--mbpo "name=value,..."`: a dataclass's fields by name, each converted to its default's
-    type (a tuple of layer sizes as `64x64`)."""
+    """`--sac`/`--mpc`/`--mbpo "name=value,..."`: a dataclass's fields by name, each read as its annotated type.
+
+    Booleans take true/false, yes/no, on/off or 1/0 (any case); integers a whole number (`2_000`, `1e4`; not
+    `2.7`); floats a finite number; a Literal one of its words; `X | None` also `none`; a tuple of layer sizes
+    `64x64`. Anything else is a ValueError naming the flag, the setting and what it accepts. A name given twice:
+    the last one counts (a run's `--config` file's settings, then the command line's).
+    """
 
     flag: ClassVar[str]
+    # The headings `--mpc help` prints, each before the field it names (the fields keep their order).
+    SECTIONS: ClassVar[dict[str, str]] = {}
 
     def __post_init__(self):
-        pass
+        for name, hint in self.hints().items():
+            value, choices = getattr(self, name), _choices(hint)
+            if choices and value not in choices and not (value is None and _optional(hint)[1]):
+                raise ValueError(f"{name} {value!r}: one of {_words(choices)}")
 
     @classmethod
-    def from_text(cls, text: str | None, base=None):
-        """Fields named in `text` over `base` (default: the defaults)."""
+    @functools.cache
+    def hints(cls) -> dict[str, Any]:
+        """Each field's resolved type annotation (`float | None`, `Literal[...]`), by name."""
+        resolved = get_type_hints(cls)
+        return {f.name: resolved[f.name] for f in fields(cls)}
+
+    @classmethod
+    def from_text(cls, text: str | None, base=None, flag: str | None = None):
+        """Fields named in `text` over `base` (default: the defaults); `flag` names the option in errors (default:
+        the class's own, e.g. `--mpc`)."""
+        flag = flag or cls.flag
         settings = replace(base) if base is not None else cls()
+        hints = cls.hints()
         for item in filter(None, (p.strip() for p in (text or "").split(","))):
             key, sep, value = item.partition("=")
             key = key.strip().replace("-", "_")
-            if not sep or not hasattr(settings, key):
-                names = ", ".join(f.name for f in fields(cls))
-                raise ValueError(f"{cls.flag} {item!r}: expected NAME=VALUE with NAME one of {names}")
-            default = getattr(cls, key)
-            if value.strip().lower() == "none":  # an optional setting left unset (`rail_k=none`)
-                if "None" not in str(next(f.type for f in fields(cls) if f.name == key)):
-                    raise ValueError(f"{cls.flag} {item!r}: {key} takes a value, not none")
-                parsed = None
-            elif isinstance(default, bool):
-                parsed = value.strip().lower() in ("1", "true", "yes", "on")
-            elif default is None:
-                parsed = float(value)
-            elif isinstance(default, tuple):
-                parsed = tuple(int(v) for v in value.lower().split("x"))
-            else:
-                parsed = type(default)(float(value)) if isinstance(default, int) else type(default)(value)
-            setattr(settings, key, parsed)
-        settings.__post_init__()
+            if not sep or key not in hints:
+                from parallel_eplus.buildings.spec.sections import did_you_mean
+
+                raise ValueError(f"{flag} {item!r}: expected NAME=VALUE with NAME one of {', '.join(hints)}"
+                                 f"{did_you_mean(key, hints)} (`{cls.flag} help` describes each)")  # fmt: skip
+            setattr(settings, key, cls.parse_value(key, value, flag))
+        try:
+            settings.__post_init__()
+        except ValueError as e:
+            raise ValueError(f"{flag} {e}") from None
         return settings
+
+    @classmethod
+    def parse_value(cls, key: str, text: str, flag: str | None = None):
+        """One setting's text read as its annotated type; a ValueError naming the flag, the setting and what it
+        accepts where the text cannot mean one."""
+        hint, optional = _optional(cls.hints()[key])
+        text = text.strip()
+        where = f"{flag or cls.flag} {key}={text!r}"
+        if text.lower() == "none":  # an optional setting left unset (`rail_k=none`)
+            if optional:
+                return None
+            raise ValueError(f"{where}: {key} takes a value, not none ({type_name(hint)})")
+        if hint is bool:
+            if text.lower() not in BOOLEANS:
+                raise ValueError(f"{where}: a boolean: true, false, yes, no, on, off, 1 or 0")
+            return BOOLEANS[text.lower()]
+        if hint is int:
+            try:
+                return int(text)
+            except ValueError:
+                number = _number(text)
+                if number is None or not number.is_integer():
+                    raise ValueError(f"{where}: a whole number, e.g. {show(getattr(cls, key))}") from None
+                return int(number)
+        if hint is float:
+            if (number := _number(text)) is None:
+                raise ValueError(f"{where}: a finite number, e.g. {show(getattr(cls, key))}")
+            return number
+        if get_origin(hint) is Literal:
+            if text not in get_args(hint):
+                raise ValueError(f"{where}: one of {_words(get_args(hint))}")
+            return text
+        if get_origin(hint) is tuple:
+            sizes = [_number(v) for v in text.lower().split("x")]
+            if any(s is None or not s.is_integer() or s < 1 for s in sizes):
+                raise ValueError(f"{where}: layer sizes, whole numbers >= 1 joined by x, e.g. 64x64")
+            return tuple(int(s) for s in sizes)
+        return text
+
+    @classmethod
+    def help_text(cls, width: int = 120) -> str:
+        """Every setting with its type, default and one line (what `--mpc help` prints)."""
+        import textwrap
+
+        hints = cls.hints()
+        name_w = max(len("setting"), *map(len, hints))
+        type_w = max(len("type"), *(len(type_name(h)) for h in hints.values()))
+        default_w = max(len("default"), *(len(show(f.default)) for f in fields(cls)))
+        indent = 2 + name_w + 2 + type_w + 2 + default_w + 2
+        title = f"{cls.flag} NAME=VALUE,...: {(cls.__doc__ or '').strip().splitlines()[0]}"
+        lines = [*textwrap.wrap(title, width, subsequent_indent="    "), ""]
+        lines.append(f"  {'setting':<{name_w}}  {'type':<{type_w}}  {'default':<{default_w}}  description")
+        for f in fields(cls):
+            if f.name in cls.SECTIONS:
+                lines += ["", cls.SECTIONS[f.name]]
+            head = f"  {f.name:<{name_w}}  {type_name(hints[f.name]):<{type_w}}  {show(f.default):<{default_w}}  "
+            about = f.metadata.get("help", "")
+            wrapped = textwrap.wrap(about, max(width - indent, 40)) or [""]
+            lines.append(head + wrapped[0])
+            lines += [" " * indent + rest for rest in wrapped[1:]]
+        tail = (
+            f"e.g. {cls.flag} {cls.example()}. Booleans take true/false, yes/no, on/off or 1/0; `none` unsets a "
+            "setting whose type allows it; a name not listed, or a value its type cannot mean, is refused."
+        )
+        lines += ["", *textwrap.wrap(tail, width)]
+        return "\n".join(lines)
+
+    @classmethod
+    def example(cls) -> str:
+        """Two settings at their defaults, as they are typed."""
+        return ",".join(f"{f.name}={show(f.default)}" for f in fields(cls)[:2])
+
+
+def _number(text: str) -> float | None:
+    """A finite float, or None."""
+    try:
+        number = float(text)
+    except ValueError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 @dataclass
@@ -76,7 +226,7 @@ class PPOSettings:
 
 @dataclass
 class SACSettings(FromText):
-    """Stable-Baselines3's SAC (off-policy) for comparison runs.
+    """Stable-Baselines3's SAC (off-policy): `train --algorithm sac`, and SAC inside `--algorithm mbpo`.
 
     64x64 ReLU (SB3's activation for SAC): the problem is small (6-10 observations, 4 actions), and on 2 shared
     cores the gradient steps, not the network's capacity, bound wall time; 256x256 (SB3's default) costs ~10x
@@ -86,17 +236,26 @@ class SACSettings(FromText):
 
     flag: ClassVar[str] = "--sac"
 
-    net_arch: tuple[int, ...] = (64, 64)
-    learning_rate: float = 3e-4
-    buffer_size: int = 1_000_000
-    learning_starts: int = 10_000  # env steps before the first update (a week of every worker's weather): random
-    # actions, or after --init-from-baseline the cloned actor's own
-    batch_size: int = 256
-    tau: float = 0.005
-    gamma: float = 0.99
-    train_freq: int = 1  # vector steps between updates
-    gradient_steps: int = 1
-    ent_coef: str = "auto"
+    net_arch: tuple[int, ...] = setting((64, 64), "hidden layer sizes of the actor and of each critic (ReLU)")
+    learning_rate: float = setting(3e-4, "Adam's learning rate for the actor, the critics and the entropy coefficient")
+    buffer_size: int = setting(1_000_000, "transitions the replay buffer holds (the oldest go first)")
+    # A week of every worker's weather: random actions, or after --init-from-baseline the cloned actor's own.
+    learning_starts: int = setting(
+        10_000, "env steps before the first update: random actions, or the cloned actor's with --init-from-baseline"
+    )
+    batch_size: int = setting(256, "transitions per gradient step (train's --batch-size is not used)")
+    tau: float = setting(0.005, "soft update rate of the target critics")
+    gamma: float = setting(0.99, "discount factor (default: train's --gamma)")
+    train_freq: int = setting(1, "vector steps (one step of every worker) between updates")
+    gradient_steps: int = setting(1, "gradient steps per update")
+    ent_coef: str = setting("auto", "entropy coefficient: auto (learned), auto_0.1 (learned, starting at 0.1) or a "
+                            "fixed number, e.g. 0.05")  # fmt: skip
+
+    def __post_init__(self):
+        super().__post_init__()
+        value = _number(str(self.ent_coef).removeprefix("auto_"))
+        if self.ent_coef != "auto" and (value is None or value <= 0):
+            raise ValueError(f"ent_coef {self.ent_coef!r}: auto, auto_<start> (e.g. auto_0.1) or a number > 0")
 
 
 @dataclass
