@@ -9,6 +9,11 @@ import os as _os
 
 from parallel_eplus import _moved
 
+# onnxruntime (1.2x on Linux) writes a device id and a telemetry database under ~/.cache/Microsoft/DeveloperTools
+# (or $XDG_CACHE_HOME) as it is imported, unless ORT_DISABLE_TELEMETRY is set by then: set here, before anything of
+# the package imports it, so a served controller writes nowhere but its log (a user's own setting is kept).
+_os.environ.setdefault("ORT_DISABLE_TELEMETRY", "1")
+
 _moved.install()  # module paths from before 1.1 import, with a DeprecationWarning, until 2.0
 
 ENV_ID = "parallel_eplus/DataCenter-v0"

@@ -338,6 +338,26 @@ def test_over_tls_with_a_token(exported, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_served_planner_writes_nothing_to_the_users_home(exported, tmp_path, monkeypatch):
+    """onnxruntime writes a device id and a telemetry database under ~/.cache when imported, unless told not to:
+    the server, started as a user would (no ORT_DISABLE_TELEMETRY of theirs), leaves HOME as it found it."""
+    import urllib.request
+
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.delenv("ORT_DISABLE_TELEMETRY", raising=False)
+    with serving(exported, tmp_path / "server.log") as url:
+        for _ in range(3):
+            request = urllib.request.Request(url + "/act", json.dumps(body()).encode(),
+                                             {"Content-Type": "application/json"})  # fmt: skip
+            with urllib.request.urlopen(request, timeout=30) as r:
+                assert json.loads(r.read())["fallback"] is False
+    assert [str(p.relative_to(home)) for p in home.rglob("*")] == []
+
+
+@pytest.mark.slow
 def test_evaluate_sends_the_token_from_a_file_or_the_environment_and_never_shows_it(exported, tmp_path, monkeypatch):
     from parallel_eplus.evaluation.http_controller import TOKEN_VARIABLE, client_token
 
