@@ -240,6 +240,38 @@ def test_with_no_command_at_any_priority_the_device_runs_the_building_s_own_cont
     pd.testing.assert_frame_equal(device[builtin.columns], builtin, check_exact=True)
 
 
+@pytest.mark.slow
+def test_a_command_outside_a_setpoint_s_limits_or_nan_is_refused_with_value_out_of_range(loop):
+    """55 °C, -3 °C, a fan's 0.1 kg/s (below its limit) and NaN at priority 8: each refused with BACnet's error
+    (property, value-out-of-range), nothing held at any priority; a command at a limit is taken."""
+    from bacpypes3.apdu import ErrorRejectAbortNack
+
+    loop.device()
+    points = {p.name: p for p in PointMap.read(loop.map).role("setpoint")}
+    setpoint, fan = points["west_setpoint_c"], points["west_fan_kg_s"]
+    impossible = [("west_setpoint_c", 55.0), ("west_setpoint_c", -3.0), ("west_setpoint_c", math.nan),
+                  ("west_fan_kg_s", 0.1), ("west_fan_kg_s", fan.high + 1.0)]  # fmt: skip
+    assert fan.low > 0.1 and setpoint.low > -3.0 and setpoint.high < 55.0
+
+    async def drive():
+        refused = []
+        async with Client(loop) as c:
+            for name, value in impossible:
+                with pytest.raises(ErrorRejectAbortNack) as e:
+                    await c.write(name, value, priority=8)
+                refused.append(str(e.value))
+            await c.write("west_setpoint_c", setpoint.high, priority=8)  # at its limit: taken
+            held = await c.read("west_setpoint_c")
+            await c.write("west_setpoint_c", None, priority=8)
+            fan_now = await c.read("west_fan_kg_s")
+        return refused, held, fan_now
+
+    refused, held, fan_now = asyncio.run(drive())
+    assert all("value-out-of-range" in r.replace("valueOutOfRange", "value-out-of-range") for r in refused), refused
+    assert held == pytest.approx(setpoint.high) and math.isnan(fan_now)  # nothing of the refused ones applied
+    assert loop.log("device").count("(value-out-of-range)") == len(impossible)
+
+
 def test_the_point_map_is_checked_against_the_contract(tmp_path):
     m = PointMap.generate([("a_c", "C")], [("s_c", "C", 10.0, 40.0)], lockstep=True, device=f"{HOST}:47808")
     path = m.write(tmp_path / "points.toml")

@@ -113,6 +113,30 @@ class Device:
                 made = analog_value(instance=p.instance, name=p.name, properties=units, presentValue=start)
         made.add_objects_to_application(app)
         self.objects = {p.name: app.this_application.app.get_object_name(p.name) for p in self.map.points}
+        for p in self.map.role("setpoint"):
+            self._refuse_out_of_range(self.objects[p.name], p)
+
+    @staticmethod
+    def _refuse_out_of_range(obj, point) -> None:
+        """A command on a setpoint outside its limits [low, high] (as float32, what a REAL carries), or NaN, is
+        refused with BACnet's error (property, value-out-of-range), as a controller refuses an impossible command:
+        never clamped nor applied. Null (relinquish) passes."""
+        from bacpypes3.errors import PropertyError
+        from bacpypes3.primitivedata import Null
+
+        write, low, high = obj.write_property, np.float32(point.low), np.float32(point.high)
+
+        async def write_property(attr, value, index=None, priority=None):
+            name = attr if isinstance(attr, str) else obj._property_identifier_class(attr).attr
+            if name == "presentValue" and value is not None and not isinstance(value, Null):
+                v = np.float32(bacnet.real(value))
+                if not low <= v <= high:  # NaN too
+                    log.warning("refused %s = %s at priority %s: outside [%s, %s] %s (value-out-of-range)",
+                                point.name, value, priority or 16, point.low, point.high, point.unit)  # fmt: skip
+                    raise PropertyError("value-out-of-range")
+            await write(attr, value, index, priority)
+
+        object.__setattr__(obj, "write_property", write_property)
 
     def _set(self, name: str, value) -> None:
         obj = self.objects[name]
