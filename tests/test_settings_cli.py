@@ -195,8 +195,10 @@ def test_a_run_from_a_config_file_saves_the_resolved_settings(tmp_path, monkeypa
         'workers = 1\nweathers = "CA"\nrun-days = 1\ntimesteps = 64\nbatch-size = 64\nrun-name = "from-file"\n'
         "gamma = 0.95\nquiet = true\nseed = 5\n[sac]\nent_coef = 0.05\n"
     )
-    assert main(["train", "--config", "run.toml", "--seed", "3", "--checkpoint-every", "64"]) == 0
+    args = ["train", "--preset", "paper-trpo", "--config", "run.toml", "--seed", "3", "--checkpoint-every", "64"]
+    assert main(args) == 0
     saved = json.loads((tmp_path / "runs" / "from-file" / "config.json").read_text())
     assert (saved["workers"], saved["weathers"], saved["run_days"], saved["batch_size"]) == (1, ["CA"], 1, 64)
     assert saved["trpo"]["gamma"] == 0.95 and saved["sac"]["ent_coef"] == "0.05"  # the file's
     assert saved["seed"] == 3 and saved["checkpoint_every"] == 64  # the command line's, over the file's seed
+    assert saved["preset"] == "paper-trpo" and saved["algorithm"] == "trpo"  # the preset it started from

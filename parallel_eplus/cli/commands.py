@@ -144,6 +144,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         residual_space=args.residual_space,
         rbc_target_c=args.rbc_target,
         algorithm=args.algorithm,
+        preset=getattr(args, "preset", None),
         reward=RewardConfig.from_any(args.reward),
         comfort=ComfortConstraint(target_pct=args.comfort_target, margin_c=args.comfort_margin),
         objective=args.objective,

@@ -33,16 +33,31 @@ class ConfigFile(argparse.Action):
 
 
 class SettingsParser(argparse.ArgumentParser):
-    """An ArgumentParser that, where it has a `ConfigFile` option, parses twice: once to find the file, then with
-    the file's values as defaults, so the command line overrides the file. Otherwise a plain ArgumentParser."""
+    """An ArgumentParser that, where it has a `ConfigFile` or `PresetOption` option, parses twice: once to find the
+    preset and the file, then with their values as defaults (the file's over the preset's), so the command line
+    overrides both. Otherwise a plain ArgumentParser."""
 
     def parse_known_args(self, args=None, namespace=None):
-        if not any(isinstance(a, ConfigFile) for a in self._actions):
+        if not any(isinstance(a, (ConfigFile, PresetOption)) for a in self._actions):
             return super().parse_known_args(args, namespace)
         args = list(sys.argv[1:] if args is None else args)
+        saved = dict(self._defaults), {id(a): a.default for a in self._actions}
+        try:
+            return self._parse_with_settings(args, namespace)
+        finally:  # a parser parses again as it was built (tests, `optimize` and sweeps reuse one)
+            self._defaults.clear()
+            self._defaults.update(saved[0])
+            for action in self._actions:
+                action.default = saved[1][id(action)]
+
+    def _parse_with_settings(self, args: list[str], namespace):
         first, _ = super().parse_known_args(args, None)
+        preset = preset_defaults(self, first, args)  # the lowest: a preset, then the file, then the command line
         path = getattr(first, CONFIG_DEST, None)
         values = read_config(self, path) if path is not None else {}
+        for dest, value in preset.items():  # a file's [mpc] adds to the preset's, its own winning
+            values[dest] = f"{value},{values[dest]}" if _is_settings(self, dest) and values.get(dest) else \
+                values.get(dest, value)  # fmt: skip
         self.set_defaults(**values)
         namespace, extras = super().parse_known_args(args, namespace)
         for dest, value in values.items():  # `--mpc` on the command line adds to the file's [mpc]
@@ -51,6 +66,64 @@ class SettingsParser(argparse.ArgumentParser):
                 setattr(namespace, dest, f"{value},{given}")
         namespace.from_config = values  # what the file set (commands.py: a setting given, not a default)
         return namespace, extras
+
+
+class PresetOption(argparse.Action):
+    """`--preset NAME`: a shipped preset's settings for this command (parallel_eplus/presets/) as the defaults under a
+    `--config` file's and the command line's; the name is kept (`args.preset`) so the run records it."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+
+
+def preset_defaults(parser: argparse.ArgumentParser, first: argparse.Namespace, args: list[str]) -> dict[str, Any]:
+    """The defaults of the preset named with `--preset`, else, for `train --building SPEC` with no `--algorithm`,
+    `--config` or `--resume`, the building's own preset (a spec's `band = "thermostat"`: the thermostat planner).
+    Each value is checked as its option checks its text; `parser.error` for an unknown preset."""
+    from parallel_eplus.presets.catalog import PresetError, load_preset
+
+    name = getattr(first, "preset", None)
+    if name is None and _building_default_applies(parser, first, args):
+        name = building_preset(first.building)
+        if name is not None:
+            first.preset = name
+            import logging
+
+            logging.getLogger(__name__).info(
+                "%s: training its kind's preset %s (`parallel-eplus presets %s`; --algorithm or --preset to choose)",
+                first.building, name, name)  # fmt: skip
+    if name is None:
+        return {}
+    try:
+        preset = load_preset(name)
+    except PresetError as e:
+        parser.error(str(e))
+    command = parser.prog.split()[-1]
+    values = option_defaults(parser, preset.commands.get(command, {}), f"--preset {name}")
+    values["preset"] = name
+    return values
+
+
+def _building_default_applies(parser: argparse.ArgumentParser, first: argparse.Namespace, args: list[str]) -> bool:
+    if parser.prog.split()[-1] != "train" or not getattr(first, "building", None):
+        return False
+    chosen = ("--algorithm", "--resume", "--config", "--init-from")
+    return not any(a == c or a.startswith(c + "=") for a in args for c in chosen)
+
+
+def building_preset(building: str) -> str | None:
+    """The preset a spec's kind trains by default: its `band = "thermostat"` and a rule it names say which."""
+    from parallel_eplus.buildings.resources import spec_file
+    from parallel_eplus.buildings.spec import load_spec
+    from parallel_eplus.presets.catalog import default_for
+
+    try:
+        spec = load_spec(spec_file(building))
+    except (OSError, ValueError):
+        return None  # the command reports the spec's problems itself
+    if not spec.reward.thermostat:
+        return None  # a data center: the paper's TRPO, today's defaults
+    return default_for("thermostat", has_rule="air_reset" in (spec.controller or ""))
 
 
 def _is_settings(parser: argparse.ArgumentParser, dest: str) -> bool:

@@ -9,8 +9,9 @@ from pathlib import Path
 
 from parallel_eplus.cli import commands as c
 from parallel_eplus.cli import deploy, many_runs
-from parallel_eplus.cli.config_file import SettingsParser
+from parallel_eplus.cli.config_file import PresetOption, SettingsParser
 from parallel_eplus.cli.evaluate import cmd_evaluate
+from parallel_eplus.cli.presets import cmd_presets
 from parallel_eplus.cli.train_parser import MPC, SettingsText, add_train, weather_options
 
 
@@ -70,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_train(sub)
 
+    ps = sub.add_parser("presets", help="the shipped presets: settings that earned their place, with their reasons")
+    ps.add_argument("name", nargs="?", help="show this preset with every setting, its reason and its evidence")
+    ps.set_defaults(func=cmd_presets, needs=None)
+
     sw = sub.add_parser("sweep", help="trainings over seeds and a grid or search of train settings, as Ray Tune trials")
     sw.add_argument("spec", type=Path, metavar="SPEC.toml", help="the sweep (docs/training.md); re-run it to continue")
     sw.add_argument("--ray-address", help="a Ray cluster to run the trials on (default: start Ray locally)")
@@ -84,6 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="how each --policy that is a planner (runs/<name>/planner) runs: its weather forecast (the file, or it "
         "with BOPTEST's forecast errors) and planner settings overriding its own, e.g. candidates=128; "
         "`--planner help` lists them",
+    )  # fmt: skip
+    ev.add_argument(
+        "--preset", action=PresetOption, metavar="NAME",
+        help="a shipped preset's evaluation settings (e.g. thermostat-planner: --planner band_thermostats=own) under "
+        "the command line's; `parallel-eplus presets` lists them",
     )  # fmt: skip
     ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
     ev.add_argument(

@@ -17,7 +17,7 @@ import textwrap
 from pathlib import Path
 
 from parallel_eplus.cli import commands as c
-from parallel_eplus.cli.config_file import ConfigFile, SettingsParser
+from parallel_eplus.cli.config_file import ConfigFile, PresetOption, SettingsParser
 
 ALGORITHMS = "TRPO (the paper's, default), PPO, SAC, a model-based planner (mpc) or MBPO"
 
@@ -81,6 +81,12 @@ def add_train(sub) -> argparse.ArgumentParser:
         help="read this run's settings from a TOML file (the example below): keys are these long options, with - or "
         "_; options given on the command line override it; an unknown key is an error. The resolved settings are "
         "saved in runs/<name>/config.json like any run's",
+    )  # fmt: skip
+    run.add_argument(
+        "--preset", action=PresetOption, metavar="NAME",
+        help="a shipped preset's settings (`parallel-eplus presets` lists them) under --config's and the command "
+        "line's; default: with --building and no --algorithm, the building's kind's preset (a thermostat "
+        "building: thermostat-planner), else the paper's TRPO",
     )  # fmt: skip
     run.add_argument("--run-name", help="the run's folder runs/<name>/ (default: <algorithm>-<weathers>-<time>)")
     run.add_argument(

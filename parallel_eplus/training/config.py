@@ -8,6 +8,7 @@ import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
 from parallel_eplus.buildings.scoring.reward import RewardConfig
@@ -22,6 +23,9 @@ from parallel_eplus.learning.settings import (
     TRPOSettings,
 )
 from parallel_eplus.training.eval_target import EvalSettings
+
+if TYPE_CHECKING:
+    from parallel_eplus.buildings.building import Building
 
 STEPS_PER_YEAR = 365 * STEPS_PER_DAY
 
@@ -62,6 +66,7 @@ class TrainConfig:
     # a saved model.zip whose weights and observation statistics start this run (mbpo: a planner run's folder)
     init_from: str | None = None
     algorithm: str = "trpo"  # the paper's; or "ppo", "sac", "mpc", "mbpo"
+    preset: str | None = None  # the shipped preset its settings started from (`--preset`; parallel_eplus/presets/)
     residual_scale: float = 0.0  # > 0: the policy corrects the rule-based controller (SimulationConfig)
     residual_space: str = "action"  # what it corrects: each action, or each zone's flow demand (SimulationConfig)
     rbc_target_c: float | None = None  # that controller's zone target; None: RBCConfig's
@@ -82,14 +87,15 @@ class TrainConfig:
     mpc: MPCSettings = field(default_factory=MPCSettings)  # `--algorithm mpc` (learning/model_based/)
     mbpo: MBPOSettings = field(default_factory=MBPOSettings)  # `--algorithm mbpo` (mbpo/algorithm.py)
 
-    def resolved(self) -> TrainConfig:
-        """Validate, and fill in the run name."""
+    def resolved(self, building: Building | None = None) -> TrainConfig:
+        """Validate, and fill in the run name. `building`: `self.building` as the caller resolved it (None: resolved
+        here)."""
         if self.building:
             from parallel_eplus.buildings.check.names import check_building
             from parallel_eplus.buildings.resources import builtin_specs
             from parallel_eplus.buildings.scoring.reward import reward_config
 
-            spec = check_building(self.building)  # a path, or a built-in spec's name
+            spec = check_building(building or self.building)  # a path, or a built-in spec's name
             # A built-in spec is saved by name: the run's config.json then works from another checkout, an
             # install, or a Ray node (whose package sits elsewhere).
             builtin = builtin_specs().get(spec.path.stem)
