@@ -1,0 +1,93 @@
+"""One building or several: a single model or spec is optimized in DIR itself; several (or a folder of them) each in
+DIR/<name>/, one after the other, a failed one reported and the next one started, then DIR/summary.md tables every
+building's answer. (Placing the buildings on a Ray cluster, `--ray ADDRESS`, is not built yet.)"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pandas as pd
+
+from parallel_eplus.optimize.folders import BuildingFolder, short_name
+from parallel_eplus.optimize.pipeline import optimize_building
+from parallel_eplus.optimize.prepare import source_of
+from parallel_eplus.optimize.settings import OptimizeSettings
+
+log = logging.getLogger(__name__)
+
+SUMMARY = "summary.md"
+
+
+def sources_of(arguments: list[str]) -> list[Path]:
+    """Each argument a model, a spec or a built-in spec's name; a folder: its .idf models and the .toml specs whose
+    name is not a model's beside them (a starter spec written next to its model would count the building twice)."""
+    out: list[Path] = []
+    for argument in arguments:
+        path = Path(argument)
+        if path.is_dir():
+            models = sorted(path.glob("*.idf"))
+            specs = [s for s in sorted(path.glob("*.toml")) if s.stem not in {m.stem for m in models}]
+            if not models and not specs:
+                raise FileNotFoundError(f"{path}: no .idf model or .toml spec in it")
+            out += [p.resolve() for p in models + specs]
+        else:
+            out.append(source_of(argument))
+    return list(dict.fromkeys(out))
+
+
+def folders_for(sources: list[Path], out: Path) -> list[BuildingFolder]:
+    if len(sources) == 1:
+        return [BuildingFolder(out, short_name(sources[0]), sources[0])]
+    names: dict[str, int] = {}
+    folders = []
+    for source in sources:
+        name = short_name(source)
+        names[name] = names.get(name, 0) + 1
+        name = name if names[name] == 1 else f"{name}-{names[name]}"
+        folders.append(BuildingFolder(out / name, name, source))
+    return folders
+
+
+def run_optimize(arguments: list[str], out: Path, settings: OptimizeSettings, show: bool = True) -> int:
+    """Optimize every building named; 0 when each has its answer, 1 when one could not be finished."""
+    folders = folders_for(sources_of(arguments), Path(out).resolve())
+    rows = []
+    for i, folder in enumerate(folders):
+        if len(folders) > 1:
+            log.info("building %d of %d: %s (%s)", i + 1, len(folders), folder.name, folder.source)
+        try:
+            rows.append(optimize_building(folder, settings, show))
+        except (ValueError, FileNotFoundError, OSError) as e:
+            if len(folders) == 1:
+                raise
+            log.error("%s: %s", folder.name, e)
+            rows.append({"building": folder.name, "chosen": "", "why": str(e), "folder": folder.root})
+    if len(folders) > 1:
+        write_summary(rows, Path(out).resolve(), settings)
+    for r in rows:
+        log.info("%s: %s", r["building"], r["why"])
+    return 0 if all(r["chosen"] for r in rows) else 1
+
+
+def write_summary(rows: list[dict], out: Path, settings: OptimizeSettings) -> Path:
+    metric = "bill" if settings.objective == "cost" else "HVAC energy"
+    lines = ["# Every building: what to install", "",
+             f"Each building's choice on the held-out weathers ({', '.join(settings.held_out)}): {metric} and occupied "
+             "discomfort against its own controls (sums over the test periods). Details: each building's report.", "",
+             f"| building | chosen | {metric} × (chosen) | best candidate's × | occupied K·h: own → chosen | report |",
+             "|---|---|---|---|---|---|"]  # fmt: skip
+    for r in rows:
+        x = "" if pd.isna(r.get("metric_x", float("nan"))) else f"{r['metric_x']:.3f}"
+        best = "" if r.get("best_other_x") is None or pd.isna(r["best_other_x"]) else f"{r['best_other_x']:.3f}"
+        kh = f"{r['kh_own']:.2f} → {r['kh']:.2f}" if "kh" in r else ""
+        chosen = r["chosen"] or f"not finished: {r['why']}"
+        link = Path(r["folder"]).relative_to(out) / "report.md"
+        lines.append(f"| {r['building']} | {chosen} | {x} | {best} | {kh} | [{link}]({link}) |")
+    chosen = [r for r in rows if r["chosen"]]
+    keep = sum(r["chosen"] == "own controls" for r in chosen)
+    lines += ["", f"{len(chosen)} of {len(rows)} buildings answered: {len(chosen) - keep} with a controller to "
+              f"install, {keep} keep their own controls."]  # fmt: skip
+    path = out / SUMMARY
+    path.write_text("\n".join(lines) + "\n")
+    return path
