@@ -11,6 +11,7 @@ from parallel_eplus.cli import commands as c
 from parallel_eplus.cli import deploy, many_runs
 from parallel_eplus.cli.config_file import PresetOption, SettingsParser
 from parallel_eplus.cli.evaluate import cmd_evaluate
+from parallel_eplus.cli.optimize import add_optimize
 from parallel_eplus.cli.presets import cmd_presets
 from parallel_eplus.cli.train_parser import MPC, SettingsText, add_train, weather_options
 
@@ -70,6 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.set_defaults(func=c.cmd_simulate)
 
     add_train(sub)
+
+    add_optimize(sub)
 
     ps = sub.add_parser("presets", help="the shipped presets: settings that earned their place, with their reasons")
     ps.add_argument("name", nargs="?", help="show this preset with every setting, its reason and its evidence")
