@@ -5,9 +5,11 @@
 from __future__ import annotations
 
 import asyncio
+import datetime as dt
 import glob
 import math
 import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -270,6 +272,37 @@ def test_a_command_outside_a_setpoint_s_limits_or_nan_is_refused_with_value_out_
     assert all("value-out-of-range" in r.replace("valueOutOfRange", "value-out-of-range") for r in refused), refused
     assert held == pytest.approx(setpoint.high) and math.isnan(fan_now)  # nothing of the refused ones applied
     assert loop.log("device").count("(value-out-of-range)") == len(impossible)
+
+
+def _said_within(loop, name: str, text: str, seconds: float) -> str:
+    """The line of `name`'s log holding `text`, once it comes; asserted to come within `seconds` of "supervising"."""
+    deadline = time.monotonic() + 60
+    while text not in loop.log(name):
+        assert loop.procs[name].poll() is None and time.monotonic() < deadline, loop.log(name)
+        time.sleep(0.1)
+    lines = loop.log(name).splitlines()
+    stamp = [dt.datetime.strptime(line[:23], "%Y-%m-%d %H:%M:%S,%f") for line in lines if "supervising" in line]
+    said = next(line for line in lines if text in line)
+    assert (dt.datetime.strptime(said[:23], "%Y-%m-%d %H:%M:%S,%f") - stamp[0]).total_seconds() <= seconds, said
+    return said
+
+
+@pytest.mark.slow
+def test_a_supervisor_that_cannot_reach_its_device_says_why_within_seconds(loop, controller):
+    """Nothing at the address: no I-Am, no read, said so. A local address on the device's own port (another
+    loopback IP): the supervisor's requests reach its own socket, said so, with the remedy. Each within seconds."""
+    loop.device()
+    nowhere = f"{HOST}:{loop.ports['client']}"  # a free port: no device there
+    loop.start("nowhere", "serve", str(controller), "--bacnet", nowhere, "--point-map", str(loop.map),
+               "--local", f"{HOST}:{loop.ports['supervisor']}")  # fmt: skip
+    said = _said_within(loop, "nowhere", "answered neither a Who-Is (no I-Am) nor a read in 3 s", 8)
+    assert "is a device running at that address and port" in said
+    loop.procs["nowhere"].terminate()
+    loop.wait("nowhere", 30)
+    loop.start("shared", "serve", str(controller), "--bacnet", loop.address, "--point-map", str(loop.map),
+               "--local", f"127.0.0.2:{loop.ports['device']}")  # fmt: skip
+    said = _said_within(loop, "shared", "does not answer", 8)
+    assert "on the device's own port" in said and "give --local another port" in said
 
 
 def test_the_point_map_is_checked_against_the_contract(tmp_path):

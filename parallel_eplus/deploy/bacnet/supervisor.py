@@ -28,6 +28,8 @@ from parallel_eplus.deploy.serve.runtime import PolicyRuntime
 
 log = logging.getLogger(__name__)
 
+PROBE_S = 3  # at start, a Who-Is and a read of the device's points each wait this long before saying why not
+
 
 @dataclass
 class SupervisorConfig:
@@ -114,6 +116,46 @@ class Supervisor:
         await app.write_property(Address(self.device), ObjectIdentifier(point.object_id), "present-value", v,
                                  priority=priority)  # fmt: skip
 
+    async def probe(self, local: str) -> bool:
+        """Whether the device answers a read of its points within PROBE_S; if not, say at once why it might not,
+        from whether it answered a Who-Is (I-Am) meanwhile (the loop keeps trying until `give_up_s`)."""
+        from bacpypes3.apdu import ErrorRejectAbortNack
+        from bacpypes3.pdu import Address
+
+        i_am = asyncio.ensure_future(self.app.this_application.app.who_is(address=Address(self.device),
+                                                                          timeout=PROBE_S))  # fmt: skip
+        try:
+            await asyncio.wait_for(self.read(), timeout=PROBE_S)
+        except (TimeoutError, OSError, ErrorRejectAbortNack) as e:
+            error = e
+        else:
+            i_am.cancel()
+            return True
+        try:
+            heard = await asyncio.wait_for(i_am, timeout=PROBE_S)
+        except (TimeoutError, asyncio.CancelledError):
+            heard = []
+        instances = sorted({int(i.iAmDeviceIdentifier[1]) for i in heard})
+        host, _, port = bacnet.split_address(self.device)
+        l_host, _, l_port = bacnet.split_address(local)
+        shared = l_port == port and l_host != host  # e.g. 127.0.0.2:P beside a device on 127.0.0.1:P
+        again = f"Trying again until {self.config.give_up_s:.0f} s without an answer"
+        if instances == [self.config.device_id] or shared and not heard:
+            log.error("the device at %s does not answer: %s (--local %s:%d on the device's own port, on one machine, "
+                      "shares its socket for broadcasts, so the requests reach this supervisor's own socket): give "
+                      "--local another port (the default is the device's port + 1). %s", self.device,
+                      "this supervisor answers its own Who-Is and reads" if heard else "no I-Am, no read",
+                      l_host, l_port, again)  # fmt: skip
+        elif heard:
+            log.error("the device at %s answers a Who-Is (I-Am from device %s) but not a read of the point map's "
+                      "points in %d s (%s): is %s this device's map (object types and instances)? %s", self.device,
+                      ", ".join(map(str, instances)), PROBE_S, error, self.config.point_map, again)  # fmt: skip
+        else:
+            log.error("the device at %s answered neither a Who-Is (no I-Am) nor a read in %d s: is a device running at "
+                      "that address and port, and does UDP reach it from %s:%d (a firewall, another subnet: --bbmd)? "
+                      "%s", self.device, PROBE_S, l_host, l_port, again)  # fmt: skip
+        return False
+
     # -- one step -----------------------------------------------------------------------------------
     def answer(self, state: dict) -> np.ndarray | None:
         """The controller's setpoints for the readings, or None (a fallback) where it cannot take them."""
@@ -194,6 +236,7 @@ class Supervisor:
                                           self.config.bbmd_ttl)  # fmt: skip
             log.info("supervising %s at priority %d with %s (%s)", self.device, self.config.priority,
                      self.config.controller, self.contract.data["policy"]["run"])  # fmt: skip
+            await self.probe(local)  # a device that cannot be reached is said so within seconds, with why
             timer = self.map.one("step") is None  # a real device: our own clock, a step every control step
             period = self.config.step_seconds or self.map.control_step_s
             tick = time.monotonic()
