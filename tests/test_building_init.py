@@ -159,9 +159,11 @@ def test_an_unmodified_prototype_from_init_to_evaluate(tmp_path, monkeypatch, ca
     spec.write_text(uncomment_actions(spec.read_text(), r"^# all 5 thermostats' (cooling|heating)"))
     reward = load_spec(spec).reward  # its furnaces burn gas: the energy figure counts it
     assert reward.energy == ("power_w", "naturalgas_w") and reward.occupied is not None
+    assert (reward.thermostat, reward.objective, load_spec(spec).preset) == (True, "hvac", "thermostat-planner")
     assert main(["building", "check", str(spec), "--no-cache"]) == 0
-    train = ["train", "--building", str(spec), "--weathers", "CO", "--workers", "1", "--run-days", "1",
-             "--timesteps", "144", "--batch-size", "144", "--run-name", "office", "--quiet"]  # fmt: skip
+    train = ["train", "--building", str(spec), "--algorithm", "trpo", "--weathers", "CO", "--workers", "1",
+             "--run-days", "1", "--timesteps", "144", "--batch-size", "144", "--run-name", "office",
+             "--quiet"]  # fmt: skip
     assert main(train) == 0
     out = tmp_path / "eval"
     evaluate = ["evaluate", "--building", str(spec), "--policy", "runs/office/model.zip", "--baseline",

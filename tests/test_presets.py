@@ -68,3 +68,18 @@ def test_an_unknown_preset_is_refused_naming_the_ones_there_are(bad, capsys):
     with pytest.raises(SystemExit) as e:
         build_parser().parse_args(["train", "--preset", bad])
     assert e.value.code == 2 and "thermostat-planner" in capsys.readouterr().err
+
+
+def test_a_spec_names_its_preset_and_a_preset_it_cannot_mean_is_refused(tmp_path):
+    from parallel_eplus.buildings.resources import spec_file
+    from parallel_eplus.buildings.spec import SpecError, load_spec
+
+    text = spec_file("office-small").read_text()  # its model is found by name, wherever the spec is
+    named = tmp_path / "named.toml"
+    named.write_text(text.replace('name = "', 'preset = "datacenter-planner"\nname = "', 1))
+    assert load_spec(named).preset == "datacenter-planner"
+    assert build_parser().parse_args(["train", "--building", str(named)]).preset == "datacenter-planner"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('name = "', 'preset = "thermostat-planer"\nname = "', 1))
+    with pytest.raises(SpecError, match="thermostat-planner"):
+        load_spec(bad)

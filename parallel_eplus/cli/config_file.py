@@ -121,6 +121,8 @@ def building_preset(building: str) -> str | None:
         spec = load_spec(spec_file(building))
     except (OSError, ValueError):
         return None  # the command reports the spec's problems itself
+    if spec.preset is not None:
+        return spec.preset
     if not spec.reward.thermostat:
         return None  # a data center: the paper's TRPO, today's defaults
     return default_for("thermostat", has_rule="air_reset" in (spec.controller or ""))

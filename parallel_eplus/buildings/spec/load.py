@@ -96,6 +96,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
     kpis = parse_kpis(data.get("kpis", {}), [o.name for o in observations], errors, path.parent)
     ventilation = _ventilation(data.get("ventilation", "own"), errors)
     controller_settings = _controller_settings(data, errors)
+    preset = _preset(data.get("preset"), errors)
     if errors:
         raise SpecError(f"{path}: {len(errors)} problem(s):\n  " + "\n  ".join(errors))
     return BuildingSpec(
@@ -103,7 +104,7 @@ def load_spec(path: str | Path) -> BuildingSpec:
         weathers=weathers, controller=data.get("controller"), time_features=bool(data.get("time_features", False)),
         schedule_features=bool(data.get("schedule_features", False)),
         timesteps_per_hour=data.get("timesteps_per_hour"), baseline_idf=baseline_idf, kpis=kpis,
-        forecasts=tuple(forecasts), ventilation=ventilation, controller_settings=controller_settings,
+        forecasts=tuple(forecasts), ventilation=ventilation, controller_settings=controller_settings, preset=preset,
     )  # fmt: skip
 
 
@@ -280,6 +281,19 @@ def _ventilation(value: Any, errors: list[str]) -> str:
     """`ventilation`: the controller's copy takes its outdoor air as the model has it ("own") or on demand."""
     if value not in VENTILATION:
         errors.append(f"ventilation: {value!r} is not one of {list(VENTILATION)} (docs/buildings.md)")
+    return value
+
+
+def _preset(value: Any, errors: list[str]) -> str | None:
+    """`preset`: what `train --building` trains when no algorithm is named (parallel_eplus/presets/)."""
+    if value is None:
+        return None
+    from parallel_eplus.presets.catalog import names
+
+    if value not in names():
+        errors.append(f"preset: {value!r} is not a shipped preset{did_you_mean(str(value), names())}; "
+                      f"`parallel-eplus presets` lists them")  # fmt: skip
+        return None
     return value
 
 

@@ -157,6 +157,9 @@ class BuildingSpec:
     ventilation: str = "own"
     # `controller_settings`: the spec's `controller`'s settings (its config's fields: buildings/rules/settings.py)
     controller_settings: tuple[tuple[str, Any], ...] = ()
+    # `preset`: the shipped preset `train --building` trains when no algorithm or preset is named (default: its
+    # kind's, from the band: parallel_eplus/presets/catalog.py `default_for`)
+    preset: str | None = None
 
     @property
     def demand_ventilation(self) -> bool:

@@ -181,8 +181,11 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
     t = topology(idf.read_text(encoding="latin-1"))
     lines += node_candidates(t, s, o, _zone_air_nodes(idf))
     lines += fan_candidates(s, o) + economizer_candidates(t, s, o)
+    thermostat = temps != ite and _thermostats_cover(idf, temps, obs_keys)
     lines += [
-        "[reward]  # the paper's form: a bonus near `center`, a penalty outside [lower, upper], minus power",
+        "[reward]  # HVAC energy, comfort within each zone's own setpoints in occupied hours (the preset's)"
+        if thermostat else "[reward]  # the paper's form: a bonus near `center`, a penalty outside [lower, upper], "
+        "minus power",
         f"temperatures = [{', '.join(map(_str, temps))}]",
     ]
     if ite and temps != ite:
@@ -195,19 +198,22 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         lines.append(f"occupied = {{ schedule = {_str(occupancy)} }}  # the band applies where its value is above 0")
     else:
         lines.append('# occupied = { hours = [8, 18], weekdays = ["Mon", "Tue", "Wed", "Thu", "Fri"] }  # else always')
-    if temps != ite and _thermostats_cover(idf, temps, obs_keys):
+    if thermostat:
         lines += [
             'band = "thermostat"  # each zone\'s own heating and cooling setpoint schedules, read each step (BOPTEST)',
             "# band = [22.0, 25.0]  # or one band for every zone, or { zone_temp_c = [low, high], ... }",
+            'objective = "hvac"  # what the reward\'s energy term counts: hvac, energy (above), cost or emissions',
         ]
     else:
-        lines.append("band = [22.0, 25.0]  # reported as % in band; also set center/lower/upper to your comfort range")
+        lines += [
+            "band = [22.0, 25.0]  # reported as % in band; also set center/lower/upper to your comfort range",
+            '# objective = "energy"  # what the reward\'s energy term counts: energy (above), hvac, cost or emissions',
+            "# center = 23.5",
+            "# lower = 23.0",
+            "# upper = 24.0",
+            "# power_weight = 1e-5  # per W: scale to the building's power",
+        ]
     lines += [
-        '# objective = "energy"  # what the reward\'s energy term counts: energy (above), hvac, cost or emissions',
-        "# center = 23.5",
-        "# lower = 23.0",
-        "# upper = 24.0",
-        "# power_weight = 1e-5  # per W: scale to the building's power",
         "",
         "[kpis]  # BOPTEST's figures (docs/kpis.md): HVAC energy per fuel; tariff and emission factors per fuel",
     ]
@@ -222,6 +228,9 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
         "# floor_area_m2 = 500.0  # default: the model's own",
         "",
     ]
+    if thermostat:  # a top-level key: before the first table
+        at = next(i for i, line in enumerate(lines) if line.startswith("idf = ")) + 1
+        lines.insert(at, 'preset = "thermostat-planner"  # what `train --building` trains (`parallel-eplus presets`)')
     return "\n".join(lines)
 
 
