@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from parallel_eplus.buildings.crossing import thermostat_pairs, uncrossed
+from parallel_eplus.buildings.scaling import denormalize, unit_size
 
 if TYPE_CHECKING:
     from parallel_eplus.engine.setup import WorkerSetup
@@ -35,7 +36,7 @@ def check_action(action, names: tuple[str, ...]) -> list[float]:
 def scale_action(action, low: Sequence[float], high: Sequence[float], names: tuple[str, ...]) -> list[float]:
     """[-1, 1] -> physical units, clipped; NaN or inf is a ValueError naming the element."""
     a = check_action(action, names)
-    return [lo + (v + 1.0) * 0.5 * (hi - lo) for v, lo, hi in zip(a, low, high, strict=True)]
+    return [denormalize(v, lo, hi) for v, lo, hi in zip(a, low, high, strict=True)]
 
 
 def released(action, low: Sequence[float], high: Sequence[float], names: tuple[str, ...]) -> list[float]:
@@ -58,7 +59,7 @@ class ActionMap:
         self.low, self.high = tuple(e.low for e in elements), tuple(e.high for e in elements)
         self.scale, self._demand = config.residual_scale, config.residual_space == "demand"
         self._own = tuple(own[0] for own in setup.building.own) if setup.builtin_residual else None
-        self._own_step = tuple(self.scale * (e.high - e.low) / 2 for e in elements)  # a unit of correction
+        self._own_step = tuple(self.scale * unit_size(e.low, e.high) for e in elements)  # a unit of correction
         self._setup = setup
         self._release = setup.config.relinquish  # NaN: that element released to the building's own control
         self.base = None  # the rule-based controller a residual action corrects (`start`)

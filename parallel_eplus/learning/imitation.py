@@ -34,7 +34,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
 from parallel_eplus.buildings.building import load_building
-from parallel_eplus.buildings.scaling import from_unit
+from parallel_eplus.buildings.scaling import from_unit, normalize
 from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import reported_rows
@@ -160,7 +160,7 @@ def record_baseline(
     physical_all = np.concatenate(physical)
     low = np.array([a.low for a in spec.actions])
     high = np.array([a.high for a in spec.actions])
-    actions = np.clip(2 * (physical_all - low) / (high - low) - 1, -1, 1).astype(np.float32)
+    actions = np.clip(normalize(physical_all, low, high), -1, 1).astype(np.float32)
     names = tuple(a.name for a in spec.actions)
     demos = Demonstrations(np.concatenate(observations), actions, physical_all, low, high, names, labels, rows, when)
     demos.bounds = np.array(zone_bounds, float) if zone_bounds else None

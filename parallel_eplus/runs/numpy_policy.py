@@ -18,6 +18,8 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.preprocessing import is_image_space
 from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
 
+from parallel_eplus.buildings.scaling import denormalize
+
 _HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
 
 
@@ -200,6 +202,6 @@ def squashed_mean(policy):
         x = obs.reshape(len(obs), -1).astype(np.float64)
         for step in steps:
             x = x @ step[0] + step[1] if len(step) == 2 else step[0](x)
-        return low + 0.5 * (np.tanh(x) + 1.0) * (high - low)
+        return denormalize(np.tanh(x), low, high)  # SB3's squashed action, unscaled
 
     return mean

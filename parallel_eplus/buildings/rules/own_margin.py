@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.buildings.rules.settings import rule_config
+from parallel_eplus.buildings.scaling import unit_size
 
 SIDES = {"cooling setpoint": -1.0, "heating setpoint": 1.0}  # the way the margin moves each setpoint: inward
 
@@ -48,7 +49,7 @@ class OwnMargin:
         for i, a in enumerate(b.actions):
             sides = {SIDES.get(x.control_type.lower(), 0.0) for x in a.actuators}
             if len(sides) == 1:  # a residual's unit is half the action's range (ActionMap's at scale 1)
-                correction[i] = sides.pop() * self.cfg.margin_k / ((a.high - a.low) / 2)
+                correction[i] = sides.pop() * self.cfg.margin_k / unit_size(a.low, a.high)
         if not correction.any() and self.cfg.margin_k:
             raise ValueError(f"{b.spec.name}: OwnMargin moves thermostat setpoints; the spec has no action of one side "
                              "(every actuator a zone's cooling setpoint, or every one a heating setpoint)")  # fmt: skip

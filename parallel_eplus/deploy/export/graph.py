@@ -112,7 +112,7 @@ def build_model(p: PolicyArrays, doc: str = "") -> onnx.ModelProto:
         x = b.op("Add", [b.const("minus_one_", -1.0), x])
     x = b.op("Max", [b.op("Min", [x, one]), b.const("minus_one", -1.0)])  # the action space; then check_action's
     x = b.float32_round(x)  # the policy's action is float32
-    # scale_action: lo + (v + 1) * 0.5 * (hi - lo), in that order
+    # scale_action (buildings/scaling.py `denormalize`): lo + (v + 1) * 0.5 * (hi - lo), in that order (* 0.5 is / 2)
     span = b.const("act_span", p.act_high - p.act_low)
     half = b.op("Mul", [b.op("Add", [x, one]), b.const("half", 0.5)])
     x = b.op("Add", [b.const("act_low", p.act_low), b.op("Mul", [half, span])])

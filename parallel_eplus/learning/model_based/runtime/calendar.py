@@ -25,6 +25,8 @@ import datetime as dt
 
 import numpy as np
 
+from parallel_eplus.buildings.scaling import normalize
+
 ALWAYS, CLOCK, OBSERVED, THERMOSTAT = "always", "clock", "observed", "thermostat"
 
 
@@ -228,5 +230,5 @@ def own_reference(bounds: np.ndarray, tolerance: float, sides: list, low: np.nda
         if side is not None:
             zone, edge = side
             value = bounds[:, zone, edge] + (tolerance if edge == 0 else -tolerance)
-            ref[:, i] = 2 * (value - low[i]) / (high[i] - low[i]) - 1
+            ref[:, i] = normalize(value, low[i], high[i])
     return np.clip(ref, -1, 1)

@@ -20,6 +20,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.scaling import denormalize
 from parallel_eplus.learning.imitation import Demonstrations, clone
 from parallel_eplus.runs.checkpoints import save_checkpoint
 from parallel_eplus.runs.run_files import MODEL_FILE
@@ -33,7 +34,7 @@ def demonstrations(building: str | None, observations: np.ndarray, actions: np.n
     b = load_building(building)
     low = np.array([a.low for a in b.actions])
     high = np.array([a.high for a in b.actions])
-    physical = low + (np.clip(actions, -1, 1) + 1) / 2 * (high - low)
+    physical = denormalize(np.clip(actions, -1, 1), low, high)
     return Demonstrations(observations, actions, physical, low, high, tuple(a.name for a in b.actions))
 
 
