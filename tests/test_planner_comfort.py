@@ -5,6 +5,7 @@ test_planner_own_plan.py."""
 from __future__ import annotations
 
 import datetime as dt
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from parallel_eplus.learning.imitation import record_baseline
 from parallel_eplus.learning.model_based.control.mpc import MPC
 from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions, planner_file
 from parallel_eplus.learning.model_based.runtime.features import step_times
+from parallel_eplus.learning.model_based.runtime.planner import PlanRequest
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,9 +45,10 @@ def test_a_candidate_that_plays_the_reference_pays_for_no_discomfort():
     s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
     a_last = np.array([[1.0, -1.0]], np.float32)  # the setbacks' far ends: cold at the day's start
     plans = np.repeat(a_last[:, None, None, :], mpc.settings.horizon, axis=2)  # [1, 1, H, A]
-    free, _ = mpc.planner._cost(s, a_last, plans, exo, applies, bounds, 0.0, weights)
-    paid, _ = mpc.planner._cost(s, a_last, plans, exo, applies, bounds, 100.0, weights)
-    relative, _ = mpc.planner._cost(s, a_last, plans, exo, applies, bounds, 100.0, weights, plans[:, 0])
+    seen = PlanRequest(s, a_last, exo, applies, bounds, 0.0, mpc.support, mpc.warm, [0], energy_weights=weights)
+    free, _ = mpc.planner._cost(seen, plans)
+    paid, _ = mpc.planner._cost(replace(seen, comfort_weight=100.0), plans)
+    relative, _ = mpc.planner._cost(replace(seen, comfort_weight=100.0, reference=plans[:, 0]), plans)
     assert paid[0, 0] > free[0, 0] + 1  # out of its bounds at 07:00: the comfort term is paid
     np.testing.assert_allclose(relative, free, rtol=1e-5)
 

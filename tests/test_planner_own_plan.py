@@ -24,7 +24,7 @@ from parallel_eplus.learning.model_based.model.dataset import Transitions
 from parallel_eplus.learning.model_based.model.sources import add_baseline
 from parallel_eplus.learning.model_based.runtime.calendar import Calendar, own_reference
 from parallel_eplus.learning.model_based.runtime.features import step_times
-from parallel_eplus.learning.model_based.runtime.planner import _follow
+from parallel_eplus.learning.model_based.runtime.planner import PlanRequest, _follow
 from parallel_eplus.learning.model_based.settings import MPCSettings
 from parallel_eplus.training.config import ComfortConstraint, TrainConfig
 from parallel_eplus.training.train import train
@@ -115,10 +115,11 @@ def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_
                 reference = _follow(a_last, reference, mpc.settings.max_increment, *mpc.support)  # as a candidate can
                 action = mpc.act(obs, [info], a_last)
                 steps = np.concatenate([np.zeros((1, 1, 2)), np.cumsum(mpc.last.increments[:, :-1], axis=1)], axis=1)
-                args = (s, a_last, np.stack([action[:, None] + steps, reference], axis=1).astype(np.float32), exo,
-                        applies, bounds, mpc.comfort_weight, weights, reference)  # fmt: skip
-                per = mpc.planner._cost(*args, members=True)  # [E, W, 2]: the chosen plan's, the own plan's
-                np.testing.assert_allclose(per.mean(0), mpc.planner._cost(*args)[0], rtol=1e-4, atol=1e-4)
+                pair = np.stack([action[:, None] + steps, reference], axis=1).astype(np.float32)
+                seen = PlanRequest(s, a_last, exo, applies, bounds, mpc.comfort_weight, mpc.support, mpc.warm, [0],
+                                   energy_weights=weights, reference=reference)  # fmt: skip
+                per = mpc.planner._cost(seen, pair, members=True)  # [E, W, 2]: the chosen plan's, the own plan's
+                np.testing.assert_allclose(per.mean(0), mpc.planner._cost(seen, pair)[0], rtol=1e-4, atol=1e-4)
                 own = np.allclose(action, reference[:, 0], atol=1e-6)
                 outcomes[consensus, month, hour] = (own, bool(np.all(per[:, 0, 0] < per[:, 0, 1])))
     with_consensus = [v for k, v in outcomes.items() if k[0] == "true"]
@@ -145,8 +146,9 @@ def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_muc
                                     *mpc.support)  # fmt: skip
                 action = mpc.act(obs, [info], a_last)
                 s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
-                own_cost = mpc.planner._cost(s, a_last, reference[:, None], exo, applies, bounds, mpc.comfort_weight,
-                                             weights, reference)[0][0, 0]  # fmt: skip
+                seen = PlanRequest(s, a_last, exo, applies, bounds, mpc.comfort_weight, mpc.support, mpc.warm, [0],
+                                   energy_weights=weights, reference=reference)  # fmt: skip
+                own_cost = mpc.planner._cost(seen, reference[:, None])[0][0, 0]
                 if not np.allclose(action, reference[:, 0], atol=1e-6):
                     left[share] += 1
                     assert own_cost - mpc.last.cost[0] >= share * abs(own_cost) - 1e-3  # it paid for leaving

@@ -29,6 +29,7 @@ from parallel_eplus.learning.model_based.control.saved_planner import planner_co
 from parallel_eplus.learning.model_based.runtime.demand import DemandOutlook
 from parallel_eplus.learning.model_based.runtime.energy_weights import EnergyWeights
 from parallel_eplus.learning.model_based.runtime.layout import Layout
+from parallel_eplus.learning.model_based.runtime.planner import PlanRequest
 
 from .serving import serving
 
@@ -145,8 +146,9 @@ def test_a_candidate_pays_each_charge_s_price_for_the_rise_above_the_month_s_pea
     power[..., d.part] = 1.0
 
     def cost(weights, demand=None) -> float:
-        args = (s, a_last, actions, exo[:, :1], 0 * applies[:, :1], bounds[:, :1], 0.0, weights, None, demand)
-        return float(mpc.planner._cost(*args)[0][0, 0])
+        seen = PlanRequest(s, a_last, exo[:, :1], 0 * applies[:, :1], bounds[:, :1], 0.0, mpc.support,
+                           np.zeros((1, 1, 2), np.float32), [0], energy_weights=weights, demand=demand)  # fmt: skip
+        return float(mpc.planner._cost(seen, actions)[0][0, 0])
 
     base = cost(zero)
     watts = (cost(power) - base) / mpc.power_weight  # the members' mean predicted facility demand

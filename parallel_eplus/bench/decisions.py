@@ -62,7 +62,9 @@ def decisions(run: Path, days: int = 2, repeats: int = 3, options: str | None = 
     building, weather = saved_building(saved), (saved.get("weathers") or ["CA"])[0]
     out: dict = {"planner": str(source), "building": building or "datacenter-2zone", "weather": weather}
     mpc = PlannerOptions.parse(options).apply(MPC.load(source))
-    out["settings"] = {k: getattr(mpc.settings, k) for k in ("candidates", "iterations", "elites", "shrink", "horizon")}
+    s = mpc.planner.settings
+    out["settings"] = {"candidates": s.candidates, "iterations": s.iterations, "elites": s.elites, "shrink": s.shrink,
+                       "horizon": s.horizon}  # fmt: skip
     run_dir = source.parent.parent  # runs/<name>/planner/planner.pt, or runs/<name>/best/planner/planner.pt
     policy_zip = (run_dir.parent if run_dir.name == "best" else run_dir) / "model.zip"  # the distilled policy
 

@@ -17,7 +17,7 @@ import json
 import logging
 import shutil
 import tempfile
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 
 import numpy as np
@@ -32,15 +32,13 @@ from parallel_eplus.deploy.serve.planner_runtime import ENSEMBLE_FILE, PLANNER_A
 from parallel_eplus.deploy.serve.served_rule import rule_entry
 from parallel_eplus.learning.model_based.runtime.ensemble_graph import INPUT, OUTPUT
 from parallel_eplus.learning.model_based.runtime.features import step_times
+from parallel_eplus.learning.model_based.runtime.planner import PlannerSettings
 
 log = logging.getLogger(__name__)
 
 PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (format 1) refuse it
 SAMPLED_DECISIONS = 48
-PLANNER_SETTINGS = ("horizon", "candidates", "iterations", "elites", "shrink", "max_increment", "init_std",
-                    "disagreement_weight", "comfort_risk", "terminal_weight", "consensus",
-                    "min_saving", "own_radius", "occupancy_input", "guard_k", "guard_steps",
-                    "band_thermostats", "band_lead", "own_margin")  # what a served plan needs
+PLANNER_SETTINGS = tuple(f.name for f in fields(PlannerSettings))  # what a served plan needs
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
 
 

@@ -31,7 +31,13 @@ from parallel_eplus.learning.model_based.runtime.ensemble_graph import OnnxEnsem
 from parallel_eplus.learning.model_based.runtime.features import WEATHER_SCALE, exogenous, step_times, with_occupancy
 from parallel_eplus.learning.model_based.runtime.guard import Guard, GuardState
 from parallel_eplus.learning.model_based.runtime.layout import Layout
-from parallel_eplus.learning.model_based.runtime.planner import Planner, decision_seed, side_array
+from parallel_eplus.learning.model_based.runtime.planner import (
+    Planner,
+    PlannerSettings,
+    PlanRequest,
+    decision_seed,
+    side_array,
+)
 
 log = logging.getLogger("parallel_eplus.deploy.planner")
 
@@ -44,17 +50,6 @@ FORECAST_LIMITS = {"outdoor_drybulb_c": (-90.0, 60.0), "outdoor_rh_pct": (0.0, 1
 DEFAULT_FORECAST_GAP_C = 6.0  # a forecast's dry bulb jumping more than this between two steps: fallback
 
 
-class _Settings:
-    """The planner's settings from the contract (the fields `Planner` reads)."""
-
-    def __init__(self, values: dict):
-        self.shrink, self.comfort_risk, self.terminal_weight = 1.0, "mean", 0.0  # contracts written before these
-        self.consensus, self.min_saving, self.own_radius, self.occupancy_input = False, 0.0, None, False
-        self.guard_k, self.guard_steps, self.band_thermostats, self.band_lead = None, 12, "free", 0
-        self.own_margin = 0.0
-        self.__dict__.update(values)
-
-
 class PlannerRuntime:
     """One exported planner (`directory`: what `export` wrote), answering `act(body)`."""
 
@@ -62,7 +57,7 @@ class PlannerRuntime:
         self.contract, p = contract, contract.data["planner"]
         arrays = dict(np.load(Path(directory) / PLANNER_ARRAYS))
         self.layout = Layout(**{k: tuple(v) if isinstance(v, list) else v for k, v in p["layout"].items()})
-        self.settings = _Settings(p["settings"])
+        self.settings = PlannerSettings.of(p["settings"])  # a field an older contract lacks: its default
         forward = OnnxEnsemble((Path(directory) / contract.data["onnx"]["file"]).read_bytes())
         self.planner = Planner(forward, forward.members, len(self.layout.temperatures), self.settings,
                                p["margin_c"], p["power_weight"])  # fmt: skip
@@ -133,9 +128,10 @@ class PlannerRuntime:
             demand = DemandOutlook(prices[None], running[None], self.demand.part, self.demand.per_dollar)
         guard = self._guard(body.get("guard"), s, when) if reference is not None else None
         applies = self.calendar(times)[None]
-        plan = self.planner.plan(s, a_last[None], exo, applies, bounds[None], self.comfort_weight, self.support,
-                                 warm[None], [seed], weights, reference, demand, follows,
-                                 None if guard is None else guard[1], self.side_array)  # fmt: skip
+        plan = self.planner.plan(PlanRequest(
+            s, a_last[None], exo, applies, bounds[None], self.comfort_weight, self.support, warm[None], [seed],
+            energy_weights=weights, reference=reference, demand=demand, follows=follows,
+            hold=None if guard is None else guard[1], sides=self.side_array))  # fmt: skip
         action = plan.action[0].astype(np.float64)
         answer = {
             "setpoints": self._physical(from_unit(action, self.low, self.high)),

@@ -20,6 +20,7 @@ import torch as th
 
 from parallel_eplus import io
 from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.scaling import to_unit
 from parallel_eplus.learning.model_based.model.dynamics import Ensemble
 from parallel_eplus.learning.model_based.model.exogenous import Forecasts
 from parallel_eplus.learning.model_based.runtime.calendar import THERMOSTAT, ComfortTimes, own_reference
@@ -29,7 +30,14 @@ from parallel_eplus.learning.model_based.runtime.ensemble_graph import OnnxEnsem
 from parallel_eplus.learning.model_based.runtime.features import EXOGENOUS, step_times, with_occupancy
 from parallel_eplus.learning.model_based.runtime.guard import Guard
 from parallel_eplus.learning.model_based.runtime.layout import Layout
-from parallel_eplus.learning.model_based.runtime.planner import Plan, Planner, decision_seed, side_array
+from parallel_eplus.learning.model_based.runtime.planner import (
+    Plan,
+    Planner,
+    PlannerSettings,
+    PlanRequest,
+    decision_seed,
+    side_array,
+)
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 PLANNER_FILE = "planner.pt"
@@ -59,7 +67,8 @@ class MPC:
         self.demand = charges and DemandWatch(charges, self.layout.sensors.index(self.power), workers)
         self.margin_c, self.power_weight = margin_c, power_weight
         self.seed = seed
-        self.planner = Planner(None, settings.members, len(self.layout.temperatures), settings, margin_c, power_weight)
+        self.planner = Planner(None, settings.members, len(self.layout.temperatures), PlannerSettings.of(settings),
+                               margin_c, power_weight)  # fmt: skip
         self.refresh()
         self.comfort_weight = 10.0
         n_actions = self.layout.n_actions
@@ -67,9 +76,9 @@ class MPC:
         self.warm = np.zeros((workers, settings.horizon, n_actions), np.float32)
         self.last: Plan | None = None
         self.guard: Guard | None = None  # `guard_k`'s, made at the first plan (an evaluation's settings may add it)
-        self.initial = np.array([2 * (a.initial - a.low) / (a.high - a.low) - 1 for a in b.actions], np.float32)
         self.action_low = np.array([a.low for a in b.actions], float)  # as the served planner reads them
         self.action_high = np.array([a.high for a in b.actions], float)
+        self.initial = to_unit([a.initial for a in b.actions], self.action_low, self.action_high).astype(np.float32)
         self.thermostat_sides = thermostat_sides(b)
         self.sides = side_array(self.thermostat_sides)  # as the planner reads them (`band_thermostats`)
         self.rules: list = [None] * workers  # `own_plan=rule`: each worker's rule, made at its first plan
@@ -191,9 +200,10 @@ class MPC:
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
         reference = self.own_plan(infos, bounds, a_last, obs) if self.settings.comfort_reference == "own" else None
         hold = self._guard_check(s, infos) if reference is not None else None
-        self.last = self.planner.plan(s, a_last, exo, applies, bounds, self.comfort_weight, self.support,
-                                      self.warm[: len(s)], seeds, weights, reference, demand,
-                                      self.follows, hold, self.sides)  # fmt: skip
+        self.last = self.planner.plan(PlanRequest(
+            s, a_last, exo, applies, bounds, self.comfort_weight, self.support, self.warm[: len(s)], seeds,
+            energy_weights=weights, reference=reference, demand=demand, follows=self.follows, hold=hold,
+            sides=self.sides))  # fmt: skip
         self.warm[: len(s)] = self.last.increments
         if hold is not None:
             self.guard.record(self.last, bounds[:, 0], applies[:, 0])

@@ -16,6 +16,7 @@ from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.weather.forecast import FORECASTS
 from parallel_eplus.learning.model_based.control.mpc import MPC, PLANNER_FILE
 from parallel_eplus.learning.model_based.model.exogenous import Forecasts
+from parallel_eplus.learning.model_based.runtime.planner import PlannerSettings
 from parallel_eplus.learning.model_based.settings import MPCSettings
 
 
@@ -90,7 +91,7 @@ class PlannerOptions:
                 raise ValueError(f"--planner occupancy_input: the model was trained with occupancy_input="
                                  f"{str(mpc.settings.occupancy_input).lower()} (one of its inputs); a saved planner "
                                  "keeps it")  # fmt: skip
-            mpc.settings = mpc.planner.settings = settings
+            mpc.settings, mpc.planner.settings = settings, PlannerSettings.of(settings)
             mpc.warm = np.zeros((len(mpc.warm), mpc.settings.horizon, mpc.layout.n_actions), np.float32)
             if mpc.settings.comfort_weight is not None:  # the weight the planner plans with, not only its setting
                 mpc.comfort_weight = mpc.settings.comfort_weight

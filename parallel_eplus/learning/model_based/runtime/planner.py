@@ -6,11 +6,12 @@ ensemble in one call per horizon step (ensemble_graph.py), scored, and the best 
 distribution, `iterations` times; the best sequence's first action is applied and the rest (`Plan.increments`)
 warm-starts the next step's search.
 
-The cost of a step is the spec's energy term (every fuel, times the reward's `power_weight`: about 1 per step;
-under another objective each predicted part weighed as the reward weighs it at that step, energy_weights.py),
-plus `comfort_weight` times the comfort surrogate of the constraint (learning/lagrangian.py: 0 inside each zone's
-bounds shrunk by the margin, rising by 1 per margin beyond, here unbounded so the search is pushed back in), where
-the band applies (the bounds: the spec's band, or each zone's thermostat schedules, calendar.py),
+The cost of a step (`Planner._add_step_cost`, the one place it is written; students/through_model.py has it in
+torch for the gradient, term for term) is the spec's energy term (every fuel, times the reward's `power_weight`:
+about 1 per step; under another objective each predicted part weighed as the reward weighs it at that step,
+energy_weights.py), plus `comfort_weight` times the comfort surrogate of the constraint (learning/lagrangian.py: 0
+inside each zone's bounds shrunk by the margin, rising by 1 per margin beyond, here unbounded so the search is
+pushed back in), where the band applies (the bounds: the spec's band, or each zone's thermostat schedules, calendar.py),
 plus `disagreement_weight` times the members' spread of each zone temperature (K): the planner stays where the
 model knows the building. Each member follows its own trajectory (PETS's "TS-inf"); the comfort term is the
 members' mean, or with `comfort_risk = "worst"` the worst member's (a chance constraint: the band held by every
@@ -20,16 +21,19 @@ plan must not end at the band's edge, where the next plan has no room). Measured
 is predicted to save that share: the model knows the building only near what it has seen, and the best of hundreds
 of candidates is the one its errors favour most.
 
-Numpy and onnxruntime only, and a function of its arguments: the sampler is seeded per decision from what the
-decision sees (`decision_seed`), so a served planner answers a request exactly as the in-process one acts.
+A plan is a function of the planner's settings (`PlannerSettings`: the in-process planner's from its MPCSettings, the
+served one's from its contract) and of what one decision sees (`PlanRequest`). Numpy and onnxruntime only: the
+sampler is seeded per decision from what the decision sees (`decision_seed`), so a served planner answers a request
+exactly as the in-process one acts.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -38,6 +42,128 @@ if TYPE_CHECKING:
     from parallel_eplus.learning.model_based.runtime.demand import DemandOutlook
 
 Forward = Callable[[np.ndarray], np.ndarray]  # [members, batch, inputs] -> [members, batch, targets], physical
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlannerSettings:
+    """What a plan reads of `--mpc`, and what the served planner reads beside it (`occupancy_input`, `guard_k`,
+    `guard_steps`, `own_margin`): the fields an export writes into its contract. MPCSettings
+    (learning/model_based/settings.py) says what each means. One type for both planners: the in-process one takes
+    them from its MPCSettings, the served one from its contract, where the training stack is not installed; a field
+    a contract written before it lacks takes MPCSettings' default (tests/test_planner_request.py checks they agree)."""
+
+    horizon: int
+    candidates: int
+    iterations: int
+    elites: int
+    shrink: float = 1.0
+    max_increment: float
+    init_std: float
+    disagreement_weight: float
+    comfort_risk: str = "mean"
+    terminal_weight: float = 0.0
+    consensus: bool = False
+    min_saving: float = 0.0
+    own_radius: float | None = None
+    occupancy_input: bool = False
+    guard_k: float | None = None
+    guard_steps: int = 12
+    band_thermostats: str = "free"
+    band_lead: int = 0
+    own_margin: float = 0.0
+
+    @classmethod
+    def of(cls, settings) -> PlannerSettings:
+        """These fields of an MPCSettings, or of a contract's `settings` (a mapping; other keys ignored)."""
+        values = settings if isinstance(settings, Mapping) else asdict(settings)
+        return cls(**{f.name: values[f.name] for f in fields(cls) if f.name in values})
+
+
+def _shaped(dims: str, **kwargs):
+    """A `PlanRequest` field of the shape `dims` (axis names, or sizes; checked when a request is made)."""
+    return field(metadata={"shape": tuple(int(d) if d.isdigit() else d for d in dims.split())}, **kwargs)
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """What one decision sees, for W workers at once (the served planner: one). Shapes name their axes: W workers,
+    H the horizon's steps, A actions, S the model's state, X its exogenous inputs, K zones, P energy parts, C demand
+    charges; actions are normalized ([-1, 1]). A field of the wrong shape, or whose sizes disagree with another's, is
+    a ValueError naming it (`Planner.plan` also refuses a horizon that is not its settings')."""
+
+    state: np.ndarray = _shaped("W S")  # the model's state: zone temperatures, then energy parts (Layout.state)
+    last_action: np.ndarray = _shaped("W A")  # the action of the step that just ended
+    exogenous: np.ndarray = _shaped("W H X")  # the model's exogenous inputs at each coming step's end
+    applies: np.ndarray = _shaped("W H")  # where the comfort band applies (> 0) at each coming step's end
+    # each zone's comfort bounds (low, high), degC, at each coming step's end: the spec's band, or each zone's
+    # thermostat schedules (calendar.py)
+    bounds: np.ndarray = _shaped("W H K 2")
+    comfort_weight: float  # the comfort surrogate's weight: the run's Lagrange multiplier, or a fixed one
+    support: tuple[np.ndarray, np.ndarray]  # (low [A], high [A]): the actions' range in the model's data
+    warm: np.ndarray = _shaped("W H A")  # the increments the search starts from: the last `Plan.increments`, or 0
+    seeds: Sequence[int]  # one sampler seed per worker (`decision_seed`)
+    # the weights of the predicted energy parts at each step, as the run's objective prices them (energy_weights.py);
+    # None: each counts once
+    energy_weights: np.ndarray | None = _shaped("W H P", default=None)
+    # the actions whose predicted discomfort is free (`comfort_reference = "own"`: the own plan, calendar.py
+    # `own_reference`); itself a candidate, so the search can always fall back on it. None: every K beyond the
+    # bounds costs
+    reference: np.ndarray | None = _shaped("W H A", default=None)
+    demand: DemandOutlook | None = None  # the demand charges over the horizon (demand.py); None: none priced
+    follows: np.ndarray | None = _shaped("A", default=None)  # the actions the reference sets, kept near it (own_radius)
+    hold: np.ndarray | None = _shaped("W", default=None)  # the workers that play the reference (guard.py)
+    # which bound each action's own setpoint is (0 the lower: heating, 1 the upper: cooling, -1 not a thermostat;
+    # `side_array`), which `band_thermostats` holds to the reference where the band applies
+    sides: np.ndarray | None = _shaped("A", default=None)
+
+    def __post_init__(self):
+        put = functools.partial(object.__setattr__, self)
+        put("state", np.asarray(self.state, np.float32))
+        put("last_action", np.asarray(self.last_action, np.float32))
+        put("exogenous", np.asarray(self.exogenous))
+        put("applies", np.asarray(self.applies))
+        put("bounds", np.asarray(self.bounds))
+        put("support", tuple(np.asarray(b, np.float32) for b in self.support))
+        put("warm", np.asarray(self.warm, np.float32))
+        put("seeds", tuple(self.seeds))
+        if self.energy_weights is not None:
+            put("energy_weights", np.asarray(self.energy_weights))
+        if self.reference is not None:
+            put("reference", np.asarray(self.reference, np.float32))
+        if self.follows is not None:
+            put("follows", np.asarray(self.follows, bool))
+        if self.hold is not None:
+            put("hold", np.asarray(self.hold, bool))
+        if self.sides is not None:
+            put("sides", np.asarray(self.sides))
+        sizes: dict[str, int] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if "shape" in f.metadata and value is not None:
+                _check_shape(f.name, value.shape, f.metadata["shape"], sizes)
+        if len(self.support) != 2:
+            raise ValueError(f"PlanRequest.support: (low, high), got {len(self.support)} arrays")
+        for name, bound in zip(("support[0]", "support[1]"), self.support, strict=True):
+            _check_shape(name, bound.shape, ("A",), sizes)
+        if len(self.seeds) != sizes["W"]:
+            raise ValueError(f"PlanRequest.seeds: {len(self.seeds)} seeds, expected one per worker (W={sizes['W']})")
+        if self.demand is not None:
+            for name, value in (("demand.prices", self.demand.prices), ("demand.running", self.demand.running)):
+                _check_shape(name, np.shape(value), ("W", "H", "C"), sizes)
+
+    @property
+    def horizon(self) -> int:
+        """H: the steps the request looks ahead."""
+        return self.warm.shape[1]
+
+
+def _check_shape(name: str, shape: tuple[int, ...], dims: tuple[str | int, ...], sizes: dict[str, int]) -> None:
+    """`shape` against `dims` (axis names, or sizes): a name's size is the one it first had (kept in `sizes`)."""
+    if len(shape) == len(dims) and all((sizes.setdefault(d, n) if isinstance(d, str) else d) == n
+                                       for d, n in zip(dims, shape, strict=True)):  # fmt: skip
+        return
+    expected = ", ".join(f"{d}={sizes[d]}" if d in sizes else str(d) for d in dims)
+    raise ValueError(f"PlanRequest.{name}: shape {tuple(shape)}, expected [{expected}]")
 
 
 @dataclass(frozen=True)
@@ -90,54 +216,44 @@ def _follow(a_last: np.ndarray, target: np.ndarray, max_increment: float, low: n
 
 
 class Planner:
-    """CEM over action increments; `settings` is an MPCSettings (or anything with its planner fields)."""
+    """CEM over action increments, on `forward`'s ensemble of `members` (its state's first `n_temps` the zone
+    temperatures); `margin_c` and `power_weight`: the run's comfort margin and the reward's weight of energy."""
 
-    def __init__(self, forward: Forward, members: int, n_temps: int, settings, margin_c: float, power_weight: float):
+    def __init__(self, forward: Forward, members: int, n_temps: int, settings: PlannerSettings, margin_c: float,
+                 power_weight: float):  # fmt: skip
         self.forward, self.members, self.n_temps, self.settings = forward, members, n_temps, settings
         self.margin, self.power_weight = margin_c, power_weight
 
-    def plan(self, s: np.ndarray, a_last: np.ndarray, exo: np.ndarray, applies: np.ndarray, bounds: np.ndarray,
-             comfort_weight: float, support: tuple[np.ndarray, np.ndarray], warm: np.ndarray,
-             seeds: list[int], energy_weights: np.ndarray | None = None,
-             reference: np.ndarray | None = None, demand: DemandOutlook | None = None,
-             follows: np.ndarray | None = None, hold: np.ndarray | None = None,
-             sides: np.ndarray | None = None) -> Plan:  # fmt: skip
-        """s [W, n_state], a_last [W, A], exo [W, H, X], applies [W, H], each zone's bounds [W, H, K, 2], the
-        actions' support (low [A], high [A]), the warm start [W, H, A], one sampler seed per worker, the
-        weights of the predicted energy parts [W, H, P] (None: each counts once), and the actions [W, H, A] whose
-        predicted discomfort is free (`comfort_reference = "own"`; None: every K beyond the bounds costs); the
-        reference is itself a candidate, so the search can always fall back on it; `demand`: the demand charges
-        over the horizon (demand.py), None: none priced; `follows` [A]: the actions the reference sets (the
-        thermostats), which `own_radius` keeps near it; `hold` [W]: the workers that play the reference
-        (guard.py); `sides` [A]: which bound each thermostat action's own setpoint is (0 the lower: heating, 1 the
-        upper: cooling, -1 not a thermostat), which `band_thermostats` holds to the own plan where the band
-        applies."""
+    def plan(self, request: PlanRequest) -> Plan:
+        """One decision for every worker of `request`, with `self.settings`. The reference is searched as a
+        candidate can follow it (within the support, `max_increment` a step) and scored so (`_cost`)."""
         t0 = time.perf_counter()
-        c = self.settings
+        c, r = self.settings, request
+        if r.horizon != c.horizon:
+            raise ValueError(f"PlanRequest: {r.horizon} steps ahead, the planner's horizon is {c.horizon}")
+        s, a_last, (low, high) = r.state, r.last_action, r.support
         w, h, a_n = len(s), c.horizon, a_last.shape[1]
-        s, a_last = np.asarray(s, np.float32), np.asarray(a_last, np.float32)
-        low, high = (np.asarray(b, np.float32) for b in support)
-        if reference is not None:  # as a candidate can follow it: within the support, ±max_increment a step
-            reference = _follow(a_last, np.asarray(reference, np.float32), c.max_increment, low, high)
+        reference = None
+        if r.reference is not None:  # as a candidate can follow it: within the support, ±max_increment a step
+            reference = _follow(a_last, r.reference, c.max_increment, low, high)
+            r = replace(r, reference=reference)
         near = None
-        radius = getattr(c, "own_radius", None)
-        if reference is not None and radius is not None and follows is not None:  # [W, 1, H, A] each side
-            r = np.where(np.asarray(follows, bool), np.float32(radius), np.float32(np.inf))
-            near = (reference[:, None] - r, reference[:, None] + r)
-        band = getattr(c, "band_thermostats", "free")
-        if reference is not None and band != "free" and sides is not None:
-            inside = _ahead(np.asarray(applies) > 0, getattr(c, "band_lead", 0))[:, None, :, None]  # [W, 1, H, 1]
-            sides, exact = np.asarray(sides), band == "own"
+        if reference is not None and c.own_radius is not None and r.follows is not None:  # [W, 1, H, A] each side
+            radius = np.where(r.follows, np.float32(c.own_radius), np.float32(np.inf))
+            near = (reference[:, None] - radius, reference[:, None] + radius)
+        if reference is not None and c.band_thermostats != "free" and r.sides is not None:
+            inside = _ahead(r.applies > 0, c.band_lead)[:, None, :, None]  # [W, 1, H, 1]
+            sides, exact = r.sides, c.band_thermostats == "own"
             low_ = np.where(inside & ((sides == 0) | exact & (sides >= 0)), reference[:, None], -np.inf)  # heating
             high_ = np.where(inside & ((sides == 1) | exact & (sides >= 0)), reference[:, None], np.inf)  # cooling
             near = (low_, high_) if near is None else (np.maximum(near[0], low_), np.minimum(near[1], high_))
-        rngs = [np.random.default_rng(seed) for seed in seeds]
-        mean, std = np.asarray(warm, np.float32).copy(), np.full((w, h, a_n), c.init_std, np.float32)
+        rngs = [np.random.default_rng(seed) for seed in r.seeds]
+        mean, std = r.warm.copy(), np.full((w, h, a_n), c.init_std, np.float32)
         for i in range(c.iterations):
             # each iteration searches a narrower distribution: `shrink` of the last one's candidates and elites
             n = max(int(round(c.candidates * c.shrink**i)), 2)
             elites = max(int(round(c.elites * c.shrink**i)), 2)
-            noise = np.stack([r.standard_normal((n, h, a_n), np.float32) for r in rngs])
+            noise = np.stack([rng.standard_normal((n, h, a_n), np.float32) for rng in rngs])
             delta = mean[:, None] + std[:, None] * noise
             delta[:, 0] = mean  # the warm start itself is always a candidate
             if reference is not None:  # and so is the reference: the own thermostats' plan, as far as it can be
@@ -146,31 +262,28 @@ class Planner:
             actions = np.clip(a_last[:, None, None, :] + np.cumsum(delta, axis=2), low, high)
             if near is not None:
                 np.clip(actions, *near, out=actions)
-            cost, spread = self._cost(s, a_last, actions, exo, applies, bounds, comfort_weight, energy_weights,
-                                      reference, demand)  # fmt: skip
+            cost, spread = self._cost(r, actions)
             elite = np.argpartition(cost, elites - 1, axis=1)[:, :elites]
             chosen = np.take_along_axis(delta, elite[:, :, None, None], axis=1)
             mean, std = chosen.mean(1), np.maximum(chosen.std(1, ddof=1), 0.01)
         rows = np.arange(w)
         best = cost.argmin(1)
         plan = actions[rows, best]  # [W, H, A]
-        if reference is not None and getattr(c, "min_saving", 0.0) > 0:  # candidate 1 is the reference
+        if reference is not None and c.min_saving > 0:  # candidate 1 is the reference
             keep = cost[rows, 1] - cost[rows, best] < c.min_saving * np.abs(cost[rows, 1])
             plan = np.where(keep[:, None, None], reference, plan)
             best = np.where(keep, 1, best)
-        if reference is not None and getattr(c, "consensus", False):  # the own plan, unless every member prefers
-            pair = np.stack([plan, reference], axis=1)  # [W, 2, H, A]
-            per = self._cost(s, a_last, pair, exo, applies, bounds, comfort_weight, energy_weights, reference,
-                             demand, members=True)  # [E, W, 2]  # fmt: skip
+        if reference is not None and c.consensus:  # the own plan, unless every member prefers
+            per = self._cost(r, np.stack([plan, reference], axis=1), members=True)  # [E, W, 2]
             keep = ~np.all(per[:, :, 0] < per[:, :, 1], axis=0)
             plan = np.where(keep[:, None, None], reference, plan)
             best = np.where(keep, 1, best)  # its cost and spread reported: candidate 1 is the reference's
         own_action = own_next = None
-        if reference is not None and hold is not None:
+        if reference is not None and r.hold is not None:
             own_action = reference[:, 0]
-            plan = np.where(np.asarray(hold, bool)[:, None, None], reference, plan)
-            best = np.where(hold, 1, best)
-            own_next = self._first_step(s, a_last, reference[:, 0], exo[:, 0])
+            plan = np.where(r.hold[:, None, None], reference, plan)
+            best = np.where(r.hold, 1, best)
+            own_next = self._first_step(s, a_last, reference[:, 0], r.exogenous[:, 0])
         steps = np.diff(np.concatenate([a_last[:, None], plan], axis=1), axis=1)
         increments = np.concatenate([steps[:, 1:], np.zeros((w, 1, a_n), np.float32)], axis=1)
         ms = 1000 * (time.perf_counter() - t0)
@@ -183,15 +296,16 @@ class Planner:
         out = self.forward(np.broadcast_to(row, (self.members, *row.shape)).copy())
         return s[:, : self.n_temps] + out[:, :, : self.n_temps].mean(0)
 
-    def _cost(self, s, a_last, actions, exo, applies, bounds, comfort_weight: float,
-              energy_weights: np.ndarray | None, reference=None, demand=None, members: bool = False):  # fmt: skip
+    def _cost(self, request: PlanRequest, actions: np.ndarray, members: bool = False):
         """Each candidate's cost over the horizon and its members' largest temperature spread: ([W, N], [W, N]),
-        from actions [W, N, H, A]. (Sums, not means, over the members: numpy's mean costs more per call.) A
-        `reference` [W, H, A] rides along as one more candidate, each member's discomfort on it subtracted from
-        that member's on every candidate. With `demand`, each demand charge pays its price times the rise of the
-        members' mean predicted facility demand above the month's running peak, at its highest in the charge's
-        window over the horizon. `members`: each member's cost instead, [E, W, N] (the spread and demand terms, which
-        are the members' together, added to each)."""
+        from actions [W, N, H, A]. The request's `reference` [W, H, A] (as given: `plan` gives it as a candidate
+        can follow it) rides along as one more candidate, each member's discomfort on it subtracted from that
+        member's on every candidate. With `demand`, each demand charge pays its price times the rise of the members'
+        mean predicted facility demand above the month's running peak, at its highest in the charge's window over
+        the horizon. `members`: each member's cost instead, [E, W, N] (the spread and demand terms, which are the
+        members' together, added to each)."""
+        r = request
+        s, a_last, exo, reference, demand = r.state, r.last_action, r.exogenous, r.reference, r.demand
         if reference is not None:
             actions = np.concatenate([actions, reference[:, None]], axis=1)
         w, n, h, a_n = actions.shape
@@ -201,14 +315,11 @@ class Planner:
         inputs[..., :ns] = s[None, :, None]
         inputs[..., ns : ns + a_n] = a_last[None, :, None]
         flat = inputs.reshape(e, b, x1)
-        lo = np.repeat(bounds[..., 0] + self.margin, n, axis=0)  # [W*N, H, K]
-        hi = np.repeat(bounds[..., 1] - self.margin, n, axis=0)
-        applied = np.repeat(applies, n, axis=0) * (comfort_weight / self.margin / k)  # [W*N, H]
-        total, worst = np.zeros(b, np.float32), np.zeros(b, np.float32)
-        worst_case = self.settings.comfort_risk == "worst"
-        weights = None if energy_weights is None else np.repeat(np.asarray(energy_weights, np.float32), n, axis=0)
-        energy_scale, spread_scale = self.power_weight / e, self.settings.disagreement_weight
-        per = np.zeros((e, b), np.float32) if members else None
+        lo = np.repeat(r.bounds[..., 0] + self.margin, n, axis=0)  # [W*N, H, K]
+        hi = np.repeat(r.bounds[..., 1] - self.margin, n, axis=0)
+        applied = np.repeat(r.applies, n, axis=0) * (r.comfort_weight / self.margin / k)  # [W*N, H]
+        cost, worst = np.zeros((e, b) if members else b, np.float32), np.zeros(b, np.float32)
+        weights = None if r.energy_weights is None else np.repeat(np.asarray(r.energy_weights, np.float32), n, axis=0)
         if demand is not None:  # [W*N, H, C]; the rise above the running peak so far, kW [W*N, C]
             d_prices, d_running = (np.repeat(np.asarray(v, np.float32), n, axis=0) for v in (demand.prices,
                                                                                              demand.running))
@@ -218,44 +329,68 @@ class Planner:
             inputs[..., x0:] = exo[None, :, None, step]
             out = self.forward(flat)  # [E, W*N, ns]
             temps = flat[:, :, :k] + out[:, :, :k]
-            if weights is None:
-                total += out[:, :, k:].sum(axis=(0, 2)) * energy_scale
-            else:  # [W*N, P] this step's weights
-                total += (out[:, :, k:].sum(0) * weights[:, step]).sum(-1) * energy_scale
-            if per is not None:
-                parts = out[:, :, k:] if weights is None else out[:, :, k:] * weights[None, :, step]
-                per += parts.sum(-1) * self.power_weight
             if demand is not None:
                 kw = out[:, :, k + demand.part].sum(0) * (1 / e / 1000)  # [W*N]
                 above = np.where(d_prices[:, step] > 0, kw[:, None] - d_running[:, step], 0.0)
                 np.maximum(rise, above, out=rise)
-            over = np.maximum(lo[:, step] - temps, temps - hi[:, step])
-            np.maximum(over, 0, out=over)
-            if reference is not None:  # beyond the reference's, per member and zone (no credit for beating it)
-                rows = over.reshape(e, w, n, k)
-                over = np.maximum(rows - rows[:, :, -1:], 0).reshape(e, b, k)
-            over = over.sum(-1)  # [E, W*N]
-            weight = applied[:, step] * (1 + self.settings.terminal_weight if step == h - 1 else 1)
-            if per is not None:
-                per += over * weight
-            total += (over.max(0) if worst_case else over.sum(0) * (1 / e)) * weight
-            if e > 1:
-                centred = temps - temps.sum(0) * (1 / e)
-                sd = np.sqrt((centred * centred).sum(0) * (1 / (e - 1)))  # [W*N, K]
-                total += sd.sum(-1) * spread_scale
-                if per is not None:
-                    per += sd.sum(-1) * spread_scale
+            sd = self._add_step_cost(cost, out, temps, lo[:, step], hi[:, step], applied[:, step], last=step == h - 1,
+                                     weights=None if weights is None else weights[:, step],
+                                     reference_every=None if reference is None else n)  # fmt: skip
+            if sd is not None:
                 np.maximum(worst, sd.max(-1), out=worst)
             if step + 1 < h:  # the next step's state and last action
                 flat[:, :, :k] = temps
                 flat[:, :, k:ns] = out[:, :, k:]
                 inputs[..., ns : ns + a_n] = actions[:, :, step]
         if demand is not None:
-            total += (rise * d_prices.max(axis=1)).sum(-1) * (demand.per_dollar * self.power_weight)
-            if per is not None:
-                per += (rise * d_prices.max(axis=1)).sum(-1) * (demand.per_dollar * self.power_weight)
-        if per is not None:
-            return per.reshape(e, w, n)[:, :, :-1] if reference is not None else per.reshape(e, w, n)
+            cost += (rise * d_prices.max(axis=1)).sum(-1) * (demand.per_dollar * self.power_weight)
+        if members:
+            return cost.reshape(e, w, n)[:, :, :-1] if reference is not None else cost.reshape(e, w, n)
         if reference is not None:
-            return total.reshape(w, n)[:, :-1], worst.reshape(w, n)[:, :-1]
-        return total.reshape(w, n), worst.reshape(w, n)
+            return cost.reshape(w, n)[:, :-1], worst.reshape(w, n)[:, :-1]
+        return cost.reshape(w, n), worst.reshape(w, n)
+
+    def _add_step_cost(self, cost: np.ndarray, out: np.ndarray, temps: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                       applied: np.ndarray, *, last: bool, weights: np.ndarray | None,
+                       reference_every: int | None) -> np.ndarray | None:  # fmt: skip
+        """One step's cost, the one place it is written (the module's docstring says why each term): added to
+        `cost` [B], the members' together, or [E, B], each member's. From the members' predictions `out` [E, B,
+        targets] (the energy parts after the `n_temps` temperature changes) and zone temperatures `temps` [E, B, K]:
+
+        - energy: every predicted part, each times its weight this step (`weights` [B, P]; None: 1), times
+          `power_weight`; the members' mean;
+        - comfort: the K beyond each zone's bounds shrunk by the margin (`lo`, `hi` [B, K]), summed over zones, times
+          `applied` [B] (where the band applies, times comfort_weight / margin / K), times 1 + `terminal_weight` on
+          the horizon's `last` step; the members' mean, or with `comfort_risk = "worst"` the worst member's. With a
+          reference (the last of every `reference_every` candidates), only what a member's prediction has beyond
+          its own on the reference;
+        - disagreement: the members' spread (standard deviation) of each zone temperature, summed over zones, times
+          `disagreement_weight`; the same for each member.
+
+        Returns the spread [B, K] (None with one member). Sums, not means, over the members: numpy's mean costs
+        more per call. students/through_model.py `Rollouts.cost` is this step in torch, term for term."""
+        e, k, members = self.members, self.n_temps, cost.ndim == 2
+        if members:
+            parts = out[:, :, k:] if weights is None else out[:, :, k:] * weights[None]
+            cost += parts.sum(-1) * self.power_weight
+        elif weights is None:
+            cost += out[:, :, k:].sum(axis=(0, 2)) * (self.power_weight / e)
+        else:
+            cost += (out[:, :, k:].sum(0) * weights).sum(-1) * (self.power_weight / e)
+        over = np.maximum(lo - temps, temps - hi)
+        np.maximum(over, 0, out=over)
+        if reference_every is not None:  # beyond the reference's, per member and zone (no credit for beating it)
+            rows = over.reshape(e, -1, reference_every, k)
+            over = np.maximum(rows - rows[:, :, -1:], 0).reshape(e, -1, k)
+        over = over.sum(-1)  # [E, B]
+        weight = applied * (1 + self.settings.terminal_weight if last else 1)
+        if members:
+            cost += over * weight
+        else:
+            cost += (over.max(0) if self.settings.comfort_risk == "worst" else over.sum(0) * (1 / e)) * weight
+        if e == 1:
+            return None
+        centred = temps - temps.sum(0) * (1 / e)
+        sd = np.sqrt((centred * centred).sum(0) * (1 / (e - 1)))  # [B, K]
+        cost += sd.sum(-1) * self.settings.disagreement_weight
+        return sd

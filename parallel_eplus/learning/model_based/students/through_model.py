@@ -143,6 +143,13 @@ class Rollouts:
         return obs
 
     def cost(self, b: dict, comfort_weight: float) -> tuple[th.Tensor, dict]:
+        """The policy's cost on the batch `b` over the horizon, and its parts. Each step's is the planner's
+        (runtime/planner.py `Planner._add_step_cost`, where the formula is written), term for term in torch for the
+        gradient: energy (each part as the objective weighs it) x power_weight, the comfort surrogate (K beyond the
+        bounds shrunk by the margin, summed over zones; the members' mean or worst) where the band applies x
+        `comfort_weight` / margin / K, x 1 + `terminal_weight` on the horizon's last step, and the members' spread x
+        `disagreement_weight`; means over the batch (a loss), where the planner sums per candidate. The student's
+        own: its `comfort_weight` and margin (`student_comfort_weight`, `student_margin`), and the moves term."""
         m, s_, k = self.model, self.s, self.k
         e = s_.members
         state = th.as_tensor(self.layout.state(b["obs"][:, : self.n_sensors].numpy()))
@@ -172,7 +179,9 @@ class Rollouts:
             hi = b["bounds"][:, h, :, 1] - margin
             over = th.relu(th.maximum(lo - temps, temps - hi)).sum(-1)  # [E, B]
             over = over.max(0).values if s_.comfort_risk == "worst" else over.mean(0)
-            parts["comfort"] = parts["comfort"] + (over * b["applies"][:, h]).mean() * comfort_weight / margin / k
+            terminal = 1 + s_.terminal_weight if h == s_.horizon - 1 else 1  # x 1: the same bits
+            comfort = (over * b["applies"][:, h]).mean() * comfort_weight / margin / k * terminal
+            parts["comfort"] = parts["comfort"] + comfort
             parts["spread"] = parts["spread"] + temps.std(0).sum(-1).mean() * s_.disagreement_weight
             prev = a
             obs = self.rebuild(b["obs"], s, b["outdoor"][:, h], b["clock"][:, h])
