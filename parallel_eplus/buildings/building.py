@@ -1,7 +1,9 @@
 """A loaded building spec as the engine uses it: sensors, action elements, bounds and reward signals.
 
 Both sides of the pipe build one from the same spec file (the env process from `SimulationConfig.building`,
-the EnergyPlus side from `--building`), so they agree on every name and order by construction.
+the EnergyPlus side from `--building`), so they agree on every name and order by construction. A command resolves
+its building once (`load_building`) and hands the `Building` on: the functions below it that take a spec take the
+resolved object too.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ PREDICTOR_ACTUATORS = frozenset({"zone temperature control"})
 
 @dataclass(frozen=True)
 class Building:
-    """A spec resolved for the engine; loaded once per spec file (`load_building` caches it)."""
+    """A spec resolved for the engine: its spec read, its model's thermostats and schedules found (`load_building`)."""
 
     spec: BuildingSpec
     sensors: tuple[Sensor, ...]  # the observations, then the signals read for the figures only (`hidden`)
@@ -36,6 +38,9 @@ class Building:
     # Per action, per actuator: the hidden sensor reading the schedule the building's own controls set that
     # actuator to (a thermostat's setpoint schedule), None where there is none; for `--residual-space builtin`.
     own: tuple[tuple[str | None, ...], ...] = ()
+    # False: the data center a run gets when it names no building (`load_building(None)`): its configs carry no
+    # spec (`SimulationConfig.building` None) and `model` picks its control variant (buildings/datacenter.py)
+    named: bool = True
 
     @functools.cached_property
     def node_schedules(self) -> tuple[tuple[str | None, ...], ...]:
@@ -146,18 +151,29 @@ def timesteps_per_hour(idf: Path) -> int:
 
 
 @functools.cache
-def _load(path: Path) -> Building:
+def _load(path: Path, named: bool = True) -> Building:
     spec = datacenter.DEFAULT if path == datacenter.DEFAULT_SPEC else load_spec(path)
     sensors = tuple(
         Sensor(o.name, o.variable or o.meter or "", o.key or "", o.low, o.high, o.meter is not None, o.scale)
         for o in spec.observations
     )
-    hidden: list[Sensor] = []
-    bounds = _thermostat_bounds(spec, hidden) if spec.reward.thermostat else None
-    hvac = _hvac_signals(spec, hidden)
     actions = action_elements(spec)
-    own = _own_schedules(spec, actions, hidden)
-    return Building(spec, sensors + tuple(hidden), actions, len(hidden), bounds, hvac, own)
+    model = _model_objects(spec, actions)  # the IDF, parsed once for the thermostats and schedules read below
+    hidden: list[Sensor] = []
+    bounds = _thermostat_bounds(spec, model, hidden) if spec.reward.thermostat else None
+    hvac = _hvac_signals(spec, hidden)
+    own = _own_schedules(model, actions, hidden)
+    return Building(spec, sensors + tuple(hidden), actions, len(hidden), bounds, hvac, own, named)
+
+
+def _model_objects(spec: BuildingSpec, actions) -> list:
+    """The model's objects (buildings/idf/objects.py) where the building reads its thermostats or its own schedules;
+    empty where it reads neither."""
+    from parallel_eplus.buildings.idf.objects import idf_objects
+
+    if not (spec.reward.thermostat or any(side for sides in _own_sides(actions) for side in sides)):
+        return []
+    return idf_objects(spec.idf.read_text(encoding="latin-1"))
 
 
 HVAC_ELECTRICITY = "Facility Total HVAC Electricity Demand Rate"  # W: every HVAC electric end use, no lights/plugs
@@ -176,19 +192,23 @@ _OWN_SIDE = {("zone temperature control", "heating setpoint"): "heating",
              ("system node setpoint", "temperature setpoint"): "node"}  # fmt: skip
 
 
-def _own_schedules(spec: BuildingSpec, actions, hidden: list[Sensor]) -> tuple[tuple[str | None, ...], ...]:
+def _own_sides(actions) -> list[list[str | None]]:
+    """Per action, per actuator: which of the model's own schedules it has (`_OWN_SIDE`), None: none."""
+    return [[_OWN_SIDE.get((a.component_type.lower(), a.control_type.lower())) for a in e.actuators] for e in actions]
+
+
+def _own_schedules(model: list, actions, hidden: list[Sensor]) -> tuple[tuple[str | None, ...], ...]:
     """Per action, per actuator: the hidden sensor of the schedule the model's own controls follow there (the
-    value the built-in controls would set; read each step, as the thermostat bounds are), None elsewhere."""
-    from parallel_eplus.buildings.idf.objects import idf_objects
+    value the built-in controls would set; read each step, as the thermostat bounds are), None elsewhere.
+    `model`: the IDF's objects."""
     from parallel_eplus.buildings.idf.takeover import scheduled_setpoints
     from parallel_eplus.buildings.idf.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
 
-    kinds = [[_OWN_SIDE.get((a.component_type.lower(), a.control_type.lower())) for a in e.actuators] for e in actions]
+    kinds = _own_sides(actions)
     if not any(k for ks in kinds for k in ks):
         return tuple((None,) * len(e.actuators) for e in actions)
-    setpoints = zone_setpoints(spec.idf)
-    nodes = scheduled_setpoints(idf_objects(spec.idf.read_text(encoding="latin-1"))) if any(
-        "node" in ks for ks in kinds) else {}  # fmt: skip
+    setpoints = zone_setpoints(model)
+    nodes = scheduled_setpoints(model) if any("node" in ks for ks in kinds) else {}
     out = []
     for e, ks in zip(actions, kinds, strict=True):
         names = []
@@ -203,12 +223,13 @@ def _own_schedules(spec: BuildingSpec, actions, hidden: list[Sensor]) -> tuple[t
     return tuple(out)
 
 
-def _thermostat_bounds(spec: BuildingSpec, hidden: list[Sensor]) -> tuple[tuple[str, str], ...]:
-    """Each reward zone's bounds: its thermostat's heating and cooling setpoint schedules, read each step."""
+def _thermostat_bounds(spec: BuildingSpec, model: list, hidden: list[Sensor]) -> tuple[tuple[str, str], ...]:
+    """Each reward zone's bounds: its thermostat's heating and cooling setpoint schedules, read each step. `model`:
+    the IDF's objects."""
     from parallel_eplus.buildings.idf.thermostat import SCHEDULE_VARIABLE, sensor_name, zone_setpoints
     from parallel_eplus.buildings.spec.load import SpecError
 
-    setpoints = zone_setpoints(spec.idf)
+    setpoints = zone_setpoints(model)
     by_name = {o.name: o for o in spec.observations}
     out, missing = [], []
     for t in spec.reward.temperatures:
@@ -248,14 +269,18 @@ def _hvac_signals(spec: BuildingSpec, hidden: list[Sensor]) -> tuple[tuple[str, 
     return tuple(out)
 
 
-def load_building(path: str | Path | None = None) -> Building:
-    """The building a spec file declares; None: the data center (specs/datacenter-2zone.toml)."""
+def load_building(path: str | Path | Building | None = None) -> Building:
+    """The building a spec file declares (a path, or a built-in spec's name); None: the data center
+    (specs/datacenter-2zone.toml), as a run that names no building has it (`Building.named`). A `Building` is
+    resolved already: it is returned as it is. Each spec is resolved once per process."""
     from parallel_eplus.buildings.resources import spec_file
 
-    return _load(spec_file(path) if path else datacenter.DEFAULT_SPEC)
+    if isinstance(path, Building):
+        return path
+    return _load(spec_file(path)) if path else _load(datacenter.DEFAULT_SPEC, named=False)
 
 
-def weather_path(building: str | None, weather: str) -> Path:
+def weather_path(building: str | Path | Building | None, weather: str) -> Path:
     """The .epw of a weather as a building's spec names it (its short names, the paper's codes, or a path)."""
     from parallel_eplus.buildings.weather.files import resolve_weather
 

@@ -39,16 +39,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         weathers = parse_weathers("all")
     if args.workers < 1 or not 1 <= args.run_days <= 365:
         raise ValueError("--workers must be at least 1 and --run-days within 1..365")
+    building = load_building(args.building)  # resolved once: every check, controller and episode below reads it
     controllers = []
     if args.baseline:
         controllers.append(Controller(BASELINE_LABEL, "baseline"))
     if isinstance(args.rbc, str):  # a class named on the command line instead of the spec's `controller`
-        load_building(args.building).controller_class(args.rbc)  # a name that does not import fails here
+        building.controller_class(args.rbc)  # a name that does not import fails here
         controllers.append(Controller(f"{RBC_LABEL} ({args.rbc.rpartition(':')[2]})", "rbc", rule=args.rbc))
     elif args.rbc:
         controllers.append(Controller(RBC_LABEL, "rbc"))
-    if args.rbc and args.building and load_building(args.building).spec.controller_settings:
-        controllers[-1].make(args.building)  # the spec's settings for its rule: a wrong one fails here
+    if args.rbc and building.named and building.spec.controller_settings:
+        controllers[-1].make(building)  # the spec's settings for its rule: a wrong one fails here
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
     from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
@@ -72,10 +73,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.scenario != "year":  # each weather's two weeks, from a year of the built-in controls (kept in --out)
         from parallel_eplus.evaluation.scenarios import find_periods
 
-        periods = find_periods(args.scenario, weathers, args.building, args.out, args.workers, not args.quiet)
+        periods = find_periods(args.scenario, weathers, building, args.out, args.workers, not args.quiet)
     df = run_sweep(
         controllers, weathers, args.run_days, args.workers, args.out, RewardConfig.from_any(args.reward),
-        not args.quiet, args.building, args.backend, args.ray_address, keep_going=True, periods=periods,
+        not args.quiet, building, args.backend, args.ray_address, keep_going=True, periods=periods,
         weather_noise=args.weather_noise, noisy_years=args.noisy_years, resume=args.resume,
     )  # fmt: skip
     failures = df.attrs.get("failures", [])

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from parallel_eplus.buildings.datacenter import (
     control_model,
 )
 from parallel_eplus.buildings.rules.datacenter import DEMAND_CORRECTIONS
 from parallel_eplus.buildings.scoring.reward import RewardConfig
+
+if TYPE_CHECKING:
+    from parallel_eplus.buildings.building import Building
 
 
 @dataclass
@@ -85,17 +89,19 @@ class SimulationConfig:
 RESIDUAL_SPACES = ("action", "demand", "builtin")
 
 
-def forecast_specs(config: SimulationConfig):
-    """The forecasts ending the observation: the building spec's own, then `forecast_hours`' outdoor one."""
+def forecast_specs(config: SimulationConfig, building: Building | None = None):
+    """The forecasts ending the observation: the building spec's own, then `forecast_hours`' outdoor one.
+    `building`: the config's, resolved already (None: resolved here)."""
     from parallel_eplus.buildings.building import load_building
     from parallel_eplus.buildings.weather.forecast_features import outdoor_forecast
 
     extra = (outdoor_forecast(config.forecast_hours, config.forecast_error),) if config.forecast_hours else ()
-    return load_building(config.building).spec.forecasts + extra
+    return (building or load_building(config.building)).spec.forecasts + extra
 
 
-def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
-    """The elements of the action a policy gives: the model's own, or per-zone demand corrections."""
+def policy_action_names(config: SimulationConfig, building: Building | None = None) -> tuple[str, ...]:
+    """The elements of the action a policy gives: the model's own, or per-zone demand corrections. `building`: the
+    config's, resolved already (None: resolved here)."""
     if config.residual_space not in RESIDUAL_SPACES:
         raise ValueError(f"unknown residual space {config.residual_space!r}: use {' or '.join(RESIDUAL_SPACES)}")
     if config.residual_scale and config.residual_space == "demand":
@@ -103,5 +109,5 @@ def policy_action_names(config: SimulationConfig) -> tuple[str, ...]:
     if config.building and config.model != "baseline":
         from parallel_eplus.buildings.building import load_building
 
-        return tuple(e.name for e in load_building(config.building).actions)
+        return tuple(e.name for e in (building or load_building(config.building)).actions)
     return tuple(e.name for e in control_model(config.model).actions)

@@ -100,8 +100,12 @@ class WorkerSetup:
         return scored
 
     @classmethod
-    def resolve(cls, config: SimulationConfig, weathers: list[str] | None = None) -> WorkerSetup:
-        building = load_building(config.building)  # None: the data center, whose variants `model` names
+    def resolve(
+        cls, config: SimulationConfig, weathers: list[str] | None = None, building: Building | None = None
+    ) -> WorkerSetup:
+        """`building`: the config's, as the command running it resolved it (None: resolved here from the config's
+        spec; None there: the data center, whose variants `model` names)."""
+        building = building or load_building(config.building)
         model = building.control(config.model) if config.building else control_model(config.model)
         comfort = building.comfort
         if config.objective and config.objective != comfort.objective:
@@ -138,9 +142,9 @@ class WorkerSetup:
             config, building, model, comfort, idf, low, high, len(building.observed),
             it_load_schedule(idf) if config.schedule_features else None,
             parse_noise(config.weather_noise),  # a malformed option fails before anything is spawned
-            tuple(forecast_specs(config)), weathers,
+            tuple(forecast_specs(config, building)), weathers,
             [named.get(w) or resolve_weather(w) for w in weathers],  # fail before spawning
-            config.run_days * building.steps_per_day, initial, tuple(policy_action_names(config)),
+            config.run_days * building.steps_per_day, initial, tuple(policy_action_names(config, building)),
         )  # fmt: skip
 
     def start_day(self, worker: str, episode: int) -> int:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parallel_eplus.buildings.building import Building
 from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.buildings.weather.forecast_features import Forecaster
 from parallel_eplus.engine.actions import ActionMap
@@ -46,14 +47,16 @@ class Simulation:
         name: str = "0",
         siblings: int = 1,
         prepare: bool = False,
+        building: Building | None = None,
     ):
         """`siblings`: how many Simulations one process steps together (sets the default spin). `prepare`: episode
         after episode (an env's): two long-lived EnergyPlus-side processes take turns, one running an episode
-        while the other prepares the next (prepared.py, warm_process.py); off for one episode (an evaluation's)."""
+        while the other prepares the next (prepared.py, warm_process.py); off for one episode (an evaluation's).
+        `building`: the config's, as the command resolved it (None: resolved from the config)."""
         self.config = config
         self._from_prepared = False  # the running episode was prepared ahead (a failed start-up is retried cold)
         self.name = name
-        s = self.setup = WorkerSetup.resolve(config, weathers)  # every check before anything is spawned
+        s = self.setup = WorkerSetup.resolve(config, weathers, building)  # every check before anything is spawned
         self.building, self.model, self.comfort, self.idf = s.building, s.model, s.comfort, s.idf
         self.elements, self.observer, self.sensor_names = s.elements, Observer(s), s.building.sensor_names
         self.noise, self.forecasts = s.noise, s.forecasts

@@ -9,7 +9,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.building import Building, load_building
 from parallel_eplus.buildings.datacenter import SCHEDULE_FEATURES, TIME_FEATURES
 from parallel_eplus.buildings.scoring.reward import RewardConfig, reward_config
 from parallel_eplus.engine.config import SimulationConfig
@@ -19,15 +19,17 @@ from parallel_eplus.engine.simulation import Simulation
 def observation_space(
     time_features: bool = False,
     schedule_features: bool = False,
-    building: str | Path | None = None,
+    building: str | Path | Building | None = None,
     forecast_hours: int = 0,
 ) -> gym.spaces.Box:
-    """The building's sensors (None: the data center), the opt-in features, which lie in [-1, 1], then its
-    forecasts and `forecast_hours` of the outdoor dry bulb (weather/forecast_features.py; the EPW's bounds)."""
+    """The building's sensors (a spec, or its `Building` resolved; None: the data center), the opt-in features,
+    which lie in [-1, 1], then its forecasts and `forecast_hours` of the outdoor dry bulb (weather/forecast_features.py;
+    the EPW's bounds)."""
     from parallel_eplus.buildings.weather.forecast_features import outdoor_forecast
 
-    spec = load_building(building).spec
-    low, high = load_building(building).bounds()
+    b = load_building(building)
+    spec = b.spec
+    low, high = b.bounds()
     extra = len(TIME_FEATURES) * time_features + len(SCHEDULE_FEATURES) * schedule_features
     low, high = low + [-1.0] * extra, high + [1.0] * extra
     for f in spec.forecasts + ((outdoor_forecast(forecast_hours),) if forecast_hours else ()):

@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from parallel_eplus.buildings.building import Building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.episode import record_failure
 from parallel_eplus.engine.simulation import Simulation, wait_any
@@ -53,8 +54,10 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
         shares: list[list[str]],
         max_restarts: int = 3,
         first_worker: int = 0,
+        building: Building | None = None,
     ):
-        """One worker per entry of `shares`: the weathers it cycles through (see `weather_shares`)."""
+        """One worker per entry of `shares`: the weathers it cycles through (see `weather_shares`). `building`: the
+        config's, as the command resolved it (None: resolved from the config)."""
         self.num_envs = num_envs = len(shares)
         self.max_restarts = max_restarts
         self.sims: list[Simulation] = []
@@ -64,7 +67,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
                 out = None if config.output_dir is None else str(Path(config.output_dir) / f"worker-{worker}")
                 sim = Simulation(
                     replace(config, output_dir=out), share, name=str(worker), siblings=len(shares),
-                    prepare=config.prepare_next,
+                    prepare=config.prepare_next, building=building,
                 )  # fmt: skip
                 self.sims.append(sim)
         except BaseException:
@@ -72,7 +75,7 @@ class EnergyPlusVectorEnv(gym.vector.VectorEnv):
             raise
         n_actions = len(self.sims[0].policy_names)
         self.single_observation_space = observation_space(
-            config.time_features, config.schedule_features, config.building, config.forecast_hours
+            config.time_features, config.schedule_features, self.sims[0].building, config.forecast_hours
         )
         self.single_action_space = action_space(n_actions)
         self.observation_space = batch_space(self.single_observation_space, num_envs)

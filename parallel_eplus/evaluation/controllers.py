@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.building import Building, load_building
 from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.rules.datacenter import RBCConfig, RuleBasedController
 from parallel_eplus.buildings.weather.files import weather_label
@@ -60,12 +60,12 @@ class Controller:
     def model(self) -> str:
         return "baseline" if self.kind == "baseline" else "temp_fan"
 
-    def relinquishes(self, building: str | None) -> bool:
+    def relinquishes(self, building: str | Building | None) -> bool:
         """Whether its NaN action elements release their actuators to the building's own control (a rule-based
         controller that says so: buildings/rules/air_reset.py); the episode then runs with `relinquish`."""
         return self._rule_says(building, "relinquishes")
 
-    def residual(self, building: str | None) -> tuple[float, str]:
+    def residual(self, building: str | Building | None) -> tuple[float, str]:
         """(residual_scale, residual_space) for its episodes: a policy's as trained, or, for a rule-based controller
         whose actions correct the building's own schedules (`corrects_own`: buildings/rules/own_margin.py), "builtin" at
         scale 1, so EnergyPlus's side adds them to each schedule at the step it applies to."""
@@ -73,14 +73,15 @@ class Controller:
             return 1.0, "builtin"
         return self.residual_scale, self.residual_space
 
-    def _rule_says(self, building: str | None, flag: str) -> bool:
+    def _rule_says(self, building: str | Building | None, flag: str) -> bool:
         if self.kind != "rbc" or not (building or self.rule):
             return False
         return bool(getattr(load_building(building).controller_class(self.rule), flag, False))
 
-    def make(self, building: str | None = None) -> Callable[[np.ndarray, dict], np.ndarray]:
-        """A fresh actor for one episode: (observation, info) -> action. `building`: the swept spec, whose
-        `controller` ("module:Class") is the rule-based one; None: the data center's."""
+    def make(self, building: str | Building | None = None) -> Callable[[np.ndarray, dict], np.ndarray]:
+        """A fresh actor for one episode: (observation, info) -> action. `building`: the swept spec (or its
+        `Building`, resolved: what a rule class taking `building` is given), whose `controller` ("module:Class") is
+        the rule-based one; None: the data center's."""
         if self.kind == "baseline":
             empty = np.zeros(0, dtype=np.float32)
             return lambda obs, info: empty

@@ -19,10 +19,14 @@ import json
 import logging
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pandas as pd
 
 from parallel_eplus.engine.episode import reported_rows
+
+if TYPE_CHECKING:
+    from parallel_eplus.buildings.building import Building
 
 log = logging.getLogger(__name__)
 
@@ -114,10 +118,12 @@ def _loads_of(episode_dir: Path, weather: str, failed: bool, error: str | None) 
 
 
 def find_periods(
-    scenario: str, weathers: list[str], building: str | None, out_dir: Path, workers: int = 1, progress: bool = True
+    scenario: str, weathers: list[str], building: str | Building | None, out_dir: Path, workers: int = 1,
+    progress: bool = True,
 ) -> dict[str, Period]:
     """Each weather's period for `scenario`, from a year of the built-in controls (run once per weather and kept in
-    `out_dir/scenarios.json` with every scenario's day, so other scenarios reuse it)."""
+    `out_dir/scenarios.json` with every scenario's day, so other scenarios reuse it). `building`: a spec, or the
+    `Building` the command resolved (None: the data center)."""
     from parallel_eplus.buildings.weather.files import weather_label
     from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
     from parallel_eplus.evaluation.sweep import run_sweep

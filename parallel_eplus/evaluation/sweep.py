@@ -14,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 from tqdm import tqdm
 
-from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.building import Building, load_building
 from parallel_eplus.buildings.scoring.reward import RewardConfig
 from parallel_eplus.buildings.weather.files import parse_weathers, weather_label
 from parallel_eplus.engine.config import SimulationConfig
@@ -38,7 +38,7 @@ def run_sweep(
     out_dir: Path,
     reward: RewardConfig | None = None,
     progress: bool = True,
-    building: str | None = None,
+    building: str | Path | Building | None = None,
     backend: str = "local",
     ray_address: str | None = None,
     keep_going: bool = False,
@@ -59,20 +59,21 @@ def run_sweep(
 
     `backend` "ray": each episode is a Ray task (ray_sweep.py), on `ray_address`'s cluster or a local Ray.
 
-    `building`: a spec (checked first); its "baseline" is its model's own controls (`baseline_idf`).
+    `building`: a spec (a path, a built-in name, or the `Building` the command resolved; checked first); its
+    "baseline" is its model's own controls (`baseline_idf`). None: the data center.
 
     `keep_going`: an episode whose EnergyPlus fails (a model's own controls can fail on a weather) is left out
     and the others run on; the table's `attrs["failures"]` lists what failed, why and where (`failure_row`).
     Otherwise the first failure stops the sweep, as any caller averaging over the weathers needs.
 
     `resume`: the jobs whose episode a previous sweep into `out_dir` finished are not run again (resume.py)."""
+    swept = load_building(building)  # resolved once (by the command, or here): every job reads this object
     known = None
-    if building:
+    if swept.named:
         from parallel_eplus.buildings.check.names import check_building
 
-        spec = check_building(building)  # a path, or a built-in spec's name
-        building, known = str(spec.path), spec.weathers
-    swept = load_building(building)  # its spec's path None: the data center's spec, as a run that named it
+        check_building(swept)
+        known = swept.spec.weathers
     for c in controllers:  # a policy acts only in the building it was trained on, or a variant of it
         trained = load_building(c.building) if c.kind in ("policy", "http", "planner") else swept
         if trained.spec.path == swept.spec.path:
@@ -80,14 +81,15 @@ def run_sweep(
         if trained.interface() != swept.interface():
             raise ValueError(
                 f"{c.path or c.url} was trained on building {c.building or 'datacenter-2zone (default)'}, "
-                f"not {building or 'datacenter-2zone (default)'}: pass --building accordingly"
+                f"not {swept.spec.path if swept.named else 'datacenter-2zone (default)'}: pass --building accordingly"
             )
         log.warning("%s was trained on %s and acts in %s, a variant with the same observations and actions: what "
-                    "it learned of the building may not hold there", c.path or c.url, trained.spec.path, building)
+                    "it learned of the building may not hold there", c.path or c.url, trained.spec.path,
+                    swept.spec.path if swept.named else None)  # fmt: skip
     weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs
     for c in controllers:  # a rule-based controller the building cannot take fails here, not mid-sweep
         if c.kind == "rbc":
-            c.make(building)
+            c.make(swept)
     controllers = unique_labels(controllers)
     if weather_noise is not None:
         from parallel_eplus.buildings.weather.noise import parse_noise
@@ -97,7 +99,7 @@ def run_sweep(
             raise ValueError("--noisy-years must be at least 1")
     years = range(noisy_years) if weather_noise is not None else [None]
     jobs = [
-        (c, _job_config(c, w, building, run_days, reward, out_dir, weather_noise, k))
+        (c, _job_config(c, w, swept, run_days, reward, out_dir, weather_noise, k))
         for c in controllers for w in weathers for k in years
     ]  # fmt: skip
     for _, cfg in jobs:
@@ -112,9 +114,9 @@ def run_sweep(
         from parallel_eplus.evaluation.resume import split_finished
 
         finished, jobs = split_finished(jobs)
-    steps_per_day = load_building(building).steps_per_day
+    steps_per_day = swept.steps_per_day
     total_steps = sum(cfg.run_days for _, cfg in jobs) * steps_per_day
-    band = _band_columns(building)
+    band = _band_columns(swept)
     bar = tqdm(total=total_steps, unit="step", desc="evaluate", disable=not progress, smoothing=0.05)
     try:
         if not jobs:  # every episode finished before (`resume`)
@@ -128,7 +130,7 @@ def run_sweep(
             deadline_s = 600.0 + run_days * steps_per_day * per_step
             rows, failures = ray_sweep.run_jobs(jobs, workers, ray_address, bar, deadline_s, keep_going)
         else:
-            rows, failures = run_local(jobs, workers, bar, keep_going)
+            rows, failures = run_local(jobs, workers, bar, keep_going, swept)
     finally:
         bar.close()
     rows = [{**row, **band} for row in finished + rows]  # a spec's band, beside its "% in band"
@@ -145,17 +147,20 @@ def run_sweep(
 
 
 def _job_config(
-    controller: Controller, weather: str, building: str | None, run_days: int, reward: RewardConfig | None,
+    controller: Controller, weather: str, building: str | Building | None, run_days: int, reward: RewardConfig | None,
     out_dir: Path, weather_noise: str | None = None, year: int | None = None,
 ) -> SimulationConfig:  # fmt: skip
+    """`building`: as the config names it (a spec's path; None: the data center), or its `Building` resolved."""
     folder = out_dir / "episodes" / slug(controller.label) / (controller.run or "") / weather_label(weather)
-    residual_scale, residual_space = controller.residual(building)
+    (residual_scale, residual_space), relinquish = controller.residual(building), controller.relinquishes(building)
+    if isinstance(building, Building):
+        building = str(building.spec.path) if building.named else None
     return SimulationConfig(
         weather=weather, model=controller.model, building=building, run_days=run_days,
         reward=reward or RewardConfig(),
         time_features=controller.time_features, schedule_features=controller.schedule_features,
         residual_scale=residual_scale, residual_space=residual_space,
-        rbc_target_c=controller.rbc_target_c, relinquish=controller.relinquishes(building),
+        rbc_target_c=controller.rbc_target_c, relinquish=relinquish,
         output_dir=str(folder if year is None else folder / f"year-{year}"),
         forecast_hours=controller.forecast_hours, forecast_error=controller.forecast_error,
         weather_noise=weather_noise, seed=year or 0, fixed_seed=year is not None,
@@ -163,9 +168,11 @@ def _job_config(
 
 
 def run_local(
-    jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar, keep_going: bool = False
+    jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar, keep_going: bool = False,
+    building: Building | None = None,
 ) -> tuple[list[dict], list[dict]]:
-    """The jobs as EnergyPlus processes of this machine, up to `workers` at once: (rows, failures)."""
+    """The jobs as EnergyPlus processes of this machine, up to `workers` at once: (rows, failures). `building`: the
+    jobs' building as the command resolved it (None: each job's resolved from its config)."""
     queue = deque(jobs)
     rows: list[dict] = []
     failures: list[dict] = []
@@ -183,8 +190,8 @@ def run_local(
             started = []
             while queue and len(active) < workers:
                 controller, cfg = queue.popleft()
-                sim = Simulation(cfg, name=controller.label, siblings=workers)
-                job = {"controller": controller, "cfg": cfg, "sim": sim, "act": controller.make(cfg.building)}
+                sim = Simulation(cfg, name=controller.label, siblings=workers, building=building)
+                job = {"controller": controller, "cfg": cfg, "sim": sim, "act": controller.make(sim.building)}
                 active.append(job)
                 try:
                     sim.launch()
@@ -227,11 +234,8 @@ def run_local(
     return rows, failures
 
 
-def _band_columns(building: str | None) -> dict:
+def _band_columns(b: Building) -> dict:
     """A spec's one band beside its "% in band"; none where each zone has its own bounds (thermostat, per zone)."""
-    if not building:
-        return {}
-    b = load_building(building)
-    if b.spec.reward.thermostat or b.spec.reward.zone_bands:
+    if not b.named or b.spec.reward.thermostat or b.spec.reward.zone_bands:
         return {}
     return dict(zip(("band_low_c", "band_high_c"), b.band, strict=True))

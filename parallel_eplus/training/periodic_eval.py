@@ -30,6 +30,7 @@ import pandas as pd
 from stable_baselines3.common.callbacks import BaseCallback
 
 from parallel_eplus import io
+from parallel_eplus.buildings.building import Building, load_building
 from parallel_eplus.buildings.weather.files import weather_label
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
@@ -66,8 +67,10 @@ class Evaluator:
     """Runs and records the evaluations of one run (any algorithm's)."""
 
     def __init__(self, run_dir: Path, settings: EvalSettings, sim: SimulationConfig, weathers: list[str],
-                 workers: int):  # fmt: skip
+                 workers: int, building: Building | None = None):  # fmt: skip
+        """`building`: `sim.building` as the run resolved it (None: resolved here)."""
         self.run_dir, self.settings, self.sim = Path(run_dir), settings, sim
+        self.building = building or load_building(sim.building)
         self.weathers = settings.weathers or weathers
         self.days = settings.days or sim.run_days
         self.workers = max(1, min(workers, len(self.weathers)))
@@ -111,13 +114,13 @@ class Evaluator:
         """Each weather's period for a BOPTEST scenario, from a year of the built-in controls (once per run)."""
         from parallel_eplus.evaluation.scenarios import find_periods
 
-        return find_periods(scenario, self.weathers, self.sim.building, self.run_dir / "eval-periods", self.workers,
+        return find_periods(scenario, self.weathers, self.building, self.run_dir / "eval-periods", self.workers,
                             progress=False)  # fmt: skip
 
     def _run(self, controller: Controller, cases: list[tuple[str, str]], out: Path) -> dict[str, dict]:
         """`cases`: (weather, scenario) pairs; rows keyed `_case(weather, scenario)`."""
         jobs = [(controller, self._config(controller, w, s, out)) for w, s in cases]
-        rows, _ = run_local(jobs, min(self.workers, len(jobs)), _NoBar())
+        rows, _ = run_local(jobs, min(self.workers, len(jobs)), _NoBar(), building=self.building)
 
         def scenario_of(row: dict) -> str:  # a period's episodes run in a folder of its name (`_config`)
             return next((s for s in self.settings.scenarios if s in Path(row["episode_dir"]).parts), "start")

@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from parallel_eplus import io
+from parallel_eplus.buildings.building import Building, load_building
 from parallel_eplus.runs.checkpoints import resume_point
 from parallel_eplus.runs.policy_files import _check_init_from, run_dir_of
 from parallel_eplus.runs.registry import process_alive
@@ -23,8 +24,11 @@ from parallel_eplus.training.config import TrainConfig
 log = logging.getLogger(__name__)
 
 
-def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) -> tuple[TrainConfig, Path | None]:
-    """The run's settings (a resumed run's own) and checkpoint; a new run claims its name. Writes config.json."""
+def prepare_run(
+    cfg: TrainConfig, resume: str | Path | None, overwrite: bool
+) -> tuple[TrainConfig, Path | None, Building]:
+    """The run's settings (a resumed run's own), checkpoint and building (resolved once here: its check, workers and
+    evaluations read this object); a new run claims its name. Writes config.json."""
     checkpoint = None
     if resume is not None and cfg.init_from is not None:
         raise ValueError("--resume continues a run; --init-from starts a new one from a policy: pass one of them")
@@ -43,7 +47,8 @@ def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) ->
         if cfg.evaluation.every:  # evaluation may be added to (or changed for) a resumed run
             saved.evaluation = cfg.evaluation
         cfg = saved
-    cfg = cfg.resolved()
+    building = load_building(cfg.building)
+    cfg = cfg.resolved(building)
     if cfg.init_from is not None and checkpoint is None and cfg.algorithm != "mbpo":  # resumed: has its weights
         _check_init_from(Path(cfg.init_from), (cfg.time_features, cfg.schedule_features))  # before EnergyPlus starts
     if checkpoint is None:
@@ -52,7 +57,7 @@ def prepare_run(cfg: TrainConfig, resume: str | Path | None, overwrite: bool) ->
     run_dir = cfg.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     io.write_text(run_dir / "config.json", cfg.to_json())
-    return cfg, checkpoint
+    return cfg, checkpoint, building
 
 
 def _refuse_a_live_run(path: Path) -> None:

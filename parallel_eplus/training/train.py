@@ -18,7 +18,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from tqdm import tqdm
 
 from parallel_eplus import io
-from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.building import Building
 from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv, weather_shares
 from parallel_eplus.errors import EnergyPlusError, Interrupts
@@ -76,8 +76,9 @@ def sim_config(cfg: TrainConfig) -> SimulationConfig:
     )
 
 
-def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
-    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv."""
+def make_vec_env(cfg: TrainConfig, building: Building | None = None) -> SB3VecEnv:
+    """The workers as SB3 sees them: local processes or Ray actors behind one VecEnv. `building`: the run's, as
+    `train` resolved it (None: resolved from the config; a Ray actor resolves its own)."""
     sim = sim_config(cfg)
     shares = weather_shares(cfg.weathers, cfg.workers, episodes_done(cfg.run_dir / "episodes.csv", cfg.workers))
     if cfg.backend == "ray":
@@ -86,7 +87,7 @@ def make_vec_env(cfg: TrainConfig) -> SB3VecEnv:
         per_actor = cfg.workers_per_actor or cfg.workers
         venv = RayVectorEnv(sim, shares, per_actor, cfg.ray_address, cfg.max_restarts)
     else:
-        venv = EnergyPlusVectorEnv(sim, shares, max_restarts=cfg.max_restarts)
+        venv = EnergyPlusVectorEnv(sim, shares, max_restarts=cfg.max_restarts, building=building)
     return SB3VecEnv(venv)
 
 
@@ -104,25 +105,25 @@ def train(
     `callbacks` run after ours (a sweep's trial reports each batch to Ray Tune with one: experiments/tune_trial.py).
     runs/<name>/status.json says how far it got and how it ended (run_status.py; `parallel-eplus runs`).
     """
-    cfg, checkpoint = prepare_run(cfg, resume, overwrite)
+    cfg, checkpoint, building = prepare_run(cfg, resume, overwrite)  # the one resolution of the run's building
     if cfg.algorithm == "mpc":  # the model-based learner drives the same workers itself
         from parallel_eplus.training.mpc import train_mpc
 
-        return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model, callbacks, _evaluator(cfg))
+        return train_mpc(cfg, checkpoint, progress, make_vec_env, _new_model, callbacks, _evaluator(cfg, building))
     with RunStatus(cfg.run_dir, cfg.timesteps) as status:
-        return _learn(cfg, checkpoint, progress, timer, status, callbacks)
+        return _learn(cfg, building, checkpoint, progress, timer, status, callbacks)
 
 
 def _learn(
-    cfg: TrainConfig, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None, status: RunStatus,
-    callbacks: Sequence[BaseCallback] = (),
+    cfg: TrainConfig, building: Building, checkpoint: Path | None, progress: bool, timer: UpdateTimer | None,
+    status: RunStatus, callbacks: Sequence[BaseCallback] = (),
 ) -> Path:  # fmt: skip
     from parallel_eplus.learning.algorithms import ALGORITHMS
     from parallel_eplus.learning.saved_models import load_model
 
     run_dir = cfg.run_dir
     th.set_num_threads(1)  # the cores belong to EnergyPlus; the 32x32 policy needs no more
-    venv = make_vec_env(cfg)
+    venv = make_vec_env(cfg, building)
     bar = None
     try:
         if checkpoint is not None:
@@ -137,7 +138,7 @@ def _learn(
                 _warm_start(Path(cfg.init_from), model, env)
                 log.info("%s starts from the weights of %s", cfg.run_name, cfg.init_from)
             if cfg.init_from_baseline:
-                _clone_baseline(cfg, model, env, progress)
+                _clone_baseline(cfg, building, model, env, progress)
         if cfg.off_policy:  # a cloned actor acts its warm-up (guarded_sac.py)
             model.warmup_policy = cfg.init_from_baseline
         model.lockstep = cfg.lockstep
@@ -157,12 +158,12 @@ def _learn(
                    desc=f"train {cfg.run_name}", smoothing=0.05)  # fmt: skip
         chain = CallbackList([
             timer or UpdateTimer(),
-            EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * load_building(cfg.building).steps_per_day),
+            EpisodeMetrics(run_dir / "episodes.csv", bar, 365 * building.steps_per_day),
             AtomicCheckpoint(max(cfg.checkpoint_every // cfg.workers, 1), run_dir / "checkpoints"),
             *([SACComfort(cfg.batch_size)] if cfg.constrained and cfg.off_policy else []),
             *([model_based] if model_based is not None else []),
             status,
-            *_evaluation(cfg, model, env),
+            *_evaluation(cfg, building, model, env),
             *callbacks,
         ])  # fmt: skip
         try:
@@ -189,23 +190,23 @@ def _learn(
         venv.close()
 
 
-def _evaluation(cfg: TrainConfig, model, env: VecNormalize) -> list[BaseCallback]:
+def _evaluation(cfg: TrainConfig, building: Building, model, env: VecNormalize) -> list[BaseCallback]:
     """`--eval-every`: the frozen policy on the validation weathers between batches (training/periodic_eval.py)."""
     if not cfg.evaluation.every:
         return []
     from parallel_eplus.training.periodic_eval import PeriodicEval
 
-    return [PeriodicEval(_evaluator(cfg), (cfg.time_features, cfg.schedule_features),
+    return [PeriodicEval(_evaluator(cfg, building), (cfg.time_features, cfg.schedule_features),
                          lambda path: save_checkpoint(model, env, path))]  # fmt: skip
 
 
-def _evaluator(cfg: TrainConfig):
+def _evaluator(cfg: TrainConfig, building: Building):
     """`--eval-every`'s evaluator (training/periodic_eval.py), for any algorithm; None without the option."""
     if not cfg.evaluation.every:
         return None
     from parallel_eplus.training.periodic_eval import Evaluator
 
-    return Evaluator(cfg.run_dir, cfg.evaluation, sim_config(cfg), cfg.weathers, cfg.workers)
+    return Evaluator(cfg.run_dir, cfg.evaluation, sim_config(cfg), cfg.weathers, cfg.workers, building)
 
 
 def _load_replay_buffer(model, checkpoint: Path) -> None:
@@ -220,7 +221,7 @@ def _load_replay_buffer(model, checkpoint: Path) -> None:
                     "empty buffer and updates from it at once", checkpoint.name)  # fmt: skip
 
 
-def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) -> None:
+def _clone_baseline(cfg: TrainConfig, building: Building, model, env: VecNormalize, progress: bool) -> None:
     """`--init-from-baseline`: fit the new policy to the building's own controls on the training weathers; the
     cloned policy is saved in runs/<name>/cloned/ (evaluate it to see how close it gets before any RL)."""
     import json
@@ -234,7 +235,6 @@ def _clone_baseline(cfg: TrainConfig, model, env: VecNormalize, progress: bool) 
                             (cfg.time_features, cfg.schedule_features), progress, cfg.forecast_hours)  # fmt: skip
     if days == cfg.run_days and demos.builtin:  # the built-in's figures: episodes' ratios to them (callbacks.py)
         io.write_text(cfg.run_dir / BUILTIN_FILE, pd.DataFrame(demos.builtin).to_csv(index=False))
-    building = load_building(cfg.building)
     regulated = [building.sensor_names.index(t) for t in building.temperatures]
     report = clone(model, env, demos, cfg.imitation, cfg.seed, regulated, building.band)
     shutil.rmtree(work, ignore_errors=True)  # a year's EnergyPlus CSV per weather: the fit is what is kept

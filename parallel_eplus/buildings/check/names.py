@@ -21,8 +21,12 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from parallel_eplus.buildings.spec.load import BuildingSpec, SpecError, load_spec
+
+if TYPE_CHECKING:
+    from parallel_eplus.buildings.building import Building
 
 CHECK_TIMEOUT_S = 300.0  # sizing a large model can take a minute on a busy machine
 
@@ -189,12 +193,14 @@ def require_checked(spec: BuildingSpec | str | Path, weather: str | Path | None 
     return result
 
 
-def check_building(path: str | Path, weather: str | Path | None = None, use_cache: bool = True) -> BuildingSpec:
-    """Load a spec (a path or a built-in name) and check it against its model; the spec, or SpecError."""
+def check_building(
+    building: str | Path | Building, weather: str | Path | None = None, use_cache: bool = True
+) -> BuildingSpec:
+    """Check a spec (a path, a built-in name, or the `Building` a command resolved) against its model; the spec,
+    or SpecError."""
     from parallel_eplus.buildings.building import load_building
-    from parallel_eplus.buildings.resources import spec_file
 
-    spec = load_building(spec_file(path)).spec  # loaded once per process: what the engine reads too
+    spec = load_building(building).spec  # the object the engine reads too
     result = check_spec(spec, weather, use_cache=use_cache)
     if not result.ok:
         lines = "\n  ".join(result.problems)

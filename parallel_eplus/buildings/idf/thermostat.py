@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from parallel_eplus.buildings.idf.objects import idf_objects
+from parallel_eplus.buildings.idf.objects import IdfObject, idf_objects
 
 SCHEDULE_VARIABLE = "Schedule Value"
 
@@ -32,9 +32,10 @@ def sensor_name(schedule: str) -> str:
     return "setpoint_" + re.sub(r"[^a-z0-9]+", "_", schedule.lower()).strip("_")
 
 
-def zone_setpoints(idf: Path) -> dict[str, ZoneSetpoints]:
-    """Zone name (upper-case) -> its thermostat's setpoint schedules, for every zone a thermostat controls."""
-    objects = idf_objects(idf.read_text(encoding="latin-1"))
+def zone_setpoints(idf: Path | list[IdfObject]) -> dict[str, ZoneSetpoints]:
+    """Zone name (upper-case) -> its thermostat's setpoint schedules, for every zone a thermostat controls. `idf`:
+    the model's file, or its objects parsed already."""
+    objects = idf if isinstance(idf, list) else idf_objects(Path(idf).read_text(encoding="latin-1"))
     by_kind: dict[str, dict[str, list[str]]] = {}
     for o in objects:
         if o.fields:

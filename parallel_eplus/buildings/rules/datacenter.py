@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.buildings.building import load_building
+from parallel_eplus.buildings.building import Building, load_building
 from parallel_eplus.buildings.datacenter import it_load_schedule
 from parallel_eplus.buildings.scaling import to_unit
 
@@ -43,8 +43,8 @@ class RuleBasedController:
     floor); below it, the shortfall raises the setpoint instead.
     """
 
-    def __init__(self, cfg: RBCConfig | None = None, building: str | Path | None = None):
-        """`building`: a spec with the data center's shape (None: the data center's own)."""
+    def __init__(self, cfg: RBCConfig | None = None, building: str | Path | Building | None = None):
+        """`building`: a spec with the data center's shape, or its `Building` resolved (None: the data center's own)."""
         self.cfg = cfg or RBCConfig()
         b = load_building(building)
         if len(b.actions) != 4 or len(b.temperatures) != 2:
