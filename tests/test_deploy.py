@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import io
 import json
+import logging
 import subprocess
-import sys
 from pathlib import Path
 
 import pandas as pd
@@ -183,10 +184,7 @@ def test_exported_controller_gives_the_policys_setpoints_over_a_recorded_episode
     )  # fmt: skip
     model = train(cfg, progress=False)
     out = tmp_path / "controller"
-    r = subprocess.run(
-        [sys.executable, "-m", "parallel_eplus.cli", "export", str(model.parent), "-o", str(out)],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+    r = cli("export", str(model.parent), "-o", str(out))
     assert r.returncode == 0, r.stderr
     df = run_sweep([policy_controller(str(model))], ["CO"], 1, 1, tmp_path / "eval", progress=False)
     steps = pd.read_parquet(Path(df.episode_dir[0]) / "steps.parquet")
@@ -224,9 +222,18 @@ def test_closed_loop_through_the_server_equals_the_in_process_episode_step_by_st
 
 
 def cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "parallel_eplus.cli", *args], capture_output=True, text=True, timeout=300
-    )
+    """`parallel-eplus ARGS` in process (a fresh interpreter pays torch's import each time): its exit code, and its
+    log as the command's stderr shows it (the process's own exit code and stderr: tests/faults/test_run_files.py)."""
+    from parallel_eplus.cli import main
+
+    stream, root = io.StringIO(), logging.getLogger()
+    handler = logging.StreamHandler(stream)
+    root.addHandler(handler)
+    try:
+        code = main(list(args))
+    finally:
+        root.removeHandler(handler)
+    return subprocess.CompletedProcess(args, code, "", stream.getvalue())
 
 
 @pytest.mark.slow

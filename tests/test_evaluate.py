@@ -92,17 +92,21 @@ def test_plot_run_and_episode(tmp_path, policy):
 
 
 @pytest.mark.slow
-def test_bad_input_fails_before_anything_runs(tmp_path):
-    def cli(*args):
-        return subprocess.run([sys.executable, "-m", "parallel_eplus.cli", "evaluate", *args, "--out", str(tmp_path)],
-                              capture_output=True, text=True)  # fmt: skip
+def test_bad_input_fails_before_anything_runs(tmp_path, caplog):
+    """The command's exit code and its one error line, in process (a fresh interpreter costs its imports each time;
+    the process's own exit code and stderr: tests/faults/test_run_files.py)."""
+    from parallel_eplus.cli import main
 
-    r = cli("--baseline", "--weathers", "CA,XX")
-    assert r.returncode == 2 and "unknown weather 'XX'" in r.stderr
-    r = cli("--policy", str(tmp_path / "missing.zip"))
-    assert r.returncode == 2 and "policy not found" in r.stderr
-    r = cli("--rbc-targets", "22.7,warm")
-    assert r.returncode == 2 and "--rbc-targets takes zone temperatures" in r.stderr
+    def cli(*args) -> tuple[int, str]:
+        caplog.clear()
+        return main(["evaluate", *args, "--out", str(tmp_path)]), caplog.text
+
+    code, err = cli("--baseline", "--weathers", "CA,XX")
+    assert code == 2 and "unknown weather 'XX'" in err
+    code, err = cli("--policy", str(tmp_path / "missing.zip"))
+    assert code == 2 and "policy not found" in err
+    code, err = cli("--rbc-targets", "22.7,warm")
+    assert code == 2 and "--rbc-targets takes zone temperatures" in err
     assert not any(tmp_path.iterdir())
 
 
