@@ -19,7 +19,7 @@ Changes, in order:
 
 It also derives the CRAC data center's agent variant from its committed model in idf/ (see its spec):
 4. 1ZoneDataCenterCRAC_wApproachTemp_agent.idf: SetpointManager:Warmest "Supply air control" commented out: with
-   it active the supply-node actuator has no effect (docs/notes/new-buildings.md); its two design days commented
+   it active the supply-node actuator has no effect (idf/NOTES.md); its two design days commented
    out too (without them the CO weather year starts; see crac_agent).
 Running the weather year rather than the design days, and the run period, are not model edits: the engine
 prepares every run's copy of any model (parallel_eplus/buildings/idf/prepare.py).

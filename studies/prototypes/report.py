@@ -89,8 +89,8 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
                   f"discomfort than its own controls: {holds} (to {SAME_KH} K·h"
                   + ("; goal: all, savings on 12 of 16)." if every else ")."),
                   "",
-                  "Why the planner finds so little, building by building, and what was tried: [docs/model-based.md]"
-                  f"({_docs(study.out)}#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
+                  "Why the planner finds so little, building by building, and what was tried: [the study's record]"
+                  f"({_record(study.out)}#every-doe-prototype-2026-11-28-started)."]  # fmt: skip
     if (study.out / "savings.png").is_file():
         lines += ["", "![savings against discomfort](savings.png)"]
     lines += [*seeds_lines(study), *played_lines(study)] if every else []
@@ -222,9 +222,9 @@ def _why_not(study: Study) -> str:
     return " or ".join(reasons)
 
 
-def _docs(out: Path) -> str:
-    """docs/model-based.md as the table's folder links it (results/prototypes/, or a recipe's folder below it)."""
-    return os.path.relpath(Path(__file__).resolve().parents[2] / "docs" / "model-based.md", Path(out).resolve())
+def _record(out: Path) -> str:
+    """This study's README (its record) as the table's folder links it (results/prototypes/, or a recipe's below)."""
+    return os.path.relpath(Path(__file__).resolve().parent / "README.md", Path(out).resolve())
 
 
 # Occupied K.h over the 20 fortnights that count as no more than its own: the small hotel's planner, on its own plan
