@@ -124,3 +124,14 @@ def test_the_claim_about_other_buildings_is_read_from_results_prototypes():
     span = f"{(1 - big[-1]) * 100:.1f}–{(1 - big[0]) * 100:.1f} %"
     assert f"lowers HVAC energy by {span} on {len(big)} of the {len(ratios)} with air loops" in text
     assert f"under 1 % on the other {len(ratios) - len(big)}" in text
+
+
+def test_the_bench_figures_are_read_from_results_bench():
+    import json
+
+    bench = json.loads((ROOT / "results" / "bench.json").read_text())
+    text = " ".join(README.read_text().split())
+    assert (
+        f"EnergyPlus alone ran the data center's year in {bench['alone_s']:.1f} s and our env in {bench['env_s']:.1f} s"
+        in text
+    )
