@@ -14,7 +14,7 @@ example tariff, building check; a spec is used as given), BOPTEST's test periods
 controls scored, Guideline 36's supply-air reset scored where the spec has supply-air actions (a refusal is reported),
 the building's preset trained (thermostat-planner, on the reset where it applies; datacenter-planner for data centers)
 and scored with the preset's evaluation settings, the choice on the held-out weathers only (the own controls unless a
-candidate is at least 0.5 %% lower at no more occupied discomfort), the export into DIR/controller/, DIR/report.md.
+candidate is at least 0.5 % lower at no more occupied discomfort), the export into DIR/controller/, DIR/report.md.
 Ctrl-C, or a rerun of the same command, continues where it stopped; a rerun with a larger --budget-minutes trains on."""
 
 

@@ -70,7 +70,7 @@ def controller_path(run: Path, preset: Preset) -> Path:
 
 
 def evaluate_options(preset: Preset) -> tuple[str, ...]:
-    """The preset's `[evaluate]` settings as options (`--planner band_thermostats=own`)."""
+    """The preset's `[evaluate]` settings as options (`--planner band_thermostats=baseline`)."""
     return tuple(option_args(preset.commands.get("evaluate", {})))
 
 

@@ -35,7 +35,7 @@ def export(folder: BuildingFolder, chosen: str, reason: str, controller: str | N
         )  # fmt: skip
         return {"state": "done", "written": str(out / NOTE), "note": "a rule: what to program, in CHOSEN.md"}
     assert chosen == LEARNED and controller and preset
-    args = ["export", controller, "-o", str(out), "--workers", str(workers)]
+    args = ["export", controller, "-o", str(out), "--workers", str(workers), "--quiet"]
     planner = preset.commands.get("evaluate", {}).get("planner")
     if planner and controller.rstrip("/").endswith("planner"):
         args += ["--planner-options", ",".join(f"{k}={v}" for k, v in planner.items())]

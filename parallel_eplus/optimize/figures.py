@@ -92,7 +92,9 @@ def typical_day(results: pd.DataFrame, spec: Path, shown: list[tuple[str, str]],
         ax.set_ylabel("°C")
         ax.set_title(f"{label}: zones, own bounds (green), its setpoints (dashed)", fontsize=9)
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=7)
-    what = "the quick window's first day" if period == QUICK else f"{period}'s day"
+    kind = {"peak_heat": "peak heating", "typical_heat": "typical heating", "peak_cool": "peak cooling",
+            "typical_cool": "typical cooling"}.get(period, period)  # fmt: skip
+    what = "the quick window's first day" if period == QUICK else f"BOPTEST's {kind} day"
     fig.suptitle(f"{weather}, {panels[0][1].time.iloc[0]:%b %d}: {what}", fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -9,7 +9,7 @@ import time
 from collections.abc import Callable
 
 from parallel_eplus.optimize import candidates as cands
-from parallel_eplus.optimize.budget import MIN_TRAIN_S, Budget
+from parallel_eplus.optimize.budget import MIN_TRAIN_S, MIN_USEFUL_TRAIN_S, Budget
 from parallel_eplus.optimize.choice import Choice, choose, figures, read_results
 from parallel_eplus.optimize.export import export
 from parallel_eplus.optimize.figures import DAY_PNG, SAVINGS_PNG, day_shown, savings, typical_day
@@ -25,11 +25,12 @@ log = logging.getLogger(__name__)
 
 
 def _stage(folder: BuildingFolder, budget: Budget, name: str, work: Callable[[], dict]) -> dict:
-    """Run a stage's work, record its fields and time, and the budget spent."""
+    """Run a stage's work, record its fields and its time (added to an earlier attempt's), and the budget spent."""
     t0 = time.time()
     log.info("%s: %s", folder.name, name)
+    before = float(folder.stage(name).get("seconds") or 0.0)
     fields = dict(work())
-    fields["seconds"] = round(fields.get("seconds") or (time.time() - t0), 1)
+    fields["seconds"] = round(before + (fields.get("seconds") or (time.time() - t0)), 1)
     record = folder.set_stage(name, **fields)
     budget.save()
     return record
@@ -135,8 +136,14 @@ def _learned(folder, settings, budget, preset, periods, notes, show):
     t = folder.stage("train")
     reserve = budget.reserve_after_training(folder.stage("own").get("seconds") or 60.0, planner)
     target = timesteps(preset, settings)
-    more = t.get("state") == "done" and (t.get("planned") != target
-                                         or (t.get("stopped") and budget.left_s() - reserve > MIN_TRAIN_S))  # fmt: skip
+    floor = MIN_TRAIN_S if settings.quick else MIN_USEFUL_TRAIN_S
+    short = budget.too_short(reserve, floor)
+    more = t.get("state") == "done" and not short and (t.get("planned") != target or t.get("stopped"))
+    if t.get("state") != "done" and short:
+        folder.set_stage("train", state="short", error=short, preset=preset.name)
+        notes.append(f"learned ({preset.name}): not trained: {short}")
+        log.warning("%s: not training: %s", folder.name, short)
+        return None
     if t.get("state") != "done" or more:
         deadline, share = budget.training_deadline(reserve)
         log.info("%s: training gets %.1f min of the budget (%.1f min left, %.1f reserved to score and export it)",

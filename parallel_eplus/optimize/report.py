@@ -7,9 +7,20 @@ from __future__ import annotations
 import pandas as pd
 
 from parallel_eplus.optimize.choice import KH_ALLOWANCE, KH_ALLOWANCE_SHARE, METRIC_NAMES, MIN_SAVING, Choice
+from parallel_eplus.optimize.figures import DAY_PNG, SAVINGS_PNG
 from parallel_eplus.optimize.folders import STAGES, BuildingFolder
 from parallel_eplus.optimize.periods import dates
 from parallel_eplus.optimize.settings import QUICK, OptimizeSettings
+
+CAPTIONS = {
+    SAVINGS_PNG: "Each candidate against the own controls, summed over the test periods: filled on the held-out "
+    "weathers, hollow on the training ones. A candidate is chosen left of the vertical dashed line (0.5 % lower) and "
+    "at or below the horizontal one (+0.1 K·h, or 1 % of the own controls' K·h where that is more).",
+    DAY_PNG: "Zone temperatures (lines), each zone's own thermostat bounds (green) and the controller's setpoints "
+    "(dashed) over one day of the first held-out weather, under the own controls and the chosen controller (when the "
+    "own controls are chosen, the candidate that came closest), from the evaluations' step records "
+    "(eval/<candidate>/<period>/episodes/).",
+}
 
 
 def _x(v) -> str:
@@ -44,8 +55,11 @@ def write_report(folder: BuildingFolder, settings: OptimizeSettings, train: pd.D
         lines += ["**No choice yet**: not every candidate is scored (rerun the same command to continue).", ""]
     else:
         lines += [f"**Chosen: {choice.label}.** {choice.reason[0].upper()}{choice.reason[1:]}.", ""]
-        if exported.get("written"):
-            lines += [f"Written: `{exported['written']}` ({exported.get('note') or 'export, with its contract'}).", ""]
+        if exported.get("written") and choice.candidate == "learned":
+            lines += [f"Written: `{exported['written']}` (`parallel-eplus export`: the controller with its contract); "
+                      f"serve it with `parallel-eplus serve {folder.controller}` (docs/deploy.md).", ""]  # fmt: skip
+        elif exported.get("written"):
+            lines += [f"Written: `{exported['written']}` ({exported.get('note')}).", ""]
         elif exported.get("state") == "done":
             lines += ["No controller written: keep your own controls (nothing was found that does better on weathers "
                       "it never saw).", ""]  # fmt: skip
@@ -68,15 +82,17 @@ def write_report(folder: BuildingFolder, settings: OptimizeSettings, train: pd.D
     if notes:
         lines += ["## Not scored, or refused", "", *[f"- {n}" for n in notes], ""]
     if figures:
-        lines += ["## Figures", "", *[f"![{f}]({f})" for f in figures], ""]
+        lines += ["## Figures", ""]
+        for f in figures:
+            lines += [f"![{f}]({f})", "", CAPTIONS.get(f, ""), ""]
     lines += ["## How it was made", "", f"- Source: `{folder.source}`; {stages.get('prepare', {}).get('how', '')}.",
               f"- Actions: {', '.join(stages.get('prepare', {}).get('actions', []))}.",
               f"- Test periods: {stages.get('periods', {}).get('how', '')}."]  # fmt: skip
     train_stage = stages.get("train", {})
-    if train_stage.get("preset"):
+    if train_stage.get("state") == "done":
         cut = " (stopped at its share of the budget)" if train_stage.get("stopped") else ""
         lines.append(f"- Learned controller: preset `{train_stage['preset']}` (version {train_stage.get('version')}: "
-                     f"{train_stage.get('summary', '')}), {train_stage.get('steps', 0):,} of "
+                     f"{train_stage.get('summary', '').rstrip('.')}), {train_stage.get('steps', 0):,} of "
                      f"{train_stage.get('planned') or 0:,} steps{cut} on {', '.join(settings.weathers)}; command in "
                      "`logs/train.log`, run in `runs/learned/`.")  # fmt: skip
     spent = [f"{s} {stages[s]['seconds'] / 60:.1f}" for s in STAGES if stages.get(s, {}).get("seconds")]
