@@ -160,14 +160,14 @@ def test_a_building_with_hidden_sensors_and_an_occupancy_calendar_plans_too(tmp_
     """The office: thermostat schedules and its HVAC gas are sensors the agent does not observe, and its band
     applies when occupied; a first run failed on its recorded controls before any step."""
     settings = MPCSettings(explore_steps=48, refit_every=96, epochs=5, candidates=32, comfort_hours="occupied",
-                           comfort_reference="own", comfort_level="own")  # fmt: skip
+                           comfort_reference="baseline", comfort_level="baseline")  # fmt: skip
     cfg = mpc_config(tmp_path, "office", building="office-small", weathers=["CA"], run_days=1, timesteps=192,
                      checkpoint_every=96, mpc=settings, comfort=ComfortConstraint(target_pct=97.5),
                      objective="cost")  # fmt: skip
     final = train(cfg, progress=False)
     mpc = MPC.load(final.parent / "planner" / "planner.pt")
     assert mpc.energy_weights.objective == "cost" and mpc.demand  # the bill, demand charges too, was its objective
-    assert mpc.settings.comfort_reference == "own" and mpc.comfort_times.occupied_only
+    assert mpc.settings.comfort_reference == "baseline" and mpc.comfort_times.occupied_only
     saved = th.load(sorted((final.parent / "checkpoints").glob("mpc_*_steps.pt"))[-1], weights_only=True)
     own = saved["own_level"]["out"]["CA"].numpy()  # the own controls' comfort by date, for the multiplier
     assert len(own) == 366 * 144 and np.all(own[:144] == -1)  # January 1, a holiday: the band did not apply

@@ -56,17 +56,17 @@ def test_a_candidate_that_plays_the_reference_pays_for_no_discomfort():
 def test_comfort_level_own_needs_a_comfort_target(tmp_path):
     from parallel_eplus.training.config import ComfortConstraint, TrainConfig
 
-    with pytest.raises(ValueError, match="comfort_level=own .* --comfort-target"):
-        TrainConfig(algorithm="mpc", mpc=MPCSettings(comfort_level="own"), runs_dir=str(tmp_path)).resolved()
+    with pytest.raises(ValueError, match="comfort_level=baseline .* --comfort-target"):
+        TrainConfig(algorithm="mpc", mpc=MPCSettings(comfort_level="baseline"), runs_dir=str(tmp_path)).resolved()
     with pytest.raises(ValueError, match="comfort_level 'mine'"):
         MPCSettings(comfort_level="mine")
-    TrainConfig(algorithm="mpc", mpc=MPCSettings(comfort_level="own"), comfort=ComfortConstraint(99.8),
+    TrainConfig(algorithm="mpc", mpc=MPCSettings(comfort_level="baseline"), comfort=ComfortConstraint(99.8),
                 runs_dir=str(tmp_path)).resolved()  # fmt: skip
 
 
 def test_comfort_reference_own_is_refused_where_no_action_is_a_thermostat():
     with pytest.raises(ValueError, match="no thermostat action"):
-        PlannerOptions.parse("comfort_reference=own").apply(MPC.load(planner_file(PLANNER)))
+        PlannerOptions.parse("comfort_reference=baseline").apply(MPC.load(planner_file(PLANNER)))
 
 
 @pytest.mark.slow
@@ -80,13 +80,14 @@ def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_a
     from parallel_eplus.deploy.serve.contract import Contract
     from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 
-    mpc = PlannerOptions.parse("comfort_reference=own,comfort_hours=occupied").apply(MPC.load(planner_file(OFFICE)))
+    options = PlannerOptions.parse("comfort_reference=baseline,comfort_hours=occupied")
+    mpc = options.apply(MPC.load(planner_file(OFFICE)))
     folder = tmp_path / "run" / "planner"
     mpc.save(folder / "planner.pt")
     shutil.copy(OFFICE / "config.json", folder / "config.json")
     export(folder, tmp_path / "served", record_days=1)
     planner = Contract.read(tmp_path / "served").data["planner"]
-    assert planner["comfort_reference"] == "own" and planner["calendar"]["occupied_only"] is True
+    assert planner["comfort_reference"] == "baseline" and planner["calendar"]["occupied_only"] is True
     assert planner["thermostat_sides"] == [[0, 1], [0, 0]]
     # a cold morning, where paying only beyond the own thermostats' discomfort changes the plan
     runtime = PlannerRuntime(tmp_path / "served", Contract.read(tmp_path / "served"))
@@ -103,15 +104,15 @@ def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_a
     info = {"time": when, "weather": "CA"}
     own = mpc.act(obs, [info], a_last)[0]
     mpc.reset(0)
-    bound = PlannerOptions.parse("comfort_reference=bound").apply(mpc).act(obs, [info], a_last)[0]
+    bound = PlannerOptions.parse("comfort_reference=band").apply(mpc).act(obs, [info], a_last)[0]
     assert not np.allclose(own, bound)  # the reference reached the plan
     np.testing.assert_allclose(served, mpc.action_low + (own + 1) / 2 * (mpc.action_high - mpc.action_low), atol=1e-4)
     # held near the own plan, and off it only for a 2 % saving: served as planned in process
-    options = "comfort_reference=own,comfort_hours=occupied,own_radius=0.1,min_saving=0.02"
+    options = "comfort_reference=baseline,comfort_hours=occupied,baseline_radius=0.1,min_saving=0.02"
     mpc = PlannerOptions.parse(options).apply(MPC.load(planner_file(OFFICE)))
     mpc.save(folder / "planner.pt")
     export(folder, tmp_path / "served-near", record_days=1)
-    assert Contract.read(tmp_path / "served-near").data["planner"]["settings"]["own_radius"] == 0.1
+    assert Contract.read(tmp_path / "served-near").data["planner"]["settings"]["baseline_radius"] == 0.1
     runtime = PlannerRuntime(tmp_path / "served-near", Contract.read(tmp_path / "served-near"))
     answer = runtime.act(body)["setpoints"]
     served = np.array([answer[n]["value"] for n in ("cooling_setpoint_c", "heating_setpoint_c")])
@@ -121,7 +122,7 @@ def test_a_planner_paying_beyond_its_own_thermostats_in_occupied_hours_exports_a
 
 @pytest.mark.slow
 def test_the_own_level_counts_the_own_controls_as_their_evaluation_scores_them(tmp_path, no_leaks):
-    """`comfort_level=own`: the share out of band the record gives the multiplier, date by date, is the share
+    """`comfort_level=baseline`: the share out of band the record gives the multiplier, date by date, is the share
     `evaluate` scores the building's own controls with over the same days (the office on CO, January 1-4 of
     2017: a Sunday, then workdays with cold mornings)."""
     from parallel_eplus.evaluation.controllers import Controller

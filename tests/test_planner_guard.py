@@ -22,7 +22,7 @@ JULY = dt.datetime(2013, 7, 8, 10, 0)  # a Monday morning: the office's band app
 
 
 def office(options: str) -> MPC:
-    return PlannerOptions.parse(f"comfort_reference=own,{options}").apply(MPC.load(planner_file(OFFICE)))
+    return PlannerOptions.parse(f"comfort_reference=baseline,{options}").apply(MPC.load(planner_file(OFFICE)))
 
 
 def observation(zone_c: float, outdoor_c: float = 30.0) -> np.ndarray:
@@ -31,17 +31,17 @@ def observation(zone_c: float, outdoor_c: float = 30.0) -> np.ndarray:
 
 def own_first(mpc: MPC, info: dict, a_last: np.ndarray) -> np.ndarray:
     """The own plan's first action as a candidate plays it."""
-    reference = mpc.own_plan([info], mpc.future([info])[2], a_last)
+    reference = mpc.baseline_plan([info], mpc.future([info])[2], a_last)
     return _follow(a_last, reference, mpc.settings.max_increment, *mpc.support)[:, 0]
 
 
 def test_where_the_band_applies_each_thermostat_conditions_at_least_as_much_as_its_own_plan_or_follows_it():
     """Cooling (action 0) no higher and heating (action 1) no lower than the own plan's at every step the band
-    applies (`at_least_own`), where without it the search raises the cooling setpoint past it; with `own`, both
+    applies (`at_least_baseline`), where without it the search raises the cooling setpoint past it; with `own`, both
     follow the own plan; refused without the own plan, or for another value."""
     a_last = np.array([[0.5, -0.5]], np.float32)
     beyond = {}
-    for option in ("band_thermostats=free", "band_thermostats=at_least_own", "band_thermostats=own"):
+    for option in ("band_thermostats=free", "band_thermostats=at_least_baseline", "band_thermostats=baseline"):
         mpc = office(option)
         beyond[option] = 0.0
         for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 23.5)):
@@ -53,9 +53,9 @@ def test_where_the_band_applies_each_thermostat_conditions_at_least_as_much_as_i
                 beyond[option] = max(beyond[option], float(action[0, 0] - own[0, 0]), float(own[0, 1] - action[0, 1]))
                 if option.endswith("=own"):
                     np.testing.assert_allclose(action, own, atol=1e-6)
-    assert beyond["band_thermostats=at_least_own"] <= 1e-6 < beyond["band_thermostats=free"]
-    with pytest.raises(ValueError, match="comfort_reference=own"):
-        PlannerOptions.parse("band_thermostats=own").apply(MPC.load(planner_file(OFFICE)))
+    assert beyond["band_thermostats=at_least_baseline"] <= 1e-6 < beyond["band_thermostats=free"]
+    with pytest.raises(ValueError, match="comfort_reference=baseline"):
+        PlannerOptions.parse("band_thermostats=baseline").apply(MPC.load(planner_file(OFFICE)))
     with pytest.raises(ValueError, match="band_thermostats"):
         PlannerOptions.parse("band_thermostats=some")
 
@@ -146,7 +146,7 @@ def test_band_lead_holds_the_thermostats_to_their_own_plan_that_many_steps_befor
     a_last = np.array([[0.5, -0.5]], np.float32)
     lead = 6
     for option, led in ((f"band_lead={lead}", True), ("band_lead=0", False)):
-        mpc = office(f"comfort_hours=occupied,band_thermostats=own,{option}")
+        mpc = office(f"comfort_hours=occupied,band_thermostats=baseline,{option}")
         ahead_only = []  # the steps before the band with it within the lead: (followed the own plan)
         for minutes in range(3 * 60, 10 * 60, int(mpc.step_minutes)):
             info = {"time": JULY.replace(hour=0) + dt.timedelta(minutes=minutes), "weather": "CA"}
@@ -161,7 +161,8 @@ def test_band_lead_holds_the_thermostats_to_their_own_plan_that_many_steps_befor
 
 
 def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_process_and_served(tmp_path, no_leaks):
-    """With `band_thermostats=own` and `own_margin`, a July morning's cooling setpoint is its own less the margin and
+    """With `band_thermostats=baseline` and `baseline_margin`, a July morning's cooling setpoint is its own less the
+    margin and
     its heating setpoint its own plus the margin, in K; the served planner sets the same; refused outside [0, 1] K
     or without the own plan."""
     from parallel_eplus.buildings.weather.forecast import WEATHER
@@ -170,13 +171,13 @@ def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_pr
     from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 
     margin, info, obs = 0.05, {"time": JULY, "weather": "CA"}, observation(23.5, 25.0)
-    at_own = office("band_thermostats=own")
-    a_last = at_own.own_plan([info], at_own.future([info])[2], np.zeros((1, 2), np.float32))[:, 0]  # on its own plan
+    at_own = office("band_thermostats=baseline")
+    a_last = at_own.baseline_plan([info], at_own.future([info])[2], np.zeros((1, 2), np.float32))[:, 0]  # on it
 
     def physical(mpc: MPC, action: np.ndarray) -> np.ndarray:
         return mpc.action_low + (action[0] + 1) / 2 * (mpc.action_high - mpc.action_low)
 
-    inside = office(f"band_thermostats=own,own_margin={margin}")
+    inside = office(f"band_thermostats=baseline,baseline_margin={margin}")
     own, held = (physical(m, m.act(obs, [info], a_last)) for m in (at_own, inside))
     np.testing.assert_allclose(own, physical(at_own, a_last), atol=1e-4)  # cooling (0), heating (1) at their own
     np.testing.assert_allclose(held - own, [-margin, margin], atol=1e-4)
@@ -184,7 +185,7 @@ def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_pr
     inside.save(tmp_path / "planner" / "planner.pt")
     export(tmp_path / "planner", tmp_path / "served", record_days=1, workers=1)
     data = Contract.read(tmp_path / "served").data  # its fallback off: this test is the margin's
-    assert data["planner"]["settings"]["own_margin"] == margin
+    assert data["planner"]["settings"]["baseline_margin"] == margin
     runtime = PlannerRuntime(tmp_path / "served", Contract(dict(data, fallback=dict(
         data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None))))
     truth = inside.forecasts("CA").file.truth(step_times(JULY, inside.step_minutes, inside.settings.horizon))
@@ -193,8 +194,8 @@ def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_pr
                           "last_setpoints": dict(zip(names, map(float, physical(inside, a_last)), strict=True)),
                           "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)}})  # fmt: skip
     np.testing.assert_allclose([answer["setpoints"][n]["value"] for n in names], held, atol=1e-4)
-    for bad in ("own_margin=-0.1", "own_margin=2"):
-        with pytest.raises(ValueError, match="own_margin"):
+    for bad in ("baseline_margin=-0.1", "baseline_margin=2"):
+        with pytest.raises(ValueError, match="baseline_margin"):
             PlannerOptions.parse(bad)
-    with pytest.raises(ValueError, match="comfort_reference=own"):
-        PlannerOptions.parse("own_margin=0.1").apply(MPC.load(planner_file(OFFICE)))
+    with pytest.raises(ValueError, match="comfort_reference=baseline"):
+        PlannerOptions.parse("baseline_margin=0.1").apply(MPC.load(planner_file(OFFICE)))

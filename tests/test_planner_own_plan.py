@@ -1,6 +1,6 @@
-"""The planner's own plan (`comfort_reference = "own"`): what the building's own controls would set over the
-horizon, or its rule (`own_plan = "rule"`), and the settings that weigh the search's plan against it (`consensus`,
-`min_saving`, `own_radius`)."""
+"""The planner's baseline (`comfort_reference = "baseline"`): what the building's own controls would set over the
+horizon, or its rule (`baseline_source = "rule"`), and the settings that weigh the search's plan against it
+(`consensus`, `min_saving`, `baseline_radius`)."""
 
 from __future__ import annotations
 
@@ -56,8 +56,9 @@ def test_the_own_reference_sets_each_thermostat_to_its_zone_s_own_setpoint():
 def test_a_supply_air_node_s_own_plan_is_what_its_manager_set_that_day(tmp_path, no_leaks):
     """The medium office's supply air follows no thermostat schedule: its own plan is what the model's own manager
     set on that date, recorded with the building's own controls. The calendar keeps it by date (and the served
-    planner's arrays the same), and `own_radius` keeps the planner's supply air that near it, as the thermostats."""
-    mpc = MPC("office-medium", MPCSettings(comfort_reference="own", own_radius=0.1), 0.5, 1e-5, 1)
+    planner's arrays the same), and `baseline_radius` keeps the planner's supply air that near it, as the
+    thermostats."""
+    mpc = MPC("office-medium", MPCSettings(comfort_reference="baseline", baseline_radius=0.1), 0.5, 1e-5, 1)
     assert mpc.follows.tolist() == [True, True, False]  # before the record: the thermostats only
     demos = record_baseline("office-medium", ["CA"], 1, 1, tmp_path / "record", progress=False)
     own = np.array([side is None for side in mpc.thermostat_sides])
@@ -67,7 +68,7 @@ def test_a_supply_air_node_s_own_plan_is_what_its_manager_set_that_day(tmp_path,
     info = {"time": demos.times[row], "weather": "CA"}
     a_last = demos.actions[row - 1 : row].copy()
     a_last[0, 2] = 0.5  # the supply air where the planner left it: 16.5 C
-    plan = mpc.own_plan([info], mpc.future([info])[2], a_last)[0]
+    plan = mpc.baseline_plan([info], mpc.future([info])[2], a_last)[0]
     np.testing.assert_allclose(plan[:, 2], demos.actions[row : row + h, 2])  # each step: what the manager set
     assert np.all(np.abs(plan[:, 2] - 0.5) > 0.5)  # (12.8 C in January), not where it was left
     times = step_times(info["time"], mpc.step_minutes, h)
@@ -104,14 +105,15 @@ def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_
     a_last = np.array([[0.5, -0.5]], np.float32)
     outcomes = {}
     for consensus in ("false", "true"):
-        mpc = PlannerOptions.parse(f"comfort_reference=own,consensus={consensus}").apply(MPC.load(planner_file(OFFICE)))
+        options = PlannerOptions.parse(f"comfort_reference=baseline,consensus={consensus}")
+        mpc = options.apply(MPC.load(planner_file(OFFICE)))
         for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
             obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
             s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
             for hour in range(24):
                 info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
                 exo, applies, bounds, weights = mpc.future([info])
-                reference = mpc.own_plan([info], bounds, a_last)
+                reference = mpc.baseline_plan([info], bounds, a_last)
                 reference = _follow(a_last, reference, mpc.settings.max_increment, *mpc.support)  # as a candidate can
                 action = mpc.act(obs, [info], a_last)
                 steps = np.concatenate([np.zeros((1, 1, 2)), np.cumsum(mpc.last.increments[:, :-1], axis=1)], axis=1)
@@ -135,14 +137,15 @@ def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_muc
     a_last = np.array([[0.5, -0.5]], np.float32)
     left = {}
     for share in (0.0, 0.02, 0.5):
-        mpc = PlannerOptions.parse(f"comfort_reference=own,min_saving={share}").apply(MPC.load(planner_file(OFFICE)))
+        options = PlannerOptions.parse(f"comfort_reference=baseline,min_saving={share}")
+        mpc = options.apply(MPC.load(planner_file(OFFICE)))
         left[share] = 0
         for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
             obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
             for hour in range(24):
                 info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
                 exo, applies, bounds, weights = mpc.future([info])
-                reference = _follow(a_last, mpc.own_plan([info], bounds, a_last), mpc.settings.max_increment,
+                reference = _follow(a_last, mpc.baseline_plan([info], bounds, a_last), mpc.settings.max_increment,
                                     *mpc.support)  # fmt: skip
                 action = mpc.act(obs, [info], a_last)
                 s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
@@ -153,19 +156,19 @@ def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_muc
                     left[share] += 1
                     assert own_cost - mpc.last.cost[0] >= share * abs(own_cost) - 1e-3  # it paid for leaving
     assert left[0.0] > left[0.02] >= left[0.5] and left[0.0] > 0
-    with pytest.raises(ValueError, match="comfort_reference=own"):
-        PlannerOptions.parse("comfort_reference=bound,min_saving=0.02").apply(MPC.load(planner_file(OFFICE)))
+    with pytest.raises(ValueError, match="comfort_reference=baseline"):
+        PlannerOptions.parse("comfort_reference=band,min_saving=0.02").apply(MPC.load(planner_file(OFFICE)))
     with pytest.raises(ValueError, match="min_saving"):
         PlannerOptions.parse("min_saving=1.5")
 
 
 def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan():
-    """`own_radius`: every thermostat action within that much (normalized) of the own plan's at the step it acts,
+    """`baseline_radius`: every thermostat action within that much (normalized) of the own plan's at the step it acts,
     where without it the search strays further; refused without the own plan."""
     a_last = np.array([[0.5, -0.5]], np.float32)
     furthest = {}
-    for radius in ("", ",own_radius=0.1"):
-        mpc = PlannerOptions.parse(f"comfort_reference=own{radius}").apply(MPC.load(planner_file(OFFICE)))
+    for radius in ("", ",baseline_radius=0.1"):
+        mpc = PlannerOptions.parse(f"comfort_reference=baseline{radius}").apply(MPC.load(planner_file(OFFICE)))
         assert mpc.follows.all()  # the office's two actions are its thermostats
         furthest[radius] = 0.0
         for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
@@ -173,25 +176,25 @@ def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan():
             for hour in range(24):
                 info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
                 bounds = mpc.future([info])[2]
-                reference = _follow(a_last, mpc.own_plan([info], bounds, a_last), mpc.settings.max_increment,
+                reference = _follow(a_last, mpc.baseline_plan([info], bounds, a_last), mpc.settings.max_increment,
                                     *mpc.support)  # fmt: skip
                 action = mpc.act(obs, [info], a_last)
                 furthest[radius] = max(furthest[radius], float(np.abs(action - reference[:, 0]).max()))
-    assert furthest[",own_radius=0.1"] <= 0.1 + 1e-5 < furthest[""]
-    with pytest.raises(ValueError, match="comfort_reference=own"):
-        PlannerOptions.parse("own_radius=0.1").apply(MPC.load(planner_file(OFFICE)))
-    with pytest.raises(ValueError, match="own_radius"):
-        PlannerOptions.parse("comfort_reference=own,own_radius=3")
+    assert furthest[",baseline_radius=0.1"] <= 0.1 + 1e-5 < furthest[""]
+    with pytest.raises(ValueError, match="comfort_reference=baseline"):
+        PlannerOptions.parse("baseline_radius=0.1").apply(MPC.load(planner_file(OFFICE)))
+    with pytest.raises(ValueError, match="baseline_radius"):
+        PlannerOptions.parse("comfort_reference=baseline,baseline_radius=3")
 
 
 @pytest.mark.slow
 def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rules(tmp_path, no_leaks):
-    """`own_plan=rule` on the medium office: the own plan of the supply air is Guideline 36's reset (the spec's
-    `controller`) run beside the planner, not the building's constant 12.8 C, and `own_radius` holds the planner
+    """`baseline_source=rule` on the medium office: the own plan of the supply air is Guideline 36's reset (the spec's
+    `controller`) run beside the planner, not the building's constant 12.8 C, and `baseline_radius` holds the planner
     within 0.2 (0.6 K) of it at every step; a planner with no rule-based `controller` that releases is refused."""
     settings = MPCSettings(explore_steps=48, refit_every=96, epochs=5, candidates=32, comfort_hours="occupied",
-                           comfort_reference="own", own_plan="rule", own_radius=0.2, support_margin=2.0,
-                           max_increment=2.0, distill=False)  # fmt: skip
+                           comfort_reference="baseline", baseline_source="rule", baseline_radius=0.2,
+                           support_margin=2.0, max_increment=2.0, distill=False)  # fmt: skip
     cfg = TrainConfig(algorithm="mpc", building="office-medium", weathers=["CO"], workers=1, run_days=2,
                       timesteps=192, checkpoint_every=96, run_name="ruled", runs_dir=str(tmp_path / "runs"),
                       tensorboard_dir=str(tmp_path / "tb"), mpc=settings,
@@ -214,15 +217,15 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
     from .serving import serving
 
     out = tmp_path / "export"
-    export(tmp_path / "runs" / "ruled", out, record_days=1, options="band_thermostats=own")  # 48 decisions checked
+    export(tmp_path / "runs" / "ruled", out, record_days=1, options="band_thermostats=baseline")  # 48 decisions checked
     contract = json.loads((out / "controller.json").read_text())
     assert [r["name"] for r in contract["rule"]["readings"]] == ["setpoint_clgsetp_sch"]  # the zones' cooling setpoint
-    assert contract["planner"]["settings"]["band_thermostats"] == "own"
+    assert contract["planner"]["settings"]["band_thermostats"] == "baseline"
     trusting = tmp_path / "trusting"  # the same planner, never falling back: its arithmetic against in process
     shutil.copytree(out, trusting)
     contract["fallback"] |= {"max_input_z": 1e9, "max_forecast_gap_c": 1e9, "max_spread_k": 1e9}
     (trusting / "controller.json").write_text(json.dumps(contract))
-    in_process = planner_controller(f"{tmp_path / 'runs' / 'ruled' / 'planner'}=Planner", "band_thermostats=own")
+    in_process = planner_controller(f"{tmp_path / 'runs' / 'ruled' / 'planner'}=Planner", "band_thermostats=baseline")
     with serving(trusting, tmp_path / "server.log") as url:
         df = run_sweep([in_process, http_controller(url)], ["FL"], 1, 2, tmp_path / "served", progress=False,
                        building="office-medium")  # fmt: skip
@@ -256,5 +259,5 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
     for field, change in refused:
         with pytest.raises(InputError, match=field):
             runtime.act({**body, **change})
-    with pytest.raises(ValueError, match="own_plan=rule"):
-        MPC("office-small", MPCSettings(comfort_reference="own", own_plan="rule"), 0.1, 1e-5, 1)
+    with pytest.raises(ValueError, match="baseline_source=rule"):
+        MPC("office-small", MPCSettings(comfort_reference="baseline", baseline_source="rule"), 0.1, 1e-5, 1)

@@ -46,7 +46,7 @@ def test_numbers_choices_none_and_layer_sizes_are_read_by_their_annotation():
         MPCSettings.from_text("min_saving=nan")
     with pytest.raises(ValueError, match=r"--mpc comfort_risk='max': one of 'mean' or 'worst'"):
         MPCSettings.from_text("comfort_risk=max")
-    with pytest.raises(ValueError, match=r"--mpc band_thermostats='some': one of 'free', 'at_least_own' or 'own'"):
+    with pytest.raises(ValueError, match=r"band_thermostats='some': one of 'free', 'at_least_baseline' or 'baseline'"):
         MPCSettings.from_text("band_thermostats=some")
     with pytest.raises(ValueError, match="horizon takes a value, not none"):
         MPCSettings.from_text("horizon=none")

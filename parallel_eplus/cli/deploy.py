@@ -23,7 +23,8 @@ def add_commands(sub) -> None:
                     help="planner: days of its own controls recorded for the fallback (default: the run's, up to 365)")
     ex.add_argument("--workers", type=int, default=2, help="planner: EnergyPlus runs at once (own controls)")
     ex.add_argument("--planner-options", metavar="NAME=VALUE,...",
-                    help="planner: settings overriding its own, as `evaluate --planner` (e.g. band_thermostats=own)")
+                    help="planner: settings overriding its saved ones, as `evaluate --planner` "
+                    "(e.g. band_thermostats=baseline)")
     ex.add_argument("--quiet", action="store_true", help="no progress bar (a log or CI's output stays readable)")
     ex.set_defaults(func=cmd_export, needs="export")
     se = sub.add_parser("serve", help="serve an exported controller over HTTP: POST /act, GET /health, GET /contract")

@@ -95,8 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     ev.add_argument(
         "--preset", action=PresetOption, metavar="NAME",
-        help="a shipped preset's evaluation settings (e.g. thermostat-planner: --planner band_thermostats=own) under "
-        "the command line's; `parallel-eplus presets` lists them",
+        help="a shipped preset's evaluation settings (e.g. thermostat-planner: --planner band_thermostats=baseline) "
+        "under the command line's; `parallel-eplus presets` lists them",
     )  # fmt: skip
     ev.add_argument("--baseline", action="store_true", help="include EnergyPlus's built-in controller")
     ev.add_argument(

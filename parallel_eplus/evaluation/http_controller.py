@@ -137,7 +137,7 @@ class HttpController:
 
     fallbacks = 0  # answers a served planner marked as fallbacks
     guard = None  # a served planner's `guard`, sent back with the next request
-    rule_state = None  # a served planner's rule's memory (`own_plan=rule`), sent back with the next request
+    rule_state = None  # a served planner's rule's memory (`baseline_source=rule`), sent back with the next request
 
     def _forecast(self, info: dict) -> dict[str, list[float]]:
         """The coming steps' weather from the episode's own file, as the contract's forecast block asks for it: the

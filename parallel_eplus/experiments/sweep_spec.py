@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from parallel_eplus.buildings.scoring.reward import RewardConfig
+from parallel_eplus.learning.model_based.runtime.renamed import renamed
 from parallel_eplus.training.config import TrainConfig
 
 # Where a trial runs is the sweep's business: each trial trains with the local backend on its node.
@@ -89,9 +90,25 @@ def _flatten(table: dict, prefix: str = "") -> dict[str, Any]:
         key = prefix + key.replace("-", "_")
         if isinstance(value, dict) and not prefix and key in _nested():
             out |= _flatten(value, key + ".")
+        elif key.startswith("mpc."):
+            out.update([_renamed(key, value)])
         else:
             out[key] = value
     return out
+
+
+def _renamed(key: str, value: Any) -> tuple[str, Any]:
+    """A planner setting (`mpc.own_radius`) by its name and values now (runtime/renamed.py), with the warning: a
+    single value, a grid's or mutations' list, or a search space's {distribution: [values]}."""
+    name = key.removeprefix("mpc.")
+    if isinstance(value, list):
+        value = [renamed(name, v, "a sweep spec")[1] for v in value]
+    elif isinstance(value, dict):
+        value = {d: [renamed(name, v, "a sweep spec")[1] for v in vs] if isinstance(vs, list) else vs
+                 for d, vs in value.items()}  # fmt: skip
+    else:
+        name, value = renamed(name, value, "a sweep spec")
+    return "mpc." + renamed(name, None, "a sweep spec")[0], value
 
 
 def config_keys() -> set[str]:

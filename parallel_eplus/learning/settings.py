@@ -99,7 +99,7 @@ class FromText:
         hints = cls.hints()
         for item in filter(None, (p.strip() for p in (text or "").split(","))):
             key, sep, value = item.partition("=")
-            key = key.strip().replace("-", "_")
+            key, value = cls.renamed(key.strip().replace("-", "_"), value.strip(), flag)
             if not sep or key not in hints:
                 from parallel_eplus.buildings.spec.sections import did_you_mean
 
@@ -111,6 +111,11 @@ class FromText:
         except ValueError as e:
             raise ValueError(f"{flag} {e}") from None
         return settings
+
+    @classmethod
+    def renamed(cls, key: str, text: str, flag: str) -> tuple[str, str]:
+        """A setting's name and text as they are called now (a class with renamed settings warns for the old)."""
+        return key, text
 
     @classmethod
     def parse_value(cls, key: str, text: str, flag: str | None = None):

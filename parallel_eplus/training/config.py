@@ -125,8 +125,8 @@ class TrainConfig:
             self._check_mbpo()
         if self.algorithm == "mpc" and (self.overlap or self.init_from or self.residual_scale):
             raise ValueError("--algorithm mpc plans on a model it learns: no --overlap, --init-from or --residual")
-        if self.mpc.comfort_level == "own" and (not self.constrained or self.mpc.comfort_weight is not None):
-            raise ValueError("--mpc comfort_level=own sets the share in band the multiplier holds: give "
+        if self.mpc.comfort_level == "baseline" and (not self.constrained or self.mpc.comfort_weight is not None):
+            raise ValueError("--mpc comfort_level=baseline sets the share in band the multiplier holds: give "
                              "--comfort-target PCT and no fixed comfort_weight")  # fmt: skip
         if self.residual_scale < 0 or (self.residual_scale and self.model != "temp_fan"):
             raise ValueError("--residual needs a scale >= 0 and --model temp_fan (it corrects all four actions)")
@@ -224,7 +224,7 @@ class TrainConfig:
         raw["comfort"] = ComfortConstraint(**raw.get("comfort", {}))  # runs from before it have none
         raw["imitation"] = ImitationSettings(**raw.get("imitation", {}))
         sac = raw.get("sac", {})
-        raw["mpc"] = MPCSettings(**raw.get("mpc", {}))
+        raw["mpc"] = MPCSettings.of_saved(raw.get("mpc", {}), "a run's config.json")  # 1.0's names renamed
         raw["mbpo"] = MBPOSettings(**raw.get("mbpo", {}))
         raw["sac"] = SACSettings(**{**sac, "net_arch": tuple(sac.get("net_arch", SACSettings.net_arch))})
         raw["evaluation"] = EvalSettings(**raw.get("evaluation", {}))  # runs from before it have none

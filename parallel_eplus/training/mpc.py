@@ -240,12 +240,12 @@ class _Loop:
         if self.own_level is not None:
             missing = [w for w in self.cfg.weathers if weather_label(w) not in self.own_level.out]
             if missing:  # those weathers' batches are held to the target alone (`comfort/own_unmatched_pct`)
-                log.warning("comfort_level=own: the record has no steps on %s; there the target holds",
+                log.warning("comfort_level=baseline: the record has no steps on %s; there the target holds",
                             ", ".join(missing))  # fmt: skip
         jump = self.mpc.own_jump()
-        if self.s.comfort_reference == "own" and jump > self.s.max_increment:
-            log.warning("comfort_reference=own: the building's own thermostats jump %.2f (normalized) in one step, "
-                        "beyond max_increment=%g: the planner reaches the occupied setpoint a step late and pays "
+        if self.s.comfort_reference == "baseline" and jump > self.s.max_increment:
+            log.warning("comfort_reference=baseline: the building's own thermostats jump %.2f (normalized) in one "
+                        "step, beyond max_increment=%g: the planner reaches the occupied setpoint a step late and pays "
                         "nothing for it; --mpc max_increment=2.0 lets it jump as they do", jump, self.s.max_increment)
 
     def _refit(self, epochs: int) -> None:
@@ -274,9 +274,9 @@ class _Loop:
         self.data.layout = self.mpc.layout
         self.steps = state["steps"]
         self.replay = {w: np.asarray(a) for w, a in state["replay"].items()}
-        if self.s.comfort_level == "own":
+        if self.s.comfort_level == "baseline":
             if state.get("own_level") is None:
-                raise ValueError(f"--resume with comfort_level=own: {checkpoint} has no record of the building's "
+                raise ValueError(f"--resume with comfort_level=baseline: {checkpoint} has no record of the building's "
                                  "own comfort (a run started without it); start a new run")
             self.own_level = OwnLevel.from_state(state["own_level"])
         if self.lagrangian is not None and state["lagrangian"] is not None:

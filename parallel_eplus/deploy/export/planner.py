@@ -88,7 +88,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
     mpc = chosen.apply(MPC.load(source))
     building = load_building(mpc.building)
     rule = None
-    if mpc.settings.own_plan == "rule":  # the rule it rides is served beside it (served_rule.py), or refused here
+    if mpc.settings.baseline_source == "rule":  # the rule it rides is served beside it (served_rule.py) or refused
         rule = rule_entry(mpc.rule(0), [s.name for s in building.observed])
     spec = building.spec
     weathers = saved.get("weathers") or list(spec.weathers)[:1] or ["CA"]

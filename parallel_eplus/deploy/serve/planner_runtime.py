@@ -38,6 +38,7 @@ from parallel_eplus.learning.model_based.runtime.planner import (
     decision_seed,
     side_array,
 )
+from parallel_eplus.learning.model_based.runtime.renamed import renamed
 
 log = logging.getLogger("parallel_eplus.deploy.planner")
 
@@ -70,13 +71,14 @@ class PlannerRuntime:
         self.demand = None if not d else DemandCharges(self.energy.tariffs["Electricity"], self.step_minutes,
                                                        d["part"], d["per_dollar"])  # fmt: skip
         self.calendar = Calendar.from_arrays(p["calendar"], {k: v for k, v in arrays.items() if k in _CALENDAR})
-        self.reference = p.get("comfort_reference", "bound")  # "own": discomfort beyond the own thermostats' is paid
+        # "baseline": discomfort beyond the baseline's (the own thermostats' plan) is paid; 1.0's "own" renamed
+        self.reference = renamed("comfort_reference", p.get("comfort_reference", "band"), "a contract")[1]
         self.sides = [tuple(x) if x is not None else None for x in p.get("thermostat_sides", [])]
-        sides = np.array([side is not None for side in self.sides], bool)  # the own plan sets these (own_radius)
+        sides = np.array([side is not None for side in self.sides], bool)  # the baseline sets these
         self.side_array = side_array(self.sides)  # and which bound each thermostat's is (band_thermostats)
         self.follows = sides | self.calendar.own_known(len(sides))
         self.not_thermostat = ~sides
-        self.rule = None  # the rule the planner rides (`own_plan=rule`): its setpoints are the own plan's there
+        self.rule = None  # the rule the planner rides (`baseline_source=rule`): its setpoints the baseline's
         if contract.data.get("rule"):
             from parallel_eplus.deploy.serve.served_rule import ServedRule
 
@@ -107,11 +109,11 @@ class PlannerRuntime:
         weights = None if self.energy.objective == "energy" else self.energy.at([when, *times[:-1]])[None]
         bounds = self.calendar.bounds(times)
         reference, follows, ruled, rule_state = None, self.follows, None, None
-        if self.reference == "own":
-            inside = self.calendar.tolerance + self.settings.own_margin  # as in process (control.py `own_plan`)
+        if self.reference == "baseline":
+            inside = self.calendar.tolerance + self.settings.baseline_margin  # as mpc.py's `baseline_plan`
             reference = own_reference(bounds, inside, self.sides, self.low, self.high, a_last,
                                       self.calendar.own_actions(times))[None]  # fmt: skip
-        if self.rule is not None:  # its setpoints now, held over the horizon, as in process (control.py `own_plan`)
+        if self.rule is not None:  # its setpoints now, held over the horizon, as mpc.py's `baseline_plan`
             ruled, rule_state = self.rule.step(body, obs)
             ruled[~self.not_thermostat] = np.nan
             sets = np.isfinite(ruled)

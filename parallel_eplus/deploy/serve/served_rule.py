@@ -1,4 +1,4 @@
-"""The rule a served planner rides (`own_plan=rule`): Guideline 36's supply-air reset, run from the contract.
+"""The rule a served planner rides (`baseline_source=rule`): Guideline 36's supply-air reset, run from the contract.
 
 In process the planner's own plan for the supply air is the reset's setpoint at each step (control.py); served, the
 server keeps no state, so the reset's one number of memory (`t_max`, trimmed and responded step by step) comes

@@ -3,9 +3,12 @@ mbpo`'s: plain data classes, each field with its one line for `--mpc help` / `--
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
+from parallel_eplus.learning.model_based.runtime.renamed import RENAMED, renamed, renamed_settings
 from parallel_eplus.learning.settings import FromText, setting
 
 
@@ -24,7 +27,7 @@ class MPCSettings(FromText):
         "planner's own steps",
         "horizon": "The planner: CEM over increments of the last action (runtime/planner.py)",
         "comfort_weight": "What a plan costs besides energy",
-        "consensus": "Against the building's own plan (with comfort_reference=own)",
+        "consensus": "Against the baseline: the building's own controls' plan (with comfort_reference=baseline)",
         "noise": "Exploration in training",
         "distill": "The policy network (the student `export` takes)",
     }
@@ -88,39 +91,40 @@ class MPCSettings(FromText):
     comfort_hours: Literal["all", "occupied"] = setting(
         "all", "when discomfort costs: at every step, setbacks too (all), or in occupied hours only (occupied)"
     )
-    # "own": what exceeds the discomfort the building's own thermostats would have from the same state, played
+    # "baseline": what exceeds the discomfort the building's own thermostats would have from the same state, played
     # through the same model (calendar.own_reference). A zone its own controls cannot hold either (the warehouse's
-    # bulk storage, which has no cooling) then costs nothing to leave as it is; against the bound, the planner
+    # bulk storage, which has no cooling) then costs nothing to leave as it is; against the band, the planner
     # cooled its neighbours for it.
-    comfort_reference: Literal["bound", "own"] = setting(
-        "bound",
-        "discomfort a plan pays for: all of it beyond the band (bound), or only what exceeds the building's "
-        "own thermostats' plan through the same model (own)",
+    comfort_reference: Literal["band", "baseline"] = setting(
+        "band",
+        "discomfort a plan pays for: all of it beyond the band (band), or only what exceeds the baseline's, the "
+        "building's own controls' plan through the same model (baseline)",
     )
-    # "own" (own_level.py): the warehouse's own controls keep 77.6 % in summer: against 99.8 % its multiplier sat
-    # at its cap.
-    comfort_level: Literal["target", "own"] = setting(
+    # "baseline" (own_level.py): the warehouse's own controls keep 77.6 % in summer: against 99.8 % its multiplier
+    # sat at its cap.
+    comfort_level: Literal["target", "baseline"] = setting(
         "target",
-        "the share in band the multiplier holds: --comfort-target's (target), or the building's own "
-        "controls' on the same dates and weathers where lower (own)",
+        "the share in band the multiplier holds: --comfort-target's (target), or where lower the one the "
+        "building's own controls (evaluate --baseline) kept on the same dates and weathers in the run's record "
+        "(baseline)",
     )
     # The search picks the candidate the model likes best, and on the restaurants that was a plan its errors
-    # favoured: HVAC x1.018 where the own plan was a candidate all along.
+    # favoured: HVAC x1.018 where the baseline was a candidate all along.
     consensus: bool = setting(
-        False, "leave the own plan only where every member predicts the chosen plan costs less than it"
+        False, "leave the baseline only where every member predicts the chosen plan costs less than it"
     )
     # The search's best of hundreds of candidates is the one the model's errors favour most (the optimizer's
     # curse): on the full-service restaurant the planner left its own thermostats' plan on 62-71 % of steps, by
     # +/-1 K, for a predicted saving the simulator did not pay out (gas +0.7 %, HVAC electricity +1 %, CO peak
     # heating).
-    min_saving: float = setting(0.0, "leave the own plan only where the chosen plan's predicted cost is lower by at "
-                                "least this share of the own plan's, within [0, 1) (0: any saving)")  # fmt: skip
+    min_saving: float = setting(0.0, "leave the baseline only where the chosen plan's predicted cost is lower by at "
+                                "least this share of the baseline's, within [0, 1) (0: any saving)")  # fmt: skip
     # In the data the model learns from, a zone's ventilation and heating start when its setpoint leaves the
     # setback: held at the setback when the schedule starts, the full-service restaurant's dining room fell 5 K in
-    # a step, where the model predicted 0.1 K (docs/model-based.md). Off the own plan by a few tenths, the model
+    # a step, where the model predicted 0.1 K (docs/model-based.md). Off the baseline by a few tenths, the model
     # has seen the building; by 6 K, it has not.
-    own_radius: float | None = setting(None, "each thermostat action kept within this much of the own plan's at "
-                                       "every step (normalized units, 0-2; none: anywhere)")  # fmt: skip
+    baseline_radius: float | None = setting(None, "each thermostat action kept within this much of the baseline's "
+                                            "at every step (normalized units, 0-2; none: anywhere)")  # fmt: skip
     # The band applies by date as the calendar recorded it, else by the weekly majority. In a restaurant's data a
     # zone's ventilation and heating start when its setpoint leaves the setback, always together: told only the
     # setpoint, the model put the cold air's arrival down to the setpoint and predicted 0.1 K for a 5 K fall
@@ -128,23 +132,23 @@ class MPCSettings(FromText):
     occupancy_input: bool = setting(
         False, "the model also sees whether the building is occupied at each step's end (kept by a saved planner)"
     )
-    # The realised test for leaving the own plan (guard.py). The model's error off the own plan is not in its
+    # The realised test for leaving the baseline (guard.py). The model's error off the baseline is not in its
     # predicted saving (min_saving=0.1 was not safe, docs/model-based.md); the building's reply is.
     guard_k: float | None = setting(
         None,
-        "a worker that left the own plan within guard_steps and whose zones end a step this many K (summed, "
-        "where the band applies) beyond the own plan's predicted discomfort plays the own plan for guard_steps "
+        "a worker that left the baseline within guard_steps and whose zones end a step this many K (summed, "
+        "where the band applies) beyond the baseline's predicted discomfort plays the baseline for guard_steps "
         "(none: no guard)",
     )
-    guard_steps: int = setting(12, "with guard_k: the steps looked back, and the steps the own plan is then played")
+    guard_steps: int = setting(12, "with guard_k: the steps looked back, and the steps the baseline is then played")
     # A zone sits at its thermostat's setpoint, and its own setpoint is the bound: the quick-service restaurant's
     # planner raised the dining room's cooling setpoint 0.8 K above its own with the zone at 24.0 C, a move its data
     # never showed, and the zone rose 0.3 K past the bound (docs/model-based.md). Outside the band's hours the
     # planner moves as before.
-    band_thermostats: Literal["free", "at_least_own", "own"] = setting(
+    band_thermostats: Literal["free", "at_least_baseline", "baseline"] = setting(
         "free",
-        "where the band applies, a thermostat action does anything the rest allows (free), conditions at "
-        "least as much as the own plan (at_least_own: cooling no higher, heating no lower) or follows it (own)",
+        "where the band applies, a thermostat action does anything the rest allows (free), conditions at least as "
+        "much as the baseline (at_least_baseline: cooling no higher, heating no lower) or follows it (baseline)",
     )
     # As far as the horizon sees: the retail store's planner set back 0.6 K deeper than its own at night, the zones
     # met the morning's schedule 0.5 K colder, and its first occupied hour held most of its excess K.h
@@ -153,18 +157,18 @@ class MPCSettings(FromText):
         0, "band_thermostats also holds this many steps before the band starts (0: from its first step)"
     )
     # The margin `OwnMargin` gives a rule. Five prototypes' planners ended 0.08-0.2 occupied K.h above their own
-    # controls over 20 fortnights with each thermostat on its own plan (docs/model-based.md); EnergyPlus holds a
+    # controls over 20 fortnights with each thermostat on the baseline (docs/model-based.md); EnergyPlus holds a
     # zone within 0.01 K of its setpoint.
-    own_margin: float = setting(0.0, "the own plan's thermostats this many K inside their own setpoints (heating "
-                                "higher, cooling lower), within [0, 1]")  # fmt: skip
+    baseline_margin: float = setting(0.0, "the baseline's thermostats this many K inside the building's own "
+                                     "setpoints (heating higher, cooling lower), within [0, 1]")  # fmt: skip
     # "rule": the spec's `controller` (`--rbc`) run beside the planner on each worker (Guideline 36's supply-air
     # reset, rules/air_reset.py); the actions the rule releases keep the building's plan. The planner then improves
     # on the rule, as the data center's best policy corrects its rule, where against the constant 12.8 C of the DOE
-    # VAV loops it was held within `own_radius` of it, far from where the reset saves (docs/model-based.md).
-    own_plan: Literal["building", "rule"] = setting(
+    # VAV loops it was held within `baseline_radius` of it, far from where the reset saves (docs/model-based.md).
+    baseline_source: Literal["building", "rule"] = setting(
         "building",
-        "the own plan of actions no thermostat schedule sets: what the building's own controls set "
-        "(building) or the spec's rule, run beside the planner (rule)",
+        "the baseline of the actions no thermostat schedule sets: what the building's own controls set "
+        "(building: evaluate --baseline) or the spec's rule, run beside the planner (rule: evaluate --rbc)",
     )
     noise: float = setting(0.0, "exploration added to the planner's action in training (normalized units)")
     # Distillation (distill.py): the policy network fitted to the planner's own actions.
@@ -200,15 +204,18 @@ class MPCSettings(FromText):
     )
 
     def __post_init__(self):
+        for name in (new for new, values in RENAMED.values() if values):  # an old value: warned, renamed
+            setattr(self, name, renamed(name, getattr(self, name), "MPCSettings")[1])
         super().__post_init__()  # each Literal setting one of its words
         if not 0 < self.shrink <= 1:
             raise ValueError(f"shrink {self.shrink}: within (0, 1]")
-        if self.own_radius is not None and not 0 <= self.own_radius <= 2:
-            raise ValueError(f"own_radius {self.own_radius}: normalized units, within [0, 2]")
+        if self.baseline_radius is not None and not 0 <= self.baseline_radius <= 2:
+            raise ValueError(f"baseline_radius {self.baseline_radius}: normalized units, within [0, 2]")
         if self.guard_k is not None and self.guard_k < 0:
-            raise ValueError(f"guard_k {self.guard_k}: K beyond the own plan's predicted discomfort, >= 0")
-        if not 0 <= self.own_margin <= 1:
-            raise ValueError(f"own_margin {self.own_margin}: K inside the own setpoints, within [0, 1]")
+            raise ValueError(f"guard_k {self.guard_k}: K beyond the baseline's predicted discomfort, >= 0")
+        if not 0 <= self.baseline_margin <= 1:
+            raise ValueError(f"baseline_margin {self.baseline_margin}: K inside the building's own setpoints, "
+                             "within [0, 1]")
         if self.band_lead < 0:
             raise ValueError(f"band_lead {self.band_lead}: steps before the band, >= 0")
         if self.guard_steps < 1:
@@ -216,7 +223,42 @@ class MPCSettings(FromText):
         if self.student_margin is not None and self.student_margin <= 0:
             raise ValueError(f"student_margin {self.student_margin}: K inside the band, > 0")
         if not 0 <= self.min_saving < 1:
-            raise ValueError(f"min_saving {self.min_saving}: a share of the own plan's cost, within [0, 1)")
+            raise ValueError(f"min_saving {self.min_saving}: a share of the baseline's cost, within [0, 1)")
+
+    @classmethod
+    def renamed(cls, key: str, text: str, flag: str) -> tuple[str, str]:
+        return renamed(key, text, flag)  # runtime/renamed.py's table
+
+    @classmethod
+    def of_saved(cls, values: Mapping[str, Any], where: str) -> MPCSettings:
+        """The settings a run's config.json or a planner checkpoint saved (`where`), old names and values renamed."""
+        return cls(**renamed_settings(values, where))
+
+
+def _old_name(old: str, new: str) -> property:
+    """`settings.own_radius`, read or set: the renamed field, with a DeprecationWarning (until 2.0)."""
+
+    def get(self):
+        return getattr(self, renamed(old, None, "MPCSettings")[0])
+
+    def put(self, value):
+        setattr(self, *renamed(old, value, "MPCSettings"))
+
+    return property(get, put, doc=f"renamed {new}")
+
+
+for _old, (_new, _) in RENAMED.items():
+    if _new != _old:
+        setattr(MPCSettings, _old, _old_name(_old, _new))
+_init = MPCSettings.__init__
+
+
+@functools.wraps(_init)
+def _init_renamed(self, *args, **kwargs):  # `MPCSettings(own_radius=0.2)`: warned, renamed
+    _init(self, *args, **renamed_settings(kwargs, "MPCSettings"))
+
+
+MPCSettings.__init__ = _init_renamed
 
 
 @dataclass

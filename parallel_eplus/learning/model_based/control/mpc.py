@@ -81,37 +81,39 @@ class MPC:
         self.initial = to_unit([a.initial for a in b.actions], self.action_low, self.action_high).astype(np.float32)
         self.thermostat_sides = thermostat_sides(b)
         self.sides = side_array(self.thermostat_sides)  # as the planner reads them (`band_thermostats`)
-        self.rules: list = [None] * workers  # `own_plan=rule`: each worker's rule, made at its first plan
+        self.rules: list = [None] * workers  # `baseline_source=rule`: each worker's rule, made at its first plan
         self.ruled = np.zeros(n_actions, bool)  # the actions the rule has set (not released)
         self.check_reference()
 
     def check_reference(self) -> None:
-        """`comfort_reference=own` needs the own thermostats' schedules as bounds (`band = "thermostat"`) and an
+        """`comfort_reference=baseline` needs the own thermostats' schedules as bounds (`band = "thermostat"`) and an
         action setting one; `comfort_hours=occupied` on a planner saved before the calendar kept occupied hours by
         date falls back on the weekly majority (daylight-saving time and holidays blurred): said, not refused."""
         thermostat = self.comfort_times.mode == THERMOSTAT
-        if self.settings.comfort_reference == "own" and not (thermostat and any(self.thermostat_sides)):
-            raise ValueError(f"comfort_reference=own: {self.building or 'the building'} has no thermostat action "
+        if self.settings.comfort_reference == "baseline" and not (thermostat and any(self.thermostat_sides)):
+            raise ValueError(f"comfort_reference=baseline: {self.building or 'the building'} has no thermostat action "
                              "(a zone's heating or cooling setpoint) that follows a schedule its comfort bounds "
                              "read (`band = \"thermostat\"`)")
         s = self.settings
-        if (s.consensus or s.min_saving or s.own_radius is not None or s.guard_k is not None or s.own_margin
-                or s.band_thermostats != "free" or s.own_plan != "building") and \
-                s.comfort_reference != "own":  # fmt: skip
-            raise ValueError("--mpc consensus, min_saving, own_radius, guard_k, own_margin, band_thermostats and "
-                             "own_plan weigh the search's plan against the own plan: add comfort_reference=own")
-        if s.own_plan == "rule":
+        if (s.consensus or s.min_saving or s.baseline_radius is not None or s.guard_k is not None
+                or s.baseline_margin or s.band_thermostats != "free" or s.baseline_source != "building") and \
+                s.comfort_reference != "baseline":  # fmt: skip
+            raise ValueError("--mpc consensus, min_saving, baseline_radius, guard_k, baseline_margin, band_thermostats "
+                             "and baseline_source weigh the search's plan against the baseline: add "
+                             "comfort_reference=baseline")
+        if s.baseline_source == "rule":
             try:
                 rule = load_building(self.building).controller_class()
             except ValueError as e:
-                raise ValueError(f"own_plan=rule: {e}") from None
+                raise ValueError(f"baseline_source=rule: {e}") from None
             if not getattr(rule, "relinquishes", False):
-                raise ValueError(f"own_plan=rule: {rule.__name__} must release (NaN) the actions it does not set, as "
-                                 "parallel_eplus.buildings.rules.air_reset:SupplyAirReset does (`relinquishes = True`)")
+                raise ValueError(f"baseline_source=rule: {rule.__name__} must release (NaN) the actions it does not "
+                                 "set, as parallel_eplus.buildings.rules.air_reset:SupplyAirReset does "
+                                 "(`relinquishes = True`)")
             try:
                 self.rule(0)  # made with the spec's controller_settings: a wrong one fails before any episode
             except ValueError as e:
-                raise ValueError(f"own_plan=rule: {e}") from None
+                raise ValueError(f"baseline_source=rule: {e}") from None
         dated = self.comfort_times.dated_applies
         if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
             log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
@@ -119,8 +121,8 @@ class MPC:
 
     @property
     def follows(self) -> np.ndarray:
-        """[A]: the actions the own plan sets (`own_radius`): the thermostats, those whose own setpoints the
-        calendar recorded by date, and those the rule has set (`own_plan=rule`)."""
+        """[A]: the actions the baseline sets (`baseline_radius`): the thermostats, those whose own setpoints the
+        calendar recorded by date, and those the rule has set (`baseline_source=rule`)."""
         sides = np.array([side is not None for side in self.thermostat_sides])
         return sides | self.comfort_times.own_known(len(sides)) | self.ruled
 
@@ -198,7 +200,8 @@ class MPC:
         a_last = np.asarray(a_last, np.float32)
         demand = self.demand.outlook(obs, infos, self.settings.horizon) if self.demand else None
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
-        reference = self.own_plan(infos, bounds, a_last, obs) if self.settings.comfort_reference == "own" else None
+        reference = (self.baseline_plan(infos, bounds, a_last, obs) if self.settings.comfort_reference == "baseline"
+                     else None)
         hold = self._guard_check(s, infos) if reference is not None else None
         self.last = self.planner.plan(PlanRequest(
             s, a_last, exo, applies, bounds, self.comfort_weight, self.support, self.warm[: len(s)], seeds,
@@ -220,17 +223,17 @@ class MPC:
         now = [info["time"] for info in infos]  # one time per worker
         return self.guard.check(s[:, : self.planner.n_temps], self.comfort_times.bounds(now), self.comfort_times(now))
 
-    def own_plan(self, infos: list[dict], bounds: np.ndarray, a_last: np.ndarray,
+    def baseline_plan(self, infos: list[dict], bounds: np.ndarray, a_last: np.ndarray,
                  obs: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """[W, H, A]: what the building's own controls would set over each worker's horizon (`own_reference`), from
-        `future`'s bounds and the own setpoints the calendar recorded on those dates; with `own_plan=rule`, the
+        `future`'s bounds and the own setpoints the calendar recorded on those dates; with `baseline_source=rule`, the
         actions the rule sets at its value now, held over the horizon (a rule is called once a step: its state)."""
         c, h = self.comfort_times, self.settings.horizon
-        inside = c.tolerance + self.settings.own_margin  # the bounds were widened by the tolerance
+        inside = c.tolerance + self.settings.baseline_margin  # the bounds were widened by the tolerance
         plan = np.stack([own_reference(bounds[i], inside, self.thermostat_sides, self.action_low, self.action_high,
                                        a_last[i], c.own_actions(step_times(info["time"], self.step_minutes, h)))
                          for i, info in enumerate(infos)])  # fmt: skip
-        if self.settings.own_plan == "rule":
+        if self.settings.baseline_source == "rule":
             not_thermostat = np.array([side is None for side in self.thermostat_sides])
             n = len(self.layout.sensors)
             for i, info in enumerate(infos):  # the sensors as observed (float32, clipped): what a served rule reads
@@ -273,7 +276,7 @@ class MPC:
 
     @classmethod
     def from_state(cls, state: dict, workers: int = 1, seed: int = 0) -> MPC:
-        settings = MPCSettings(**state["settings"])
+        settings = MPCSettings.of_saved(state["settings"], "a planner checkpoint")
         model = Ensemble.from_state(state["ensemble"])
         mpc = cls(state["building"], settings, state["margin_c"], state["power_weight"], workers, seed, model,
                   state.get("objective", "energy"))  # planners saved before objectives: energy

@@ -127,7 +127,7 @@ class Ensemble(th.nn.Module):
     @classmethod
     def from_state(cls, state: dict) -> Ensemble:
         layout = Layout(**{k: tuple(v) if isinstance(v, list) else v for k, v in state["layout"].items()})
-        model = cls(layout, MPCSettings(**state["settings"]))
+        model = cls(layout, MPCSettings.of_saved(state["settings"], "a planner checkpoint"))
         model.load_state_dict(state["weights"])
         model.fitted_rows = state.get("fitted_rows", 0)
         return model

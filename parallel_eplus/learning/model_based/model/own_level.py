@@ -1,4 +1,4 @@
-"""`--mpc comfort_level=own`: the comfort target held at the building's own controls' level, date by date.
+"""`--mpc comfort_level=baseline`: the comfort target held at the building's own controls' level, date by date.
 
 A fixed `--comfort-target` asks every building for the same share of zone samples in band. The warehouse's own
 controls keep 93 % of its zone samples in their own bounds over a year, 99.95 % in winter and 77.6 % in summer

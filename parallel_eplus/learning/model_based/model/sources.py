@@ -64,7 +64,7 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc,
                         progress: bool) -> tuple[dict[str, np.ndarray], OwnLevel | None]:  # fmt: skip
     """Record the building's own controls on the run's training weathers (`--init-from-baseline`'s recording)
     into `data`; returns each weather's normalized actions, for `Explorer` to replay, and, with
-    `comfort_level=own`, their comfort by date (own_level.py). `cfg`: the TrainConfig."""
+    `comfort_level=baseline`, their comfort by date (own_level.py). `cfg`: the TrainConfig."""
     import shutil
 
     from parallel_eplus.buildings.building import load_building
@@ -78,15 +78,15 @@ def record_own_controls(cfg, days: int, data: Transitions, mpc,
     def applies(t, values) -> bool:
         return comfort.always or comfort.applies(t, values)
 
-    # the own plan of the actions no thermostat schedule gives (a supply-air node), for `comfort_reference=own`
-    own = None if cfg.mpc.comfort_reference != "own" else np.array([s is None for s in mpc.thermostat_sides])
+    # the baseline of the actions no thermostat schedule gives (a supply-air node), for `comfort_reference=baseline`
+    own = None if cfg.mpc.comfort_reference != "baseline" else np.array([s is None for s in mpc.thermostat_sides])
     replay = add_baseline(data, demos, mpc, applies, 0, own)
     if own is not None and own.any():
         names = [a.name for a, o in zip(building.actions, own, strict=True) if o]
         log.info("the own plan of %s: what the building's own controls set on each date of the record",
                  ", ".join(names))  # fmt: skip
     level = None
-    if cfg.mpc.comfort_level == "own":
+    if cfg.mpc.comfort_level == "baseline":
         level = OwnLevel.from_record(demos, data.layout.sensors, list(building.temperatures), comfort, applies,
                                      building.steps_per_day)  # fmt: skip
     shutil.rmtree(folder, ignore_errors=True)

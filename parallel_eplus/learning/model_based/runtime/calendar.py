@@ -15,7 +15,7 @@ thermostat's bounds count only where the band applies (its occupied hours, as re
 majority at that weekday and time): what the share in own bounds and occupied K.h score. Every step's setback
 bound cost the warehouse's planner heat at night that no score counted (docs/model-based.md). By date too, what
 the building's own controls set for each action (`learn_own`, from their record): the own plan of an action no
-thermostat schedule gives (a supply-air node), for `comfort_reference = "own"`.
+thermostat schedule gives (a supply-air node), for `comfort_reference = "baseline"`.
 Numpy only: the server imports this.
 """
 
@@ -220,7 +220,7 @@ def own_reference(bounds: np.ndarray, tolerance: float, sides: list, low: np.nda
     its zone's own setpoint (the bounds `bounds` [H, K, 2], less the tolerance they were widened by), every other
     action at what the own controls set on that date (`own` [H, A], `Calendar.own_actions`: a supply-air node's
     reset), else held at `a_last` [A]. `sides`: per action, (zone, 0 heating or 1 cooling), or None (not a
-    thermostat). The planner's `comfort_reference = "own"` plays it through the model: a candidate pays only for
+    thermostat). The planner's `comfort_reference = "baseline"` plays it through the model: a candidate pays only for
     discomfort beyond what these would have from the same state."""
     ref = np.repeat(np.asarray(a_last, np.float32)[None], len(bounds), axis=0)
     if own is not None:

@@ -1,7 +1,7 @@
 """The realised test for leaving the own plan (`--mpc guard_k`): what a move off it cost, measured, not predicted.
 
-With `comfort_reference = "own"` the planner leaves the building's own plan where its model predicts a saving, and
-on the DOE prototypes those moves were the model's noise: exact on the own plan (`own_radius=0`), off it the zones
+With `comfort_reference = "baseline"` the planner leaves the building's own plan where its model predicts a saving, and
+on the DOE prototypes those moves were the model's noise: exact on the baseline (`baseline_radius=0`), off it the zones
 lost comfort the model did not see (docs/model-based.md). A higher threshold on the predicted saving did not make it
 safe, because the model's error is not in its prediction of the saving. The guard reads the building instead: at each
 step's end, the zones' discomfort beyond their bounds (K, summed, where the band applies) against what the model

@@ -16,8 +16,9 @@ plus `disagreement_weight` times the members' spread of each zone temperature (K
 model knows the building. Each member follows its own trajectory (PETS's "TS-inf"); the comfort term is the
 members' mean, or with `comfort_risk = "worst"` the worst member's (a chance constraint: the band held by every
 member's prediction, not by their average); `terminal_weight` weighs the horizon's last step's comfort more (a
-plan must not end at the band's edge, where the next plan has no room). Measured against the building's own plan
-(`reference`), `own_radius` keeps its thermostats near that plan and `min_saving` plays it unless the search's plan
+plan must not end at the band's edge, where the next plan has no room). Measured against the baseline, the building's
+own controls' plan (`reference`), `baseline_radius` keeps its thermostats near it and `min_saving` plays it unless the
+search's plan
 is predicted to save that share: the model knows the building only near what it has seen, and the best of hundreds
 of candidates is the one its errors favour most.
 
@@ -38,6 +39,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from parallel_eplus.learning.model_based.runtime.renamed import renamed_settings
+
 if TYPE_CHECKING:
     from parallel_eplus.learning.model_based.runtime.demand import DemandOutlook
 
@@ -47,7 +50,7 @@ Forward = Callable[[np.ndarray], np.ndarray]  # [members, batch, inputs] -> [mem
 @dataclass(frozen=True, kw_only=True)
 class PlannerSettings:
     """What a plan reads of `--mpc`, and what the served planner reads beside it (`occupancy_input`, `guard_k`,
-    `guard_steps`, `own_margin`): the fields an export writes into its contract. MPCSettings
+    `guard_steps`, `baseline_margin`): the fields an export writes into its contract. MPCSettings
     (learning/model_based/settings.py) says what each means. One type for both planners: the in-process one takes
     them from its MPCSettings, the served one from its contract, where the training stack is not installed; a field
     a contract written before it lacks takes MPCSettings' default (tests/test_planner_request.py checks they agree)."""
@@ -64,18 +67,19 @@ class PlannerSettings:
     terminal_weight: float = 0.0
     consensus: bool = False
     min_saving: float = 0.0
-    own_radius: float | None = None
+    baseline_radius: float | None = None
     occupancy_input: bool = False
     guard_k: float | None = None
     guard_steps: int = 12
     band_thermostats: str = "free"
     band_lead: int = 0
-    own_margin: float = 0.0
+    baseline_margin: float = 0.0
 
     @classmethod
     def of(cls, settings) -> PlannerSettings:
-        """These fields of an MPCSettings, or of a contract's `settings` (a mapping; other keys ignored)."""
-        values = settings if isinstance(settings, Mapping) else asdict(settings)
+        """These fields of an MPCSettings, or of a contract's `settings` (a mapping; other keys ignored; names and
+        values from before 1.1 renamed, renamed.py)."""
+        values = renamed_settings(settings, "a contract") if isinstance(settings, Mapping) else asdict(settings)
         return cls(**{f.name: values[f.name] for f in fields(cls) if f.name in values})
 
 
@@ -105,12 +109,13 @@ class PlanRequest:
     # the weights of the predicted energy parts at each step, as the run's objective prices them (energy_weights.py);
     # None: each counts once
     energy_weights: np.ndarray | None = _shaped("W H P", default=None)
-    # the actions whose predicted discomfort is free (`comfort_reference = "own"`: the own plan, calendar.py
+    # the actions whose predicted discomfort is free (`comfort_reference = "baseline"`: the baseline, calendar.py
     # `own_reference`); itself a candidate, so the search can always fall back on it. None: every K beyond the
     # bounds costs
     reference: np.ndarray | None = _shaped("W H A", default=None)
     demand: DemandOutlook | None = None  # the demand charges over the horizon (demand.py); None: none priced
-    follows: np.ndarray | None = _shaped("A", default=None)  # the actions the reference sets, kept near it (own_radius)
+    # the actions the reference sets, kept near it (baseline_radius)
+    follows: np.ndarray | None = _shaped("A", default=None)
     hold: np.ndarray | None = _shaped("W", default=None)  # the workers that play the reference (guard.py)
     # which bound each action's own setpoint is (0 the lower: heating, 1 the upper: cooling, -1 not a thermostat;
     # `side_array`), which `band_thermostats` holds to the reference where the band applies
@@ -238,12 +243,12 @@ class Planner:
             reference = _follow(a_last, r.reference, c.max_increment, low, high)
             r = replace(r, reference=reference)
         near = None
-        if reference is not None and c.own_radius is not None and r.follows is not None:  # [W, 1, H, A] each side
-            radius = np.where(r.follows, np.float32(c.own_radius), np.float32(np.inf))
+        if reference is not None and c.baseline_radius is not None and r.follows is not None:  # [W, 1, H, A] each
+            radius = np.where(r.follows, np.float32(c.baseline_radius), np.float32(np.inf))
             near = (reference[:, None] - radius, reference[:, None] + radius)
         if reference is not None and c.band_thermostats != "free" and r.sides is not None:
             inside = _ahead(r.applies > 0, c.band_lead)[:, None, :, None]  # [W, 1, H, 1]
-            sides, exact = r.sides, c.band_thermostats == "own"
+            sides, exact = r.sides, c.band_thermostats == "baseline"
             low_ = np.where(inside & ((sides == 0) | exact & (sides >= 0)), reference[:, None], -np.inf)  # heating
             high_ = np.where(inside & ((sides == 1) | exact & (sides >= 0)), reference[:, None], np.inf)  # cooling
             near = (low_, high_) if near is None else (np.maximum(near[0], low_), np.minimum(near[1], high_))
