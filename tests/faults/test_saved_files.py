@@ -126,10 +126,16 @@ class _Stats:
         self.norm_obs, self.norm_reward = s.norm_obs, s.norm_reward
 
 
-def _evaluate(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
-    cmd = [sys.executable, "-m", "parallel_eplus.cli", "evaluate", "--weathers", "CA", "--run-days", "1",
-           "--workers", "1", "--out", str(tmp_path / "eval"), "--quiet", *args]  # fmt: skip
-    return subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+def _evaluate(tmp_path: Path, caplog, *args: str) -> tuple[int, list[str]]:
+    """`evaluate` in process (a fresh interpreter pays torch's import each time): its exit code and its log's lines
+    from WARNING up, as its stderr shows them (a process's stderr of one line: test_bad_input.py)."""
+    from parallel_eplus.cli import main
+
+    caplog.clear()
+    with contextlib.chdir(tmp_path), caplog.at_level(logging.WARNING):
+        code = main(["evaluate", "--weathers", "CA", "--run-days", "1", "--workers", "1", "--out",
+                     str(tmp_path / "eval"), "--quiet", *args])  # fmt: skip
+    return code, "\n".join(r.getMessage() for r in caplog.records).splitlines()
 
 
 def _policy(tmp_path: Path, name: str, model_from: str, stats_from: str, config_from: str) -> Path:
@@ -153,11 +159,11 @@ def _policy(tmp_path: Path, name: str, model_from: str, stats_from: str, config_
     ids=["stats-from-another-run", "time-features-missing", "another-model"],
 )
 def test_evaluate_refuses_mismatched_policy_files_before_energyplus_starts(
-    tmp_path, no_leaks, model_from, stats_from, config_from, expected
+    tmp_path, no_leaks, caplog, model_from, stats_from, config_from, expected
 ):
     policy = _policy(tmp_path, "p", model_from, stats_from, config_from)
-    out = _evaluate(tmp_path, "--policy", str(policy))
-    assert out.returncode == 2, out.stderr
-    lines = [ln for ln in out.stderr.strip().splitlines() if "is a pickle" not in ln]
-    assert len(lines) == 1 and expected in lines[0], out.stderr
+    code, err = _evaluate(tmp_path, caplog, "--policy", str(policy))
+    assert code == 2, err
+    lines = [ln for ln in err if "is a pickle" not in ln]
+    assert len(lines) == 1 and expected in lines[0], err
     assert not (tmp_path / "eval").exists()  # nothing ran, nothing written
