@@ -6,6 +6,7 @@ import os
 import re
 import signal
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,19 +37,38 @@ def _template(env: EnergyPlusEnv, weather: int = 0) -> fork.Template:
     return t
 
 
-def _cold(tmp_path, weather: str, episodes: int = 1, **kw) -> list[np.ndarray]:
-    env = EnergyPlusEnv(weather=weather, run_days=1, output_dir=tmp_path / f"cold-{weather}", prepare_next=False, **kw)
-    try:
-        return [_episode(env) for _ in range(episodes)]
-    finally:
-        env.close()
+# The most cold episodes any test here compares with, by (weather, building): each test takes the first few.
+COLD_EPISODES = {("CA", None): 4, ("FL", None): 3, ("CA", "office-small"): 3}
+
+
+@pytest.fixture(scope="module")
+def cold(tmp_path_factory):
+    """`cold(weather, n, building)`: n episodes of a cold env (each in a process of its own, nothing prepared or
+    forked) under the zero action, and the folder they were written to. A cold env's episodes are the same whatever
+    follows them, so each (weather, building) runs once for the module, as many episodes as any test compares."""
+    made: dict[tuple, tuple[list[np.ndarray], Path]] = {}
+
+    def episodes(weather: str, n: int = 1, building: str | None = None) -> tuple[list[np.ndarray], Path]:
+        key = (weather, building)
+        if key not in made:
+            out = tmp_path_factory.mktemp(f"cold-{weather}")
+            env = EnergyPlusEnv(weather=weather, run_days=1, output_dir=out, prepare_next=False, building=building)
+            try:
+                made[key] = [_episode(env) for _ in range(COLD_EPISODES[key])], out
+            finally:
+                env.close()
+        runs, out = made[key]
+        assert n <= len(runs), f"COLD_EPISODES[{key}] is {len(runs)}: raise it to {n}"
+        return runs[:n], out
+
+    return episodes
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("weather", "building"), [("CA", None), ("FL", None), ("CA", "office-small")])
-def test_a_forked_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks, weather, building):
+def test_a_forked_episode_equals_a_cold_one_step_for_step(tmp_path, cold, no_leaks, weather, building):
     """The office's meters keep its steps in the Python bridge: forks hold there too."""
-    expected = _cold(tmp_path, weather, 3, building=building)
+    expected, cold_out = cold(weather, 3, building)
     env = EnergyPlusEnv(weather=weather, run_days=1, output_dir=tmp_path / "forked", building=building)
     try:
         got = []
@@ -66,7 +86,7 @@ def test_a_forked_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks, we
         env.close()
     for a, b in zip(expected, got, strict=True):
         np.testing.assert_array_equal(a, b)  # bit for bit: observations and rewards
-    cold_dir = next((tmp_path / f"cold-{weather}").glob("episode-000001-*"))
+    cold_dir = next(cold_out.glob("episode-000001-*"))
     for d in sorted((tmp_path / "forked").glob("episode-*")):  # the same files as a cold episode's, nothing more
         assert sorted(p.name for p in d.iterdir()) == sorted(p.name for p in cold_dir.iterdir())
         for name in ("eplusout.csv", "eplusout.eio"):  # EnergyPlus's own outputs too, where the model writes them
@@ -94,9 +114,9 @@ def test_every_episode_after_the_first_is_forked_and_prepared(tmp_path, no_leaks
 
 @pytest.mark.slow
 def test_a_reset_for_another_weather_discards_what_was_prepared_and_forks_from_that_weathers_template(
-    tmp_path, no_leaks
+    tmp_path, cold, no_leaks
 ):
-    ca, fl = _cold(tmp_path, "CA")[0], _cold(tmp_path, "FL")[0]
+    ca, fl = cold("CA")[0][0], cold("FL")[0][0]
     env = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path / "forked")
     try:
         env.reset()
@@ -132,8 +152,8 @@ def _gone(pids: list[int], timeout_s: float = 10.0) -> bool:
 
 
 @pytest.mark.slow
-def test_a_template_killed_mid_episode_loses_no_episode_and_is_replaced(tmp_path, no_leaks):
-    expected = _cold(tmp_path, "CA", 4)
+def test_a_template_killed_mid_episode_loses_no_episode_and_is_replaced(tmp_path, cold, no_leaks):
+    expected = cold("CA", 4)[0]
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "forked")
     try:
         obs, _ = env.reset()
@@ -158,8 +178,8 @@ def test_a_template_killed_mid_episode_loses_no_episode_and_is_replaced(tmp_path
 
 
 @pytest.mark.slow
-def test_a_forked_episode_killed_mid_episode_raises_promptly_and_the_env_recovers(tmp_path, no_leaks):
-    expected = _cold(tmp_path, "CA")[0]
+def test_a_forked_episode_killed_mid_episode_raises_promptly_and_the_env_recovers(tmp_path, cold, no_leaks):
+    expected = cold("CA")[0][0]
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "forked")
     try:
         env.reset()
@@ -181,9 +201,9 @@ def test_a_forked_episode_killed_mid_episode_raises_promptly_and_the_env_recover
 
 
 @pytest.mark.slow
-def test_a_hung_template_is_replaced_and_the_episode_starts_without_it(tmp_path, no_leaks, monkeypatch):
+def test_a_hung_template_is_replaced_and_the_episode_starts_without_it(tmp_path, cold, no_leaks, monkeypatch):
+    expected = cold("CA", 3)[0]
     monkeypatch.setattr(fork, "ANSWER_S", 1.0)
-    expected = _cold(tmp_path, "CA", 3)
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "forked")
     try:
         obs, _ = env.reset()
@@ -207,8 +227,8 @@ def test_a_hung_template_is_replaced_and_the_episode_starts_without_it(tmp_path,
 
 
 @pytest.mark.slow
-def test_a_forked_episode_killed_while_parked_is_replaced(tmp_path, no_leaks):
-    expected = _cold(tmp_path, "CA", 2)
+def test_a_forked_episode_killed_while_parked_is_replaced(tmp_path, cold, no_leaks):
+    expected = cold("CA", 2)[0]
     env = EnergyPlusEnv(weather="CA", run_days=1, output_dir=tmp_path / "forked")
     try:
         obs, _ = env.reset()
