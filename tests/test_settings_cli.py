@@ -202,3 +202,12 @@ def test_a_run_from_a_config_file_saves_the_resolved_settings(tmp_path, monkeypa
     assert saved["trpo"]["gamma"] == 0.95 and saved["sac"]["ent_coef"] == "0.05"  # the file's
     assert saved["seed"] == 3 and saved["checkpoint_every"] == 64  # the command line's, over the file's seed
     assert saved["preset"] == "paper-trpo" and saved["algorithm"] == "trpo"  # the preset it started from
+
+
+@pytest.mark.parametrize("flag", ["--planner", "--planner-options"])
+def test_planner_options_are_refused_naming_the_option_they_came_from(flag):
+    from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions
+
+    for text, what in [("consensus=ture", "a boolean"), ("seed=2.7", "a whole number"), ("forecast=exact", "one of")]:
+        with pytest.raises(ValueError, match=f"^{flag} .*{what}"):
+            PlannerOptions.parse(text, flag=flag)

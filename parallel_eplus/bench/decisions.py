@@ -61,7 +61,7 @@ def decisions(run: Path, days: int = 2, repeats: int = 3, options: str | None = 
     saved = json.loads((source.parent / "config.json").read_text())
     building, weather = saved_building(saved), (saved.get("weathers") or ["CA"])[0]
     out: dict = {"planner": str(source), "building": building or "datacenter-2zone", "weather": weather}
-    mpc = PlannerOptions.parse(options).apply(MPC.load(source))
+    mpc = PlannerOptions.parse(options, flag="--planner-options").apply(MPC.load(source))
     s = mpc.planner.settings
     out["settings"] = {"candidates": s.candidates, "iterations": s.iterations, "elites": s.elites, "shrink": s.shrink,
                        "horizon": s.horizon}  # fmt: skip

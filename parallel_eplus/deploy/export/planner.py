@@ -82,7 +82,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
     saved_path = source.parent / "config.json"
     saved = json.loads(saved_path.read_text()) if saved_path.is_file() else {}
     building_name = saved_building(saved)
-    chosen = PlannerOptions.parse(options)
+    chosen = PlannerOptions.parse(options, flag="--planner-options")
     if chosen.forecast != "perfect":
         raise ValueError("--planner-options forecast: a served planner reads the forecast each request carries")
     mpc = chosen.apply(MPC.load(source))

@@ -66,27 +66,32 @@ class PlannerOptions:
     forecast: str = "perfect"
     settings: str = ""
     seed: int | None = None  # None: the planner's own
+    flag: str = "--planner"  # the option they came from, named in errors
 
     @classmethod
-    def parse(cls, text: str | None) -> PlannerOptions:
-        """`"forecast=medium,seed=1,candidates=128"`: `forecast`, `seed` and any of MPCSettings' fields."""
+    def parse(cls, text: str | None, flag: str = "--planner") -> PlannerOptions:
+        """`"forecast=medium,seed=1,candidates=128"`: `forecast`, `seed` and any of MPCSettings' fields; `flag`: the
+        option that gave them (`evaluate --planner`, `export --planner-options`), named in errors."""
         forecast, seed, rest = "perfect", None, []
         for item in filter(None, (p.strip() for p in (text or "").split(","))):
             key, _, value = item.partition("=")
             if key.strip() == "forecast":
                 forecast = value.strip()
                 if forecast not in FORECASTS:
-                    raise ValueError(f"--planner forecast={forecast!r}: one of {', '.join(FORECASTS)}")
+                    raise ValueError(f"{flag} forecast={forecast!r}: one of {', '.join(FORECASTS)}")
             elif key.strip() == "seed":
-                seed = int(value)
+                try:
+                    seed = int(value)
+                except ValueError:
+                    raise ValueError(f"{flag} seed={value.strip()!r}: a whole number") from None
             else:
                 rest.append(item)
-        MPCSettings.from_text(",".join(rest))  # refused by name here
-        return cls(forecast, ",".join(rest), seed)
+        MPCSettings.from_text(",".join(rest), flag=flag)  # refused by name here
+        return cls(forecast, ",".join(rest), seed, flag)
 
     def apply(self, mpc: MPC) -> MPC:
         if self.settings:
-            settings = MPCSettings.from_text(self.settings, mpc.settings)
+            settings = MPCSettings.from_text(self.settings, mpc.settings, flag=self.flag)
             if settings.occupancy_input != mpc.settings.occupancy_input:
                 raise ValueError(f"--planner occupancy_input: the model was trained with occupancy_input="
                                  f"{str(mpc.settings.occupancy_input).lower()} (one of its inputs); a saved planner "
