@@ -36,20 +36,30 @@ def _parked(env: EnergyPlusEnv, timeout_s: float = 120.0):
     return env.sim.prepared
 
 
+@pytest.fixture(scope="module")
+def cold_rotation(tmp_path_factory) -> list[np.ndarray]:
+    """Three episodes of a cold env (each in a process of its own, nothing prepared) rotating CA, FL: the reference
+    both kinds of prepared episode are held to."""
+    cold = EnergyPlusEnv(weather=["CA", "FL"], run_days=1, output_dir=tmp_path_factory.mktemp("cold"),
+                         prepare_next=False)  # fmt: skip
+    try:
+        return [_episode(cold) for _ in range(3)]
+    finally:
+        cold.close()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("fork", [False, True], ids=["long-lived", "forked"])
-def test_a_prepared_episode_equals_a_cold_one_step_for_step(tmp_path, no_leaks, fork):
+def test_a_prepared_episode_equals_a_cold_one_step_for_step(tmp_path, cold_rotation, no_leaks, fork):
     weathers = ["CA", "FL"]
-    cold = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "cold", prepare_next=False)
     warm = EnergyPlusEnv(weather=weathers, run_days=1, output_dir=tmp_path / "warm", fork_episodes=fork)
     try:
-        expected = [_episode(cold) for _ in range(3)]
+        expected = cold_rotation
         got, prepared = [], []
         for _ in range(3):
             got.append(_episode(warm))
             prepared.append(warm.sim._from_prepared)
     finally:
-        cold.close()
         warm.close()
     assert prepared == [False, True, True]  # the first reset has nothing prepared
     for a, b in zip(expected, got, strict=True):
