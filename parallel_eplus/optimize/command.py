@@ -37,13 +37,13 @@ class Outcome:
 
 
 def run_command(args: list[str], log_path: Path, cwd: Path, desc: str, *, deadline: float | None = None,
-                progress: Callable[[], tuple[int, int]] | None = None, show: bool = True,
+                progress: Callable[[], tuple] | None = None, show: bool = True,
                 bar: tqdm | None = None) -> Outcome:  # fmt: skip
-    """Run `parallel-eplus ARGS` in `cwd`, its output appended to `log_path`. `progress`: () -> (done, total) for the
-    bar, polled every POLL_S seconds. At `deadline` (time.time()) the child gets SIGINT and is waited for. The child
-    has its own session, so a Ctrl-C at the terminal reaches this process only, which passes exactly one SIGINT on
-    (a second one could cut a checkpoint short), waits for the child, then raises KeyboardInterrupt. `bar`: a stage's
-    bar spanning several commands (else one of its own, closed at the end)."""
+    """Run `parallel-eplus ARGS` in `cwd`, its output appended to `log_path`. `progress`: () -> (done, total) or (done,
+    total, note) for the bar, polled every POLL_S seconds. At `deadline` (time.time()) the child gets SIGINT and is
+    waited for. The child has its own session, so a Ctrl-C at the terminal reaches this process only, which passes
+    exactly one SIGINT on (a second one could cut a checkpoint short), waits for the child, then raises
+    KeyboardInterrupt. `bar`: a stage's bar spanning several commands (else one of its own, closed at the end)."""
     log_path.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     with open(log_path, "a") as out:
@@ -81,14 +81,16 @@ def stage_bar(desc: str, show: bool, total: int | None = None, unit: str = "") -
     return tqdm(desc=desc, total=total, unit=unit, disable=not show, leave=True, dynamic_ncols=True)
 
 
-def _advance(bar: tqdm, progress: Callable[[], tuple[int, int]] | None) -> None:
+def _advance(bar: tqdm, progress: Callable[[], tuple] | None) -> None:
     if progress is None:
         bar.refresh()
         return
     try:
-        done, total = progress()
+        done, total, *note = progress()
     except (OSError, ValueError):
         return
+    if note:
+        bar.set_postfix_str(note[0], refresh=False)
     if total and bar.total != total:
         bar.total = total
     bar.n = min(done, total) if total else done

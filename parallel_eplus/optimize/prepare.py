@@ -48,6 +48,20 @@ def with_absolute_paths(text: str, folder: Path) -> str:
     return _PATHS.sub(absolute, text)
 
 
+def with_models(text: str, spec: Path) -> str:
+    """A spec's `idf` and `baseline_idf` named by the paths its loader resolves them to (a built-in spec names the
+    package's own copies of its models by bare name, which only the built-in specs find)."""
+    from parallel_eplus.buildings.spec.load import load_spec
+
+    loaded = load_spec(spec)
+    for key, path in (("idf", loaded.idf), ("baseline_idf", loaded.baseline_idf)):
+        if path is not None:
+            text = re.sub(
+                rf'^({key}\s*=\s*)"[^"\n]*"', lambda m, p=path: f'{m.group(1)}"{p}"', text, count=1, flags=re.M
+            )
+    return text
+
+
 def with_rule(text: str, rule: str = RULE) -> str:
     """The spec naming `rule` as its `controller` (replacing another's)."""
     if re.search(r"^controller\s*=", text, flags=re.M):
@@ -85,7 +99,7 @@ def prepare(folder: BuildingFolder, weather: str, show: bool) -> dict:
         text = recommended(starter.read_text())
         how = "starter from `building init`, its recommended actions and the example tariff uncommented"
     else:
-        text = with_absolute_paths(source.read_text(), source.parent)
+        text = with_models(with_absolute_paths(source.read_text(), source.parent), source)
         how = f"your spec, as given ({source})"
     folder.spec.write_text(text)
     out = run_command(["building", "check", str(folder.spec)], folder.logs / "prepare.log", folder.root,

@@ -12,13 +12,15 @@ QUICK = "quick"  # `--quick`'s one fixed period, standing in for the four
 # `--quick`: a smoke run of every stage (the suite's test, a first look at a new model), not a result. One fixed winter
 # window instead of BOPTEST's four periods (no year of the own controls to find the days in), 2 scored days after one
 # day's warm-up, 2-day training episodes, and a short planner training: the own controls recorded for 2 days, a
-# 288-step exploration, refits every 288 steps, a search of 64 candidates over 2 iterations (the preset's: 256 over 3).
+# 288-step exploration, refits every 288 steps, a search of 64 candidates over 2 iterations (the preset's: 256 over 3),
+# and a network trained through the model (the data center's preset) in 100 gradient steps a refit (its: 1,500).
 QUICK_DAY = 10  # January 11 (0: January 1), scored with the 12th; the 10th is the warm-up
 QUICK_SCORED_DAYS = 2
 QUICK_WARMUP_DAYS = 1
 QUICK_RUN_DAYS = 2
 QUICK_TIMESTEPS = 600
 QUICK_MPC = {"record_days": 2, "explore_steps": 288, "refit_every": 288, "candidates": 64, "iterations": 2}
+QUICK_STUDENT = {"student_updates": 100}  # where the preset trains a network through the model (`student`)
 QUICK_CHECKPOINT_EVERY = 144
 
 

@@ -17,6 +17,7 @@ from parallel_eplus.optimize.settings import (
     QUICK_CHECKPOINT_EVERY,
     QUICK_MPC,
     QUICK_RUN_DAYS,
+    QUICK_STUDENT,
     QUICK_TIMESTEPS,
     OptimizeSettings,
 )
@@ -47,7 +48,7 @@ def options(preset: Preset, settings: OptimizeSettings) -> dict:
     if settings.quick:
         opts |= {"run-days": QUICK_RUN_DAYS, "timesteps": QUICK_TIMESTEPS, "checkpoint-every": QUICK_CHECKPOINT_EVERY}
         if opts.get("algorithm") == "mpc":
-            opts["mpc"] = opts.get("mpc", {}) | QUICK_MPC
+            opts["mpc"] = opts.get("mpc", {}) | QUICK_MPC | (QUICK_STUDENT if "student" in opts.get("mpc", {}) else {})
     if settings.run_days:
         opts["run-days"] = settings.run_days
     if settings.timesteps:
@@ -66,6 +67,11 @@ def command(folder: BuildingFolder, spec: Path, preset: Preset, settings: Optimi
     return ["train", "--building", str(spec), "--weathers", ",".join(settings.weathers), "--workers",
             str(settings.workers), "--run-name", RUN_NAME, "--seed", "0", "--quiet",
             *option_args(options(preset, settings))]  # fmt: skip
+
+
+def _progress(run: Path, target: int) -> tuple[int, int, str]:
+    steps = int(run_state(run).get("steps", 0))
+    return steps, target, "" if steps else "recording the own controls, fitting the model"
 
 
 def _has_checkpoint(run: Path) -> bool:
@@ -89,7 +95,7 @@ def train(folder: BuildingFolder, spec: Path, preset: Preset, settings: Optimize
         try:
             outcome = run_command(args, folder.logs / "train.log", folder.root, f"train {preset.name}",
                                   deadline=deadline, show=show, bar=bar,
-                                  progress=lambda: (int(run_state(run).get("steps", 0)), target))  # fmt: skip
+                                  progress=lambda: _progress(run, target))  # fmt: skip
         finally:
             bar.close()
         state = run_state(run)
