@@ -3,13 +3,35 @@
 from __future__ import annotations
 
 import contextlib
+import faulthandler
+import io
 import json
+import logging
 import socket
 import subprocess
 import sys
 import time
 import urllib.request
 from pathlib import Path
+
+
+def cli(*args: str, timeout_s: float = 300) -> subprocess.CompletedProcess:
+    """`parallel-eplus ARGS` in this process (a fresh interpreter pays torch's import each time): its exit code, and
+    its log as the command's stderr shows it (a process's own exit code and stderr: tests/faults/test_run_files.py).
+    A command that should have refused but runs on (a server that starts) ends the session after `timeout_s`, with
+    every thread's traceback, rather than hanging it."""
+    from parallel_eplus.cli import main
+
+    stream, root = io.StringIO(), logging.getLogger()
+    handler = logging.StreamHandler(stream)
+    root.addHandler(handler)
+    faulthandler.dump_traceback_later(timeout_s, exit=True)
+    try:
+        code = main(list(args))
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+        root.removeHandler(handler)
+    return subprocess.CompletedProcess(args, code, "", stream.getvalue())
 
 
 def free_port() -> int:

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import io
 import json
-import logging
-import subprocess
 from pathlib import Path
 
 import pandas as pd
@@ -20,7 +17,7 @@ from parallel_eplus.learning.settings import SACSettings
 from parallel_eplus.training.config import TrainConfig
 from parallel_eplus.training.train import train
 
-from .serving import free_port, get, serving
+from .serving import cli, free_port, get, serving
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "results" / "paper" / "models"  # policies trained for results/paper (a year each, committed)
@@ -219,21 +216,6 @@ def test_closed_loop_through_the_server_equals_the_in_process_episode_step_by_st
     assert get(url + "/health")["act"] == 96
     assert log.read_text().count("POST /act 200") == 96  # every request logged
     assert not get(url + "/health")["loaded"]["torch"]
-
-
-def cli(*args: str) -> subprocess.CompletedProcess:
-    """`parallel-eplus ARGS` in process (a fresh interpreter pays torch's import each time): its exit code, and its
-    log as the command's stderr shows it (the process's own exit code and stderr: tests/faults/test_run_files.py)."""
-    from parallel_eplus.cli import main
-
-    stream, root = io.StringIO(), logging.getLogger()
-    handler = logging.StreamHandler(stream)
-    root.addHandler(handler)
-    try:
-        code = main(list(args))
-    finally:
-        root.removeHandler(handler)
-    return subprocess.CompletedProcess(args, code, "", stream.getvalue())
 
 
 @pytest.mark.slow

@@ -25,7 +25,7 @@ from parallel_eplus.learning.model_based.control.mpc import MPC
 from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
 from parallel_eplus.learning.model_based.runtime.ensemble_graph import OnnxEnsemble, build_graph
 
-from .serving import get, serving
+from .serving import cli, get, serving
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ROOT / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0"  # committed, 52.5k steps
@@ -255,11 +255,6 @@ def test_with_a_token_every_request_needs_it_and_the_log_never_shows_it(exported
     assert right.status_code == 200 and health.status_code == 401
     assert "POST /act 401" in caplog.text and "POST /act 200" in caplog.text
     assert TOKEN not in caplog.text
-
-
-def cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "parallel_eplus.cli", *args], capture_output=True, text=True,
-                          timeout=120)  # fmt: skip
 
 
 @pytest.mark.slow
