@@ -84,3 +84,11 @@ def test_a_spec_names_its_preset_and_a_preset_it_cannot_mean_is_refused(tmp_path
     bad.write_text(text.replace('name = "', 'preset = "thermostat-planer"\nname = "', 1))
     with pytest.raises(SpecError, match="thermostat-planner"):
         load_spec(bad)
+
+
+def test_a_config_file_may_name_the_preset_its_settings_start_from(tmp_path):
+    (tmp_path / "run.toml").write_text('preset = "thermostat-planner"\nrun-days = 7\n')
+    args = build_parser().parse_args(["train", "--config", str(tmp_path / "run.toml")])
+    assert (args.preset, args.algorithm, args.objective, args.run_days) == ("thermostat-planner", "mpc", "hvac", 7)
+    chosen = build_parser().parse_args(["train", "--config", str(tmp_path / "run.toml"), "--preset", "paper-trpo"])
+    assert (chosen.preset, chosen.algorithm, chosen.run_days) == ("paper-trpo", "trpo", 7)

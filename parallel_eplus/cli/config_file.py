@@ -52,9 +52,11 @@ class SettingsParser(argparse.ArgumentParser):
 
     def _parse_with_settings(self, args: list[str], namespace):
         first, _ = super().parse_known_args(args, None)
-        preset = preset_defaults(self, first, args)  # the lowest: a preset, then the file, then the command line
         path = getattr(first, CONFIG_DEST, None)
         values = read_config(self, path) if path is not None else {}
+        if getattr(first, "preset", None) is None and values.get("preset"):
+            first.preset = values["preset"]  # `preset = "..."` in the file: the command line's --preset wins
+        preset = preset_defaults(self, first, args)  # the lowest: a preset, then the file, then the command line
         for dest, value in preset.items():  # a file's [mpc] adds to the preset's, its own winning
             values[dest] = f"{value},{values[dest]}" if _is_settings(self, dest) and values.get(dest) else \
                 values.get(dest, value)  # fmt: skip
