@@ -1,7 +1,8 @@
 """`train --algorithm mpc` on real short episodes: the model, the planner, the distilled policy, a killed worker.
 
 One small run (2 workers, CA and FL, 2-day episodes: the building's own controls recorded, a day of exploration,
-then the planner) serves the first three tests; the fault test runs its own.
+then the planner, evaluated every 384 steps) serves the first three tests and the evaluation's; the others run their
+own.
 """
 
 from __future__ import annotations
@@ -46,8 +47,13 @@ def mpc_config(root: Path, name: str, **overrides) -> TrainConfig:
 
 @pytest.fixture(scope="module")
 def mpc_run(tmp_path_factory) -> Path:
+    """The small run, evaluated as it trains (`--eval-every 384`: the frozen planner, saved and loaded by `evaluate`'s
+    own code, so the run's own planner and data are as without it)."""
+    from parallel_eplus.training.eval_target import EvalSettings
+
     root = tmp_path_factory.mktemp("mpc")
-    final = train(mpc_config(root, "small"), progress=False)
+    evaluation = EvalSettings(every=384, days=1, target="in_band_pct>=50")
+    final = train(mpc_config(root, "small", evaluation=evaluation), progress=False)
     assert final == root / "runs" / "small" / "model.zip"
     return final.parent
 
@@ -119,15 +125,12 @@ def test_a_worker_killed_mid_plan_ends_the_run_with_a_checkpoint_and_it_resumes(
 
 
 @pytest.mark.slow
-def test_eval_every_measures_the_frozen_planner_keeps_the_best_and_records_the_target(tmp_path, no_leaks):
+def test_eval_every_measures_the_frozen_planner_keeps_the_best_and_records_the_target(mpc_run):
     import pandas as pd
 
     from parallel_eplus.runs.run_files import BEST_DIR, EVALUATIONS_FILE, TARGET_FILE
-    from parallel_eplus.training.eval_target import EvalSettings
 
-    evaluation = EvalSettings(every=384, days=1, target="in_band_pct>=50")
-    train(mpc_config(tmp_path, "evaluated", evaluation=evaluation), progress=False)
-    run = tmp_path / "runs" / "evaluated"
+    run = mpc_run  # evaluated every 384 steps, target in_band_pct>=50
     table = pd.read_csv(run / EVALUATIONS_FILE)
     assert sorted(set(table.timesteps)) == [384, 768]
     assert set(table.weather) == {"all", "CA", "FL"}
