@@ -36,7 +36,7 @@ def add_commands(sub) -> None:
                     "(required off loopback)")
     se.add_argument("--ssl-keyfile", type=Path, help="TLS: the server's private key (PEM), with --ssl-certfile")
     se.add_argument("--ssl-certfile", type=Path, help="TLS: the server's certificate chain (PEM)")
-    bn = se.add_argument_group("BACnet supervisor (docs/deploy.md#bacnet; needs the [bacnet] extra)")
+    bn = se.add_argument_group("BACnet supervisor (docs/bacnet.md; needs the [bacnet] extra)")
     bn.add_argument("--bacnet", metavar="ADDRESS", help="supervise the BACnet/IP device at host[:port] instead of "
                     "serving HTTP: read its points, write the setpoints at --priority every control step")  # fmt: skip
     bn.add_argument("--point-map", type=Path, default=Path("points.toml"),

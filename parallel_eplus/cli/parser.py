@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--reward", type=Path, help="JSON file overriding reward constants")
     sim.add_argument("--seed", type=int, default=0, help="seed of the random policy and the episode (default 0)")
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
-    bn = sim.add_argument_group("as a BACnet/IP device (docs/deploy.md#bacnet; needs the [bacnet] extra)")
+    bn = sim.add_argument_group("as a BACnet/IP device (docs/bacnet.md; needs the [bacnet] extra)")
     bn.add_argument("--bacnet", metavar="ADDRESS", help="serve the episode as a BACnet/IP device on host[/mask][:port]"
                     ": sensors as analog inputs, setpoints as commandable analog values")  # fmt: skip
     bn.add_argument("--step-seconds", type=float, help="a control step every this many seconds (default: lockstep, "

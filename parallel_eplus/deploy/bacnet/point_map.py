@@ -93,7 +93,7 @@ class PointMap:
                 raise ValueError(f"point map: no {role} point for {', '.join(missing)} (the contract needs them)")
 
     def to_toml(self) -> str:
-        lines = ["# BACnet points of one device (parallel-eplus, docs/deploy.md#bacnet). Edit object types and",
+        lines = ["# BACnet points of one device (parallel-eplus, docs/bacnet.md). Edit object types and",
                  "# instances to a real device's; `name` is the contract's, `role` what the supervisor does with it.",
                  f"device = {json.dumps(self.device)}"]  # fmt: skip
         if self.device_instance is not None:
