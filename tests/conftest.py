@@ -29,6 +29,65 @@ os.environ["TMPDIR"] = tempfile.tempdir = SESSION_TMP
 LEFT_IN_TMP = ("SB3-", "parallel-eplus-")  # SB3's default logger folders; our pipes and temporary episodes
 
 
+# Tests that start a Ray of their own (ray.init, a Ray backend or evaluation, a Tune sweep). Under pytest-xdist
+# (`pytest -n 2`) they are one unit of work, run one after another on one worker: two Rays starting at once on 2
+# loaded cores timed out ("The current node timed out during startup"). Every other test goes with its module, so a
+# module's fixtures run once, as they do without xdist.
+RAY_TESTS = (
+    "tests/faults/test_overlap_faults.py::test_ctrl_c_during_an_overlapped_update_saves_a_checkpoint_stops_the_collec",
+    "tests/faults/test_overlap_faults.py::test_an_actor_lost_during_an_overlapped_update_ends_the_run_after_a_check",
+    "tests/faults/test_ray_faults.py::",
+    "tests/test_bench.py::test_bench_measures_everything_and_writes_json",  # its Ray backend row
+    "tests/test_comfort_constraint.py::test_ray_actors_return_the_costs_their_workers_reported",
+    "tests/test_evaluate.py::test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures",
+    "tests/test_evaluate.py::test_a_ray_evaluations_bar_moves_within_its_episodes",
+    "tests/test_evaluate.py::test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder",
+    "tests/test_model_based.py::test_the_ray_backend_runs_the_planner_too",
+    "tests/test_overlap.py::test_overlapped_batches_hold_every_workers_steps_once_in_order_with_their_costs",
+    "tests/test_registry.py::",
+    "tests/test_rllib.py::",
+    "tests/test_rollout.py::test_ray_actors_collect_the_batch_local_workers_collect",
+    "tests/test_sweep.py::",
+    "tests/test_sweep_eval.py::",
+    "tests/test_sweep_job.py::",
+    "tests/test_train.py::test_ray_backend_trains_locally",
+    "tests/test_vector_env.py::test_ray_backend_starts_its_own_ray_despite_a_stale_cluster",
+)
+
+
+# Tests on a wall clock: a BACnet device stepping every 0.3-0.5 s that a supervisor must act within, or an answer
+# due within a few seconds. Marked `realtime`; .ci/run runs them alone, after the rest: beside a second test process
+# on 2 loaded cores, one of them missed a step and one took 5.6 s for 3.
+REALTIME_TESTS = (
+    "tests/faults/test_energyplus.py::test_killed_energyplus_raises_promptly_and_leaves_nothing",
+    "tests/faults/test_energyplus.py::test_hung_energyplus_hits_the_timeout",
+    "tests/test_bacnet.py::test_in_accelerated_real_time_the_supervisor_follows_the_device_s_clock",
+    "tests/test_bacnet.py::test_a_device_with_only_its_points_is_supervised_on_the_supervisor_s_own_clock",
+    "tests/test_bacnet.py::test_a_supervisor_that_cannot_reach_its_device_says_why_within_seconds",
+    "tests/test_fork.py::test_a_forked_episode_killed_mid_episode_raises_promptly_and_the_env_recovers",
+    "tests/test_fork.py::test_close_ends_the_templates_and_their_children_and_removes_their_directories",
+    "tests/test_vector_env.py::test_pipelined_worker_that_crashes_or_hangs_restarts_alone",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.nodeid.startswith(REALTIME_TESTS):
+            item.add_marker(pytest.mark.realtime)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist's scheduling by scope (`--dist loadscope`), the scope a test's module or, for RAY_TESTS, "ray"."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModulesAndRayApart(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return "ray" if nodeid.startswith(RAY_TESTS) else nodeid.split("::", 1)[0]
+
+    return ModulesAndRayApart(config, log)
+
+
 def pytest_sessionfinish(session, exitstatus):
     """Nothing of ours may stay in the temp folder: fail the session, naming what was left, then tidy up."""
     left = sorted(n for n in os.listdir(SESSION_TMP) if n.startswith(LEFT_IN_TMP))
