@@ -69,6 +69,12 @@ def controller_path(run: Path, preset: Preset) -> Path:
     return run / "model.zip"
 
 
+def scores_planner(preset: Preset) -> bool:
+    """Whether the preset's controller is scored as a planner (a model-based run that distils no network)."""
+    train = preset.commands.get("train", {})
+    return train.get("algorithm") == "mpc" and train.get("mpc", {}).get("distill") is False
+
+
 def evaluate_options(preset: Preset) -> tuple[str, ...]:
     """The preset's `[evaluate]` settings as options (`--planner band_thermostats=baseline`)."""
     return tuple(option_args(preset.commands.get("evaluate", {})))

@@ -100,9 +100,9 @@ def choose(held: pd.DataFrame, metric: str, weathers: list[str]) -> Choice:
             eligible.append((ratio, r.candidate, r.label))
     where = ", ".join(weathers)
     if not eligible:
-        why = (f"keep your own controls: no candidate's {name} on the held-out weathers ({where}) is "
-               f"{100 * MIN_SAVING:.1f} % lower at no more occupied discomfort")  # fmt: skip
+        why = (f"no candidate's {name} on the held-out weathers ({where}) is {100 * MIN_SAVING:.1f} % lower at no "
+               "more occupied discomfort: keep your own controls")  # fmt: skip
         return Choice(OWN, "own controls", why, verdicts)
     ratio, key, label = min(eligible)
-    return Choice(key, label, f"{label}: {verdicts[key]} on the held-out weathers ({where}), the lowest {name} of the "
+    return Choice(key, label, f"{verdicts[key]} on the held-out weathers ({where}), the lowest {name} of the "
                   "candidates that hold the own controls' comfort", verdicts)  # fmt: skip

@@ -36,14 +36,15 @@ class Outcome:
     seconds: float
 
 
-def run_command(args: list[str], log_path: Path, cwd: Path, desc: str, *, deadline: float | None = None,
+def run_command(args: list[str], log_path: Path, cwd: Path, desc: str, *,
+                deadline: float | Callable[[], float] | None = None,
                 progress: Callable[[], tuple] | None = None, show: bool = True,
                 bar: tqdm | None = None) -> Outcome:  # fmt: skip
     """Run `parallel-eplus ARGS` in `cwd`, its output appended to `log_path`. `progress`: () -> (done, total) or (done,
-    total, note) for the bar, polled every POLL_S seconds. At `deadline` (time.time()) the child gets SIGINT and is
-    waited for. The child has its own session, so a Ctrl-C at the terminal reaches this process only, which passes
-    exactly one SIGINT on (a second one could cut a checkpoint short), waits for the child, then raises
-    KeyboardInterrupt. `bar`: a stage's bar spanning several commands (else one of its own, closed at the end)."""
+    total, note) for the bar, polled every POLL_S seconds. At `deadline` (time.time(), or a callable asked at each
+    poll) the child gets SIGINT and is waited for. The child has its own session, so a Ctrl-C at the terminal reaches
+    this process only, which passes exactly one SIGINT on (a second one could cut a checkpoint short), waits for the
+    child, then raises KeyboardInterrupt. `bar`: a stage's bar spanning several commands (else one of its own)."""
     log_path.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     with open(log_path, "a") as out:
@@ -61,7 +62,8 @@ def run_command(args: list[str], log_path: Path, cwd: Path, desc: str, *, deadli
                 except subprocess.TimeoutExpired:
                     pass
                 _advance(bar, progress)
-                if deadline is not None and not stopped and time.time() >= deadline:
+                limit = deadline() if callable(deadline) else deadline
+                if limit is not None and not stopped and time.time() >= limit:
                     log.info("%s: its share of the budget is spent; stopping it (SIGINT: it keeps a checkpoint)", desc)
                     proc.send_signal(signal.SIGINT)
                     stopped = True

@@ -44,4 +44,9 @@ def export(folder: BuildingFolder, chosen: str, reason: str, controller: str | N
         return {"state": "failed", "error": f"export: {failure(outcome.log)}"}
     (out / NOTE).write_text(f"# Chosen: {preset.name}\n\n{reason}\n\nServe it: `parallel-eplus serve {out}` "
                             "(docs/deploy.md).\n")  # fmt: skip
-    return {"state": "done", "written": str(out / "controller.json"), "seconds": round(outcome.seconds, 1)}
+    return {
+        "state": "done",
+        "written": str(out / "controller.json"),
+        "note": f"`export` of {preset.name}",
+        "seconds": round(outcome.seconds, 1),
+    }

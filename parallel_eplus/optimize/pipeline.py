@@ -19,7 +19,7 @@ from parallel_eplus.optimize.prepare import prepare
 from parallel_eplus.optimize.report import write_report
 from parallel_eplus.optimize.scoring import forget, gather, score
 from parallel_eplus.optimize.settings import QUICK, QUICK_DAY, OptimizeSettings
-from parallel_eplus.optimize.training import run_dir, timesteps, train
+from parallel_eplus.optimize.training import acting_from, run_dir, steps_of, timesteps, train
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ def _stages(folder: BuildingFolder, settings: OptimizeSettings, budget: Budget, 
     pictures += [day] if day else []
     write_report(folder, settings, train_f, held_f, choice, periods, pictures, notes)
     folder.set_stage("report", state="done")
-    log.info("%s: %s (report: %s)", folder.name, choice.reason, folder.report)
+    log.info("%s: %s: %s (report: %s)", folder.name, choice.label, choice.reason, folder.report)
     return _row(folder, choice, held_f, settings)
 
 
@@ -132,7 +132,7 @@ def _learned(folder, settings, budget, preset, periods, notes, show):
         notes.append(f"learned ({preset.name}): it rides Guideline 36's reset, which this building cannot take")
         return None
     spec = cands.learned_spec(folder, preset)
-    planner = preset.commands.get("train", {}).get("algorithm") == "mpc"
+    planner = cands.scores_planner(preset)
     t = folder.stage("train")
     reserve = budget.reserve_after_training(folder.stage("own").get("seconds") or 60.0, planner)
     target = timesteps(preset, settings)
@@ -145,7 +145,11 @@ def _learned(folder, settings, budget, preset, periods, notes, show):
         log.warning("%s: not training: %s", folder.name, short)
         return None
     if t.get("state") != "done" or more:
-        deadline, share = budget.training_deadline(reserve)
+        pace = {}
+        if planner:  # its own pace in training tells how long scoring it will take
+            pace = {"steps": steps_of(run_dir(folder)), "acting_from": acting_from(preset, settings),
+                    "eval_steps": eval_steps(spec, periods)}  # fmt: skip
+        deadline, share = budget.training_deadline(reserve, **pace)
         log.info("%s: training gets %.1f min of the budget (%.1f min left, %.1f reserved to score and export it)",
                  folder.name, share / 60, budget.left_s() / 60, reserve / 60)  # fmt: skip
         info = {"preset": preset.name, "version": preset.version, "summary": preset.summary, "share_s": round(share)}
@@ -166,6 +170,14 @@ def _learned(folder, settings, budget, preset, periods, notes, show):
         notes.append(f"learned ({preset.name}): scoring failed: {folder.stage('learned').get('error')}")
         return None
     return candidate
+
+
+def eval_steps(spec, periods: dict) -> int:
+    """The control steps of scoring one controller on every period and weather (warm-ups included)."""
+    from parallel_eplus.buildings.building import load_building
+
+    per_day = load_building(str(spec)).steps_per_day
+    return sum(p["run_days"] * per_day for ps in periods.values() for p in ps.values())
 
 
 def _export(folder, settings, budget, choice: Choice, preset, learned, show) -> None:

@@ -58,6 +58,10 @@ def run_optimize(arguments: list[str], out: Path, settings: OptimizeSettings, sh
             log.info("building %d of %d: %s (%s)", i + 1, len(folders), folder.name, folder.source)
         try:
             rows.append(optimize_building(folder, settings, show))
+        except KeyboardInterrupt:
+            log.warning("%s: interrupted; rerun the same command to continue (finished stages are kept in %s)",
+                        folder.name, folder.root)  # fmt: skip
+            raise
         except (ValueError, FileNotFoundError, OSError) as e:
             if len(folders) == 1:
                 raise
@@ -66,7 +70,7 @@ def run_optimize(arguments: list[str], out: Path, settings: OptimizeSettings, sh
     if len(folders) > 1:
         write_summary(rows, Path(out).resolve(), settings)
     for r in rows:
-        log.info("%s: %s", r["building"], r["why"])
+        log.info("%s: %s", r["building"], f"{r['chosen']}: {r['why']}" if r["chosen"] else r["why"])
     return 0 if all(r["chosen"] for r in rows) else 1
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 
 from parallel_eplus.optimize.candidates import controller_path, option_args
@@ -62,6 +63,17 @@ def timesteps(preset: Preset, settings: OptimizeSettings) -> int:
     return int(options(preset, settings).get("timesteps", TRAIN_DEFAULT_TIMESTEPS))
 
 
+def acting_from(preset: Preset, settings: OptimizeSettings) -> int:
+    """The step from which a planner's own actions drive the run (after its exploration)."""
+    from parallel_eplus.learning.model_based.settings import MPCSettings
+
+    return int(options(preset, settings).get("mpc", {}).get("explore_steps", MPCSettings().explore_steps))
+
+
+def steps_of(run: Path) -> Callable[[], int]:
+    return lambda: int(run_state(run).get("steps", 0))
+
+
 def command(folder: BuildingFolder, spec: Path, preset: Preset, settings: OptimizeSettings) -> list[str]:
     """A new run's `train` command line."""
     return ["train", "--building", str(spec), "--weathers", ",".join(settings.weathers), "--workers",
@@ -78,7 +90,7 @@ def _has_checkpoint(run: Path) -> bool:
     return any((run / "checkpoints").glob("*.pt")) or any((run / "checkpoints").glob("*.zip"))
 
 
-def train(folder: BuildingFolder, spec: Path, preset: Preset, settings: OptimizeSettings, deadline: float,
+def train(folder: BuildingFolder, spec: Path, preset: Preset, settings: OptimizeSettings, deadline: Callable[[], float],
           show: bool) -> dict:  # fmt: skip
     """Train (or continue) until the run finishes or `deadline`; returns the stage's fields: state done with the
     steps the controller learned from (`stopped` where the budget cut it), or failed with why."""
