@@ -24,7 +24,7 @@ from parallel_eplus.optimize.candidates import OWN
 KH_ALLOWANCE = 0.1  # K·h
 KH_ALLOWANCE_SHARE = 0.01  # of the own controls' occupied K·h
 MIN_SAVING = 0.005  # a ratio of at most 0.995 is a saving
-METRIC_NAMES = {"hvac_energy_kwh": "HVAC energy", "bill": "electricity bill"}
+METRIC_NAMES = {"hvac_energy_kwh": "HVAC energy", "bill": "electricity bill", "energy_kwh": "facility energy"}
 
 
 def read_results(folder: Path) -> pd.DataFrame:
@@ -54,7 +54,7 @@ def figures(df: pd.DataFrame, held_out: bool) -> pd.DataFrame:
         pairs = own.index.intersection(mine.index)
         a, b = mine.loc[pairs], own.loc[pairs]
         row = {"candidate": key, "label": rows_of.label.iloc[0], "pairs": len(pairs), "own_pairs": len(own)}
-        for col, how in (("hvac_energy_kwh", "sum"), ("bill", "sum"), ("peak_15min_kw", "max")):
+        for col, how in (("hvac_energy_kwh", "sum"), ("energy_kwh", "sum"), ("bill", "sum"), ("peak_15min_kw", "max")):
             if col in part:
                 mine_v, own_v = a[col].agg(how), b[col].agg(how)
                 row[col], row[f"{col}_x"] = mine_v, (mine_v / own_v if own_v else float("nan"))

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 from parallel_eplus.optimize import candidates as cands
 from parallel_eplus.optimize.budget import MIN_TRAIN_S, MIN_USEFUL_TRAIN_S, Budget
-from parallel_eplus.optimize.choice import Choice, choose, figures, read_results
+from parallel_eplus.optimize.choice import METRIC_NAMES, Choice, choose, figures, read_results
 from parallel_eplus.optimize.export import export
 from parallel_eplus.optimize.figures import DAY_PNG, SAVINGS_PNG, day_shown, savings, typical_day
 from parallel_eplus.optimize.folders import BuildingFolder
@@ -98,17 +98,18 @@ def _stages(folder: BuildingFolder, settings: OptimizeSettings, budget: Budget, 
         missed = folder.stage(c.key).get("failed_episodes")
         if missed:
             notes.append(f"{c.label}: no result on {', '.join(missed)} (see eval/{c.key}/*/results.md)")
-    choice = choose(held_f, settings.metric, weather_labels(settings.held_out))
+    metric = settings.metric(prep["kind"])
+    choice = choose(held_f, metric, weather_labels(settings.held_out))
     folder.set_stage("choice", state="done", chosen=choice.candidate, reason=choice.reason)
     _export(folder, settings, budget, choice, preset, learned, show)
-    shown = day_shown(choice.candidate, choice.label, held_f, settings.metric)
-    pictures = [savings(train_f, held_f, settings.metric, folder.root / SAVINGS_PNG).name]
+    shown = day_shown(choice.candidate, choice.label, held_f, metric)
+    pictures = [savings(train_f, held_f, metric, folder.root / SAVINGS_PNG).name]
     day = _typical_day(folder, df, periods, settings, shown)
     pictures += [day] if day else []
-    write_report(folder, settings, train_f, held_f, choice, periods, pictures, notes)
+    write_report(folder, settings, metric, train_f, held_f, choice, periods, pictures, notes)
     folder.set_stage("report", state="done")
     log.info("%s: %s: %s (report: %s)", folder.name, choice.label, choice.reason, folder.report)
-    return _row(folder, choice, held_f, settings)
+    return _row(folder, choice, held_f, metric)
 
 
 def _score_reset(folder, reset, periods, settings, show) -> dict:
@@ -213,12 +214,13 @@ def _unfinished(folder: BuildingFolder, settings: OptimizeSettings, why: str) ->
     return {"building": folder.name, "chosen": "", "why": why, "folder": folder.root}
 
 
-def _row(folder: BuildingFolder, choice: Choice, held, settings: OptimizeSettings) -> dict:
-    row = {"building": folder.name, "chosen": choice.label, "why": choice.reason, "folder": folder.root}
+def _row(folder: BuildingFolder, choice: Choice, held, metric: str) -> dict:
+    row = {"building": folder.name, "chosen": choice.label, "why": choice.reason, "folder": folder.root,
+           "metric": METRIC_NAMES[metric]}  # fmt: skip
     mine = held[held.candidate == choice.candidate]
     if not mine.empty:
         r = mine.iloc[0]
-        row |= {"metric_x": r.get(f"{settings.metric}_x"), "kh_own": r.kh_own, "kh": r.kh,
-                "best_other_x": held[held.candidate != cands.OWN][f"{settings.metric}_x"].min()
+        row |= {"metric_x": r.get(f"{metric}_x"), "kh_own": r.kh_own, "kh": r.kh,
+                "best_other_x": held[held.candidate != cands.OWN][f"{metric}_x"].min()
                 if (held.candidate != cands.OWN).any() else None}  # fmt: skip
     return row

@@ -75,19 +75,20 @@ def run_optimize(arguments: list[str], out: Path, settings: OptimizeSettings, sh
 
 
 def write_summary(rows: list[dict], out: Path, settings: OptimizeSettings) -> Path:
-    metric = "bill" if settings.objective == "cost" else "HVAC energy"
     lines = ["# Every building: what to install", "",
-             f"Each building's choice on the held-out weathers ({', '.join(settings.held_out)}): {metric} and occupied "
-             "discomfort against its own controls (sums over the test periods). Details: each building's report.", "",
-             f"| building | chosen | {metric} × (chosen) | best candidate's × | occupied K·h: own → chosen | report |",
-             "|---|---|---|---|---|---|"]  # fmt: skip
+             f"Each building's choice on the held-out weathers ({', '.join(settings.held_out)}): its measure (HVAC "
+             "energy; a data center's facility energy; the bill with --objective cost) and occupied discomfort against "
+             "its own controls (sums over the test periods). Details: each building's report.", "",
+             "| building | chosen | measure | chosen × own | best candidate × own | occupied K·h: own → chosen "
+             "| report |",
+             "|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in rows:
         x = "" if pd.isna(r.get("metric_x", float("nan"))) else f"{r['metric_x']:.3f}"
         best = "" if r.get("best_other_x") is None or pd.isna(r["best_other_x"]) else f"{r['best_other_x']:.3f}"
         kh = f"{r['kh_own']:.2f} → {r['kh']:.2f}" if "kh" in r else ""
         chosen = r["chosen"] or f"not finished: {r['why']}"
         link = Path(r["folder"]).relative_to(out) / "report.md"
-        lines.append(f"| {r['building']} | {chosen} | {x} | {best} | {kh} | [{link}]({link}) |")
+        lines.append(f"| {r['building']} | {chosen} | {r.get('metric', '')} | {x} | {best} | {kh} | [{link}]({link}) |")
     chosen = [r for r in rows if r["chosen"]]
     keep = sum(r["chosen"] == "own controls" for r in chosen)
     lines += ["", f"{len(chosen)} of {len(rows)} buildings answered: {len(chosen) - keep} with a controller to "

@@ -27,23 +27,27 @@ def _x(v) -> str:
     return "" if v is None or pd.isna(v) else f"{v:.3f}"
 
 
-def candidate_rows(train: pd.DataFrame, held: pd.DataFrame) -> list[str]:
-    lines = ["| candidate | weathers | HVAC energy × | bill × | peak × | occupied K·h: own → it "
-             "| in own bounds: own → it | periods |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+def candidate_rows(train: pd.DataFrame, held: pd.DataFrame, facility: bool = False) -> list[str]:
+    """The candidates' table; `facility`: with the facility's energy (a data center's measure) first."""
+    columns = ("energy_kwh",) * facility + ("hvac_energy_kwh", "bill", "peak_15min_kw")
+    heads = "facility energy × | " * facility + "HVAC energy × | bill × | peak ×"
+    lines = [f"| candidate | weathers | {heads} | occupied K·h: own → it | in own bounds: own → it | periods |",
+             "|---" * (5 + len(columns)) + "|"]  # fmt: skip
     for where, df in (("held-out", held), ("training", train)):
         for _, r in df.iterrows():
-            ratios = " | ".join(_x(r.get(f"{c}_x")) for c in ("hvac_energy_kwh", "bill", "peak_15min_kw"))
+            ratios = " | ".join(_x(r.get(f"{c}_x")) for c in columns)
             comfort = f"{r.kh_own:.2f} → {r.kh:.2f} | {r.in_band_pct_own:.2f} % → {r.in_band_pct:.2f} %"
             lines.append(f"| {r.label} | {where} | {ratios} | {comfort} | {r.pairs} of {r.own_pairs} |")
     return lines
 
 
-def write_report(folder: BuildingFolder, settings: OptimizeSettings, train: pd.DataFrame, held: pd.DataFrame,
+def write_report(folder: BuildingFolder, settings: OptimizeSettings, metric_key: str, train: pd.DataFrame,
+                 held: pd.DataFrame,
                  choice: Choice | None, periods: dict, figures: list[str], notes: list[str]) -> str:  # fmt: skip
     status = folder.status()
     stages = status.get("stages", {})
     exported = stages.get("export", {})
-    metric = METRIC_NAMES[settings.metric]
+    metric = METRIC_NAMES[metric_key]
     lines = [f"# {folder.name}: what it can save, and which controller to install", ""]
     if settings.quick:
         lines += [
@@ -70,7 +74,7 @@ def write_report(folder: BuildingFolder, settings: OptimizeSettings, train: pd.D
               f"same periods and weathers (× own; 1.000: the same). Held-out weathers ({', '.join(settings.held_out)}) "
               f"decide; training weathers ({', '.join(settings.weathers)}) are shown beside them. The bill is the "
               "facility's electricity under the spec's tariff (docs/kpis.md). Read from `results/*.csv`.", "",
-              *candidate_rows(train, held), ""]  # fmt: skip
+              *candidate_rows(train, held, metric_key == "energy_kwh"), ""]  # fmt: skip
     if choice is not None:
         lines += ["## The choice", "",
                   f"By the held-out weathers only: the lowest {metric} among the candidates at no more occupied "

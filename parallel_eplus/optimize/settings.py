@@ -65,10 +65,12 @@ class OptimizeSettings:
     def all_weathers(self) -> tuple[str, ...]:
         return (*self.weathers, *self.held_out)
 
-    @property
-    def metric(self) -> str:
-        """The results column the choice minimises."""
-        return "bill" if self.objective == "cost" else "hvac_energy_kwh"
+    def metric(self, kind: str) -> str:
+        """The results column the choice minimises: the bill with --objective cost; else HVAC energy, or a data
+        center's facility energy (its servers draw more with warmer inlet air: HVAC alone would reward that)."""
+        if self.objective == "cost":
+            return "bill"
+        return "energy_kwh" if kind == "datacenter" else "hvac_energy_kwh"
 
     def fingerprint(self) -> dict:
         """The settings the folder's results depend on: a rerun with other values would mix two questions' answers.
