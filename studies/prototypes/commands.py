@@ -15,31 +15,14 @@ from pathlib import Path
 
 from study import SCENARIOS, Study, read_status, short_name, write_status
 
+from parallel_eplus.optimize.prepare import recommended  # the starter's recommended actions, as optimize takes them
+
 LOG = logging.getLogger("prototypes")
 EVAL_WEATHERS = "CA,CO,FL,IL,VA"
-TARIFF_LINE = '# tariff = { Electricity = { file = "commercial-tou-demand.toml" } }'
 
 
 def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "parallel_eplus.cli", *args]
-
-
-def recommended(starter: str) -> str:
-    """The starter with its recommended actions and the example tariff uncommented (what its notes ask a user)."""
-    out, on = [], False
-    for line in starter.splitlines():
-        heading = line.startswith(("# all ", "# the one thermostat's", "# the one air loop's"))
-        kinds = ("thermostats'", "thermostat's", "air loops' supply", "air loop's supply")
-        if heading and any(k in line for k in kinds):
-            on = True  # a block's heading: its lines follow, to a blank line
-        elif on and line.startswith("# "):
-            line = line[2:]
-        elif not line.strip():
-            on = False
-        if line.startswith(TARIFF_LINE):
-            line = line[2:]
-        out.append(line)
-    return "\n".join(out) + "\n"
 
 
 def failure(result: subprocess.CompletedProcess) -> str:
