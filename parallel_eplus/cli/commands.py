@@ -273,17 +273,18 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_clean(args: argparse.Namespace) -> int:
     from parallel_eplus.engine.pipes import leftovers
-    leftovers = leftovers.leftover_processes()
-    for p in leftovers:
+
+    found = leftovers.leftover_processes()
+    for p in found:
         print(f"leftover EnergyPlus process {p.pid} (its trainer is gone; pipe {p.pipe_dir})")
-    if leftovers and args.kill:
-        leftovers.kill(leftovers)
-        print(f"killed {len(leftovers)} leftover EnergyPlus process(es)")
-    elif leftovers:
+    if found and args.kill:
+        leftovers.kill(found)
+        print(f"killed {len(found)} leftover EnergyPlus process(es)")
+    elif found:
         print("stop them with: parallel-eplus clean --kill")
     stale = leftovers.stale_pipe_dirs(unowned=True)
     for d in stale if args.dry_run else leftovers.sweep(unowned=True):
         print(f"{'stale' if args.dry_run else 'removed'} pipe directory: {d}")
-    if not leftovers and not stale:
+    if not found and not stale:
         print("nothing to clean: no pipe directory or EnergyPlus process of a process that is gone")
     return 0
