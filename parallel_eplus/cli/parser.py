@@ -9,6 +9,7 @@ from pathlib import Path
 
 from parallel_eplus.cli import commands as c
 from parallel_eplus.cli import deploy, many_runs
+from parallel_eplus.cli.boptest import add_boptest
 from parallel_eplus.cli.config_file import PresetOption, SettingsParser
 from parallel_eplus.cli.evaluate import cmd_evaluate
 from parallel_eplus.cli.optimize import add_optimize
@@ -73,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_train(sub)
 
     add_optimize(sub)
+    add_boptest(sub)
 
     ps = sub.add_parser("presets", help="the shipped presets: settings that earned their place, with their reasons")
     ps.add_argument("name", nargs="?", help="show this preset with every setting, its reason and its evidence")
