@@ -189,6 +189,8 @@ def serve(testcases: dict[str, Path], host: str = "127.0.0.1", port: int = 8000,
              len(testcases), ", ".join(testcases), workers, f" on Ray at {ray_address}" if ray_address else "",
              idle_timeout_s, "; bearer token required" if token else "")  # fmt: skip
     try:
-        uvicorn.run(app, host=host, port=port, access_log=False, log_level="warning", timeout_graceful_shutdown=3)
+        # a client's connection kept alive through a minute of its own computing between steps (uvicorn's default: 5 s)
+        uvicorn.run(app, host=host, port=port, access_log=False, log_level="warning", timeout_graceful_shutdown=3,
+                    timeout_keep_alive=60)  # fmt: skip
     finally:
         registry.close()

@@ -2,7 +2,8 @@
 once (Running), the rest wait in order (Queued); a request that needs the simulation of a queued test waits for its
 turn (up to `queue_wait_s`). A test idle past `idle_timeout_s` is stopped, as `PUT /stop` stops one: its process
 ended and its pipes and episode folder removed at once. Test ids are random UUIDs (122 bits from the OS's
-generator): knowing one test's id tells nothing of another's.
+generator): knowing one test's id tells nothing of another's. A queued test holds nothing to free: its idle time
+counts from when it runs.
 """
 
 from __future__ import annotations
@@ -165,7 +166,8 @@ class Registry:
         while not self._closing.wait(tick):
             now = time.monotonic()
             with self._cond:
-                idle = [t for t, e in self.tests.items() if not e.busy and now - e.last > self.idle_timeout_s]
+                idle = [t for t, e in self.tests.items()
+                        if e.status == RUNNING and not e.busy and now - e.last > self.idle_timeout_s]  # fmt: skip
             for testid in idle:
                 try:
                     self.stop(testid, f"was stopped after {self.idle_timeout_s:g} s without a request (--idle-timeout)")
