@@ -84,6 +84,9 @@ class SimulationConfig:
     # `baseline_idf` runs with the actions' actuators, and an action element that is NaN releases them to its own
     # setpoint managers and fan controls for that step. `initial_action` NaN: warm-up under its own controls too.
     relinquish: bool = False
+    # The oracle's (issue 89): the episode serves forks of itself wherever it awaits an action, each playing given
+    # actions over a horizon (engine/eplus_side/branch.py; our side engine/episodes/branch.py). Python bridge only.
+    branching: bool = False
 
 
 RESIDUAL_SPACES = ("action", "demand", "builtin")

@@ -60,6 +60,7 @@ class WorkerSetup:
         building = ["--building", str(self.building.spec.path)] if self.config.building else []
         own = ["--builtin-residual"] if self.builtin_residual else []
         own += ["--relinquish"] if self.config.relinquish else []
+        own += ["--branching"] if self.config.branching else []
         return ["--model", self.model.name, *building, "--steps", str(self.steps_per_episode),
                 "--initial-action", *map(str, self.initial_action), *own]  # fmt: skip
 

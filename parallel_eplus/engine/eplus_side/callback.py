@@ -18,6 +18,7 @@ import os
 import sys
 import traceback
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -44,6 +45,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--spin-us", type=float, default=0.0, help="poll this long for an action before blocking")
     p.add_argument("--native", help="the compiled C bridge (native.py) to run each step in; default: Python")
     p.add_argument("--replay", help="without pipes: a .npy of one action row per step (physical units) to apply")
+    p.add_argument("--branching", action="store_true",
+                   help="serve forks of the episode where it awaits an action (branch.py: the oracle)")  # fmt: skip
     return p.parse_args(argv)
 
 
@@ -84,10 +87,15 @@ def _run(args: argparse.Namespace, opened: list[int]) -> int:
         state = api.state_manager.new_state()
         api.runtime.set_console_output_status(state, False)
         replay = np.load(args.replay) if args.replay else None
-        bridge = Bridge(
+        kind = Bridge
+        if args.branching:
+            from parallel_eplus.engine.eplus_side.branch import BranchingBridge as kind
+        bridge = kind(
             api, act_fd, obs_fd, args.model, args.steps, args.initial_action, args.spin_us * 1e-6, replay,
             args.building, args.builtin_residual, args.relinquish,
         )  # fmt: skip
+        if args.branching:
+            bridge.open_branching(Path(args.act_pipe).parent)
         for s in bridge.sensors:  # EnergyPlus gathers only requested variables: a model need not report them
             if not s.meter:
                 api.exchange.request_variable(state, s.variable, s.key)
