@@ -57,6 +57,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     for path in args.policy or []:  # a model-based run's planner, else a policy or a folder of runs (seeds)
         planner = planner_controller(path, args.planner)
         controllers += [planner] if planner else policy_controllers(path)
+    if getattr(args, "oracle", None) is not None:  # plans on EnergyPlus itself (learning/oracle/)
+        from parallel_eplus.learning.oracle.controller import oracle_controller
+
+        controllers.append(oracle_controller(args.oracle))
     if args.controller_url:
         from parallel_eplus.evaluation.http_controller import client_token
 
@@ -66,7 +70,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers += served
     if not controllers:
         raise ValueError(
-            "nothing to evaluate: give --baseline, --rbc, --rbc-targets, --policy PATH and/or --controller-url URL"
+            "nothing to evaluate: give --baseline, --rbc, --rbc-targets, --policy PATH, --oracle and/or "
+            "--controller-url URL"
         )
     histogram = tuple(args.histogram.rsplit(",", 1)) if args.histogram else None  # labels may hold commas
     periods = None

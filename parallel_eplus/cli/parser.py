@@ -96,6 +96,13 @@ def build_parser() -> argparse.ArgumentParser:
         "`--planner help` lists them",
     )  # fmt: skip
     ev.add_argument(
+        "--oracle", nargs="?", const="", metavar="NAME=VALUE,...|help", action=SettingsText,
+        settings="parallel_eplus.learning.oracle.settings:OracleSettings",
+        help="include the oracle: at each decision it plays candidate action sequences in forks of the running "
+        "EnergyPlus and applies the best (docs/oracle.md); settings e.g. horizon_h=24,candidates=24; "
+        "`--oracle help` lists them",
+    )  # fmt: skip
+    ev.add_argument(
         "--preset", action=PresetOption, metavar="NAME",
         help="a shipped preset's evaluation settings (e.g. thermostat-planner: --planner band_thermostats=baseline) "
         "under the command line's; `parallel-eplus presets` lists them",

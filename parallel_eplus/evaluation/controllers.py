@@ -27,6 +27,9 @@ log = logging.getLogger(__name__)
 
 BASELINE_LABEL = "Baseline"
 RBC_LABEL = "Rule-based"
+# kind "oracle" (learning/oracle/): plans on EnergyPlus itself, forking the running episode (SimulationConfig's
+# `branching`); its actor is given the episode's Simulation (`bind`) before the first step
+ORACLE_KIND = "oracle"
 
 
 @dataclass

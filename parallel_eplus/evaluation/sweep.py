@@ -21,6 +21,7 @@ from parallel_eplus.engine.config import SimulationConfig
 from parallel_eplus.engine.simulation import Simulation, wait_any
 from parallel_eplus.errors import EnergyPlusError
 from parallel_eplus.evaluation.controllers import (
+    ORACLE_KIND,
     Controller,
     failure_row,
     slug,
@@ -87,6 +88,8 @@ def run_sweep(
                     "it learned of the building may not hold there", c.path or c.url, trained.spec.path,
                     swept.spec.path if swept.named else None)  # fmt: skip
     weathers = parse_weathers(",".join(weathers), known)  # fail before anything runs
+    if backend == "ray" and any(c.kind == ORACLE_KIND for c in controllers):
+        raise ValueError("--oracle forks the running episode on this machine: run it with --backend local")
     for c in controllers:  # a rule-based controller the building cannot take fails here, not mid-sweep
         if c.kind == "rbc":
             c.make(swept)
@@ -164,6 +167,7 @@ def _job_config(
         output_dir=str(folder if year is None else folder / f"year-{year}"),
         forecast_hours=controller.forecast_hours, forecast_error=controller.forecast_error,
         weather_noise=weather_noise, seed=year or 0, fixed_seed=year is not None,
+        branching=controller.kind == ORACLE_KIND, native_bridge=controller.kind != ORACLE_KIND,
     )  # fmt: skip
 
 
@@ -192,6 +196,8 @@ def run_local(
                 controller, cfg = queue.popleft()
                 sim = Simulation(cfg, name=controller.label, siblings=workers, building=building)
                 job = {"controller": controller, "cfg": cfg, "sim": sim, "act": controller.make(sim.building)}
+                if controller.kind == ORACLE_KIND:
+                    job["act"].bind(sim)  # it forks this episode's process
                 active.append(job)
                 try:
                     sim.launch()

@@ -1,0 +1,237 @@
+"""The oracle as an evaluation controller: at each decision, candidate sequences played in forks of the running
+episode, scored with the learned planner's cost, the best one's first interval applied.
+
+A candidate holds one target action per decision interval (an hour by default) over the horizon (a day); the
+actions it plays move toward each target by at most `max_increment` a control step (the learned planner's limit,
+planner.py's `_follow`), within [-1, 1]. Each decision plays, up to `candidates` in all:
+- the warm start (the last decision's best, one interval on), the last action held, and the building's rule's
+  action now held (where it has a rule that sets every action);
+  and halfway from the warm start to the rule's;
+- then moves from the best so far: each action's targets raised and lowered by `step` (normalized units), and as
+  many moves of that length in random directions (comfort is often a thin valley across the actions: the data
+  center's flow and supply temperature), over the whole horizon (even rounds) or its first interval only (odd
+  rounds: a pre-cooling or a setback ending early); a round that finds nothing better halves the step. A round
+  larger than what is left of the budget plays a random part of it.
+The cost of a played step is `Planner._add_step_cost`'s with one member, from what the fork observed: its energy
+under the building's objective times the reward's `power_weight`, and the comfort term (the K beyond each zone's
+bounds, widened by the spec's tolerance and shrunk by `margin`, where the band applies, times `comfort_weight` /
+margin / zones). Demand charges are not priced. The episode's own process is never stepped by a fork: it waits
+at its awaited action while the forks play, then takes the chosen one (engine/eplus_side/branch.py).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from parallel_eplus.engine.actions import scale_action
+from parallel_eplus.engine.episodes.branch import Branches, frame_width
+from parallel_eplus.learning.model_based.runtime.planner import Planner, PlannerSettings
+from parallel_eplus.learning.oracle.settings import OracleSettings
+
+log = logging.getLogger(__name__)
+STATS_FILE = "oracle.json"  # in the episode's directory: the search's settings and its cost per decision
+
+
+def ramp(last: np.ndarray, targets: np.ndarray, max_increment: float) -> np.ndarray:
+    """[N, T, A] actions moving from `last` [A] toward each step's target `targets` [N, T, A] by at most
+    `max_increment` a step, within [-1, 1] (planner.py's `_follow`, for the oracle's candidates)."""
+    path = np.empty_like(targets)
+    x = np.broadcast_to(np.asarray(last, targets.dtype), targets[:, 0].shape)
+    for t in range(targets.shape[1]):
+        x = np.clip(x + np.clip(targets[:, t] - x, -max_increment, max_increment), -1.0, 1.0)
+        path[:, t] = x
+    return path
+
+
+class PlanCost:
+    """What the oracle minimizes over a candidate's steps, and what it is measured by: the learned planner's cost
+    (`Planner._add_step_cost`) with one member, from observed steps. `comfort`: the building's, under the run's
+    objective; `power_weight`: the reward's."""
+
+    def __init__(self, comfort, settings: OracleSettings, power_weight: float, horizon: int = 1):
+        self.comfort, self.s, self.k = comfort, settings, len(comfort.temperatures)
+        ps = PlannerSettings(horizon=horizon, candidates=settings.candidates, iterations=1, elites=1,
+                             max_increment=settings.max_increment, init_std=settings.step, disagreement_weight=0.0,
+                             terminal_weight=settings.terminal_weight)  # fmt: skip
+        self.planner = Planner(None, 1, self.k, ps, settings.margin, power_weight)
+
+    def __call__(self, infos: list[dict]) -> float:
+        """The cost of observed steps (`infos`: each step's sensors by name and its `time`): the objective's energy
+        times `power_weight`, and the comfort term where the band applies."""
+        c, k, t = self.comfort, self.k, len(infos)
+        out = np.zeros((1, t, k + 1), np.float32)
+        temps = np.array([[i[z] for z in c.temperatures] for i in infos], np.float32)[None]
+        out[0, :, k] = [c.energy_w(i) for i in infos]
+        tol, m = c.tolerance, self.s.margin
+        bounds = np.array([c.bounds(i) for i in infos], np.float32)  # [T, K, 2]
+        lo, hi = bounds[..., 0] - tol + m, bounds[..., 1] + tol - m
+        applies = np.array([c.always or c.applies(i["time"], i) for i in infos], np.float32)
+        applied = applies * (self.s.comfort_weight / m / k)
+        cost = np.zeros(t, np.float32)
+        self.planner._add_step_cost(cost, out, temps, lo, hi, applied, last=False, weights=None,
+                                    reference_every=None)  # fmt: skip
+        if self.s.terminal_weight:  # the last step's comfort again, terminal_weight times
+            end = np.zeros(1, np.float32)
+            self.planner._add_step_cost(end, np.zeros((1, 1, k + 1), np.float32), temps[:, -1:], lo[-1:], hi[-1:],
+                                        applied[-1:] * self.s.terminal_weight, last=False, weights=None,
+                                        reference_every=None)  # fmt: skip
+            cost[-1] += end[0]
+        return float(cost.sum())
+
+
+class OracleActor:
+    """(observation, info) -> normalized action, for one episode of `evaluate --oracle`. `bind(sim)` gives it the
+    episode's Simulation (run with `SimulationConfig.branching`) before its first step."""
+
+    def __init__(self, settings: OracleSettings):
+        self.s = settings
+        self.sim = None
+        self.rule = None
+        self.plan: np.ndarray | None = None  # the chosen path's actions for the rest of the interval [T, A]
+        self.targets: np.ndarray | None = None  # the chosen candidate's targets per interval [B, A] (warm start)
+        self.calls = 0
+        self.decisions: list[dict] = []
+
+    def bind(self, sim) -> None:
+        self.sim = sim
+        b, s = sim.building, self.s
+        self.step_minutes = 24 * 60 / b.steps_per_day
+        per = s.interval_min / self.step_minutes
+        if per < 1 or abs(per - round(per)) > 1e-9:
+            raise ValueError(f"--oracle interval_min={s.interval_min}: a whole number of control steps "
+                             f"({self.step_minutes:g} min each)")  # fmt: skip
+        self.per = int(round(per))
+        self.blocks = max(1, int(round(s.horizon_h * 60 / s.interval_min)))
+        self.cost_of = PlanCost(sim.setup.comfort, s, sim.config.reward.power_weight, self.blocks * self.per)
+        self.last = _unit(sim)
+        self.warmup_steps = max(0, sim.config.warmup_days - 1) * b.steps_per_day
+        self.rule = _rule(b)
+
+    # -- acting --------------------------------------------------------------------------------
+    def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:
+        if self.sim is None:
+            raise RuntimeError("the oracle acts only in an episode it is bound to (evaluate --oracle)")
+        ruled = None
+        if self.rule is not None:
+            ruled = np.asarray(self.rule(obs, info), np.float32)  # every step: its state (an integrator) runs on
+        if self.calls % self.per == 0:
+            self.plan = self._decide(info, ruled)
+        action = self.plan[self.calls % self.per]
+        self.calls += 1
+        self.last = action
+        return action
+
+    def _decide(self, info: dict, ruled: np.ndarray | None) -> np.ndarray:
+        t0 = time.perf_counter()
+        s, a = self.s, len(self.last)
+        n = s.warmup_candidates if self.calls < self.warmup_steps else s.candidates
+        seed = int.from_bytes(hashlib.blake2b(f"{s.seed}|{info['time'].isoformat()}".encode(),
+                                              digest_size=8).digest(), "little")  # fmt: skip
+        rng = np.random.default_rng(seed)
+        hold = np.broadcast_to(self.last, (self.blocks, a))
+        warm = hold if self.targets is None else np.concatenate([self.targets[1:], self.targets[-1:]])
+        pool = [warm, hold]
+        if ruled is not None and ruled.shape == (a,) and np.all(np.isfinite(ruled)):
+            rule = np.broadcast_to(np.clip(ruled, -1, 1), (self.blocks, a))
+            pool += [rule, (warm + rule) / 2]  # the rule's action now, and halfway to it
+        pool = pool[:n]
+        best = self._play(pool)
+        hold_cost = best["costs"][1] if len(pool) > 1 else None
+        used, step, rounds = len(pool), s.step, 0
+        while used < n:
+            # coordinate moves of one action at a time, the whole horizon (even rounds) or its first interval only
+            moves, span = [], slice(None) if rounds % 2 == 0 else slice(0, 1)
+            for d in rng.permutation(a):
+                for sign in (1.0, -1.0):
+                    t = best["targets"].copy()
+                    t[span, d] += sign * step
+                    moves.append(np.clip(t, -1.0, 1.0))
+            for _ in range(a):  # and random directions: comfort is often a thin valley across the actions
+                t = best["targets"].copy()
+                direction = rng.standard_normal(a)
+                t[span] += step * direction / np.linalg.norm(direction)
+                moves.append(np.clip(t, -1.0, 1.0))
+            moves = [moves[i] for i in rng.permutation(len(moves))] if len(moves) > n - used else moves
+            moves = moves[: n - used]
+            played = self._play(moves, best)
+            used += len(moves)
+            if played is best:  # nothing better: a finer step
+                step /= 2
+            best, rounds = played, rounds + 1
+        self.targets = best["targets"]
+        ms = 1000 * (time.perf_counter() - t0)
+        self.decisions.append({"time": info["time"].isoformat(), "candidates": used, "ms": round(ms, 1),
+                               "cost": float(best["cost"]), "hold_cost": hold_cost})
+        self._write_stats()  # every decision: the episode's end is not the actor's to see
+        if best["path"] is None:  # every fork failed: hold the last action
+            log.warning("every candidate of the decision at %s failed; the last action is held", info["time"])
+            return np.broadcast_to(self.last, (self.per, a)).copy()
+        return best["path"][: self.per]
+
+    def _play(self, pool: list[np.ndarray], best: dict | None = None) -> dict:
+        """Play candidate targets [B, A] each; the best of them and `best` (targets, path, cost, costs)."""
+        targets = np.stack(pool).astype(np.float32)
+        paths = ramp(self.last, np.repeat(targets, self.per, axis=1), self.s.max_increment)
+        costs = self._costs(paths)
+        k = int(np.argmin(costs))
+        if best is not None and not costs[k] < best["cost"]:
+            return best
+        path = paths[k] if np.isfinite(costs[k]) else None
+        return {"targets": targets[k], "path": path, "cost": float(costs[k]), "costs": costs.tolist()}
+
+    def _costs(self, paths: np.ndarray) -> np.ndarray:
+        """Each candidate's cost over the horizon [N] from its actions [N, T, A] (normalized), played in forks."""
+        sim = self.sim
+        physical = [np.array([scale_action(row, sim.low, sim.high, sim.action_names) for row in p]) for p in paths]
+        width = frame_width(len(sim.sensor_names))
+        branches = Branches(sim.process.pipes.dir, width, sim.running, self.s.parallel)
+        try:
+            played = branches.run(physical)
+        finally:
+            branches.close()
+        return np.array([np.inf if rows is None or not len(rows) else self._cost(rows) for rows in played])
+
+    def _cost(self, rows: np.ndarray) -> float:
+        """The learned planner's cost of the steps a fork played (its observation frames)."""
+        sim = self.sim
+        return self.cost_of([sim.observer(r, sim.weather, None)[1] for r in rows])
+
+    def _write_stats(self) -> None:
+        folder = getattr(self.sim, "episode_dir", None)
+        if folder is None:
+            return
+        ms = [d["ms"] for d in self.decisions]
+        stats = {"settings": self.s.__dict__, "decisions": len(ms), "ms_per_decision_mean": float(np.mean(ms)),
+                 "candidates_per_decision_mean": float(np.mean([d["candidates"] for d in self.decisions])),
+                 "per_decision": self.decisions}  # fmt: skip
+        (Path(folder) / STATS_FILE).write_text(json.dumps(stats, indent=1))
+
+
+def _rule(building):
+    """The building's rule as a candidate's source (None where it has none, or its actions are not plain actions: a
+    rule that corrects the own schedules or releases actuators)."""
+    from parallel_eplus.evaluation.controllers import RBC_LABEL, Controller
+
+    named = building if building.named else None
+    c = Controller(RBC_LABEL, "rbc")
+    try:
+        if named is not None and not building.spec.controller:
+            return None
+        if c.relinquishes(named) or c.residual(named)[0]:
+            return None
+        return c.make(named)
+    except (ValueError, TypeError, ImportError) as e:
+        log.info("the oracle searches without the building's rule (%s)", e)
+        return None
+
+
+def _unit(sim) -> np.ndarray:
+    """The episode's initial action in normalized units (what it holds until the first decision)."""
+    lo, hi = np.asarray(sim.low, float), np.asarray(sim.high, float)
+    return (2 * (np.asarray(sim.initial_action, float) - lo) / (hi - lo) - 1).astype(np.float32)
