@@ -323,3 +323,30 @@ def test_a_spec_folder_adds_its_test_cases(tmp_path):
     (tmp_path / "my-office.toml").write_text(Path(builtin_specs()["office-small"]).read_text())
     cases = testcases_of(tmp_path)
     assert cases["my-office"] == (tmp_path / "my-office.toml").resolve() and "office-medium" in cases
+
+
+def test_a_tests_kpis_are_evaluates_for_the_same_controller_and_period(tmp_path):
+    """A day of the building's own controls (no input activated) through a test, in process, against `evaluate`'s
+    baseline on the same day: BOPTEST's KPIs equal the summary's figures (cost aside: the test's price scenario is
+    BOPTEST's constant price, the evaluation's the spec's tariff)."""
+    from parallel_eplus.deploy.boptest.test import BoptestTest
+    from parallel_eplus.evaluation.controllers import BASELINE_LABEL, Controller
+    from parallel_eplus.evaluation.sweep import run_sweep
+
+    test = BoptestTest(TESTCASE, TESTCASE, "IL")
+    try:
+        test.initialize(0, 0, end_time=DAY)
+        steps = 0
+        while test.advance({})[1]:
+            steps += 1
+        kpi = test.kpi()[1]
+    finally:
+        test.close()
+    row = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["IL"], 1, 1, tmp_path, progress=False,
+                    building=TESTCASE).iloc[0]  # fmt: skip
+    assert steps == row["steps"] == 144
+    assert kpi["tdis_tot"] == pytest.approx(row["discomfort_kh"], rel=1e-9) and kpi["tdis_tot"] > 0
+    assert kpi["ener_tot"] == pytest.approx(row["hvac_energy_kwh_m2"], rel=1e-9)
+    assert kpi["emis_tot"] == pytest.approx(row["emissions_kg_m2"], rel=1e-9)
+    assert kpi["pele_tot"] == pytest.approx(row["hvac_electricity_peak_kw_m2"], rel=1e-9)
+    assert kpi["pgas_tot"] == pytest.approx(row["hvac_naturalgas_peak_kw_m2"], rel=1e-9)

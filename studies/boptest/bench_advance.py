@@ -7,7 +7,8 @@ meets each alike:
 2. a BOPTEST test in process: deploy/boptest/test.py's `advance` (inputs parsed, the state built and kept);
 3. over HTTP: `POST /advance/{testid}` to `parallel-eplus boptest` on loopback, one kept-alive connection.
 
-Prints each way's wall time per step (after initialize) and the API's overhead per step and ratio against 1.
+Prints each way's wall time per step (after initialize; the mean, and the median step) and what the API adds per
+step, and its ratio, against 1.
 
     .venv/bin/python studies/boptest/bench_advance.py --days 365 --rounds 1
 """
@@ -42,16 +43,17 @@ def in_process(days: int) -> tuple[float, int]:
     e = sim.elements[0]
     action = [normalize(23.0, e.low, e.high)] + [math.nan] * (n_actions - 1)
     sim.start()
-    t0, steps = time.perf_counter(), 0
+    t0, each = time.perf_counter(), []
     while True:
+        t = time.perf_counter()
         sim.send(action)
         _, _, done, _ = sim.receive()
-        steps += 1
+        each.append(time.perf_counter() - t)
         if done:
             break
     elapsed = time.perf_counter() - t0
     sim.close()
-    return elapsed, steps
+    return elapsed, each
 
 
 def test_in_process(days: int) -> tuple[float, int]:
@@ -59,12 +61,15 @@ def test_in_process(days: int) -> tuple[float, int]:
 
     t = BoptestTest(BUILDING, BUILDING, "CA")
     t.initialize(0, 0, end_time=days * 86400)
-    t0, steps = time.perf_counter(), 0
-    while t.advance(dict(INPUT))[1]:
-        steps += 1
+    t0, each = time.perf_counter(), []
+    while True:
+        t1 = time.perf_counter()
+        if not t.advance(dict(INPUT))[1]:
+            break
+        each.append(time.perf_counter() - t1)
     elapsed = time.perf_counter() - t0
     t.close()
-    return elapsed, steps
+    return elapsed, each
 
 
 def over_http(port: int, days: int) -> tuple[float, int]:
@@ -77,14 +82,18 @@ def over_http(port: int, days: int) -> tuple[float, int]:
     testid = call("POST", f"/testcases/{BUILDING}/select", {"weather": "CA"})["testid"]
     call("PUT", f"/initialize/{testid}", {"start_time": 0, "warmup_period": 0})
     end = days * 86400
-    t0, steps, now = time.perf_counter(), 0, 0.0
+    t0, each, now = time.perf_counter(), [], 0.0
     while now < end:
-        now = call("POST", f"/advance/{testid}", INPUT)["payload"]["time"]
-        steps += 1
+        t1 = time.perf_counter()
+        state = call("POST", f"/advance/{testid}", INPUT)["payload"]
+        if not state:  # the run period's end
+            break
+        each.append(time.perf_counter() - t1)
+        now = state["time"]
     elapsed = time.perf_counter() - t0
     conn.request("PUT", f"/stop/{testid}")
     conn.getresponse().read()
-    return elapsed, steps
+    return elapsed, each
 
 
 def main() -> int:
@@ -105,24 +114,29 @@ def main() -> int:
             except OSError:
                 time.sleep(0.2)
         per: dict[str, list[float]] = {"in process": [], "test in process": [], "over HTTP": []}
+        medians: dict[str, list[float]] = {k: [] for k in per}
         counts = {}
         for r in range(args.rounds):
             for name, run in (("in process", lambda: in_process(args.days)),
                               ("test in process", lambda: test_in_process(args.days)),
                               ("over HTTP", lambda: over_http(port, args.days))):  # fmt: skip
-                elapsed, steps = run()
+                elapsed, each = run()
+                steps = len(each)
                 per[name].append(elapsed / steps * 1000)
+                medians[name].append(statistics.median(each) * 1000)
                 counts[name] = steps
-                print(f"round {r + 1}: {name}: {steps} steps in {elapsed:.1f} s, {elapsed / steps * 1000:.3f} ms/step",
-                      flush=True)  # fmt: skip
+                print(f"round {r + 1}: {name}: {steps} steps in {elapsed:.1f} s, {elapsed / steps * 1000:.3f} ms/step "
+                      f"(median step {medians[name][-1]:.3f} ms)", flush=True)  # fmt: skip
     finally:
         server.terminate()
         server.wait(timeout=60)
-    base = statistics.median(per["in process"])
+    base, base_median = statistics.median(per["in process"]), statistics.median(medians["in process"])
     print(f"\n{args.days} days of 15-minute steps, {BUILDING}, median of {args.rounds} round(s):")
+    print(f"  {'':16s} {'mean':>7s}  {'added':>7s}  {'ratio':>5s}  {'median':>7s}  {'added':>7s}")
     for name, values in per.items():
-        ms = statistics.median(values)
-        print(f"  {name:16s} {ms:7.3f} ms/step  +{ms - base:6.3f} ms  x{ms / base:5.2f}  ({counts[name]} steps)")
+        ms, med = statistics.median(values), statistics.median(medians[name])
+        print(f"  {name:16s} {ms:7.3f}  {ms - base:+7.3f}  {ms / base:5.2f}  {med:7.3f}  {med - base_median:+7.3f}  "
+              f"ms/step ({counts[name]} steps)")
     return 0
 
 

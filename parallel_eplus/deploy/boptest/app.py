@@ -4,8 +4,9 @@ then per test `PUT /initialize/{testid}`, `POST /advance/{testid}`, ... and `GET
 envelope `{"message", "payload", "status"}` (select its `{"testid"}`; status and stop plain text, as the description
 has them); a refusal is the same envelope with a 4xx status and a message naming what is wrong, never a crash.
 
-Access as `serve` has it (deploy/serve/server.py): loopback by default, a bearer token required off it; every
-request logged with its status and time, never its token.
+Access as `serve` has it (deploy/serve/server.py): loopback by default, a bearer token required off it. Refusals are
+logged with their reason, tests' starts and ends at INFO, every request with its status and time only with `-v`
+(a line per control step is a year's 35,040), never a token.
 """
 
 from __future__ import annotations
@@ -72,8 +73,9 @@ def create_app(registry: Registry, token: str | None = None) -> FastAPI:
     app = FastAPI(title="parallel-eplus: BOPTEST's API over EnergyPlus buildings", docs_url=None, redoc_url=None,
                   openapi_url=None)  # fmt: skip
     if token is not None:
-        app.add_middleware(BearerToken, token=token)
-    app.add_middleware(RequestLog)  # outermost: a request refused for its token is logged too
+        app.add_middleware(BearerToken, token=token)  # a refusal logged at WARNING, never the token
+    if log.isEnabledFor(logging.DEBUG):  # every request with its time (`-v`): a line per step otherwise costs
+        app.add_middleware(RequestLog)
 
     @app.exception_handler(TestError)
     async def refused(request: Request, e: TestError) -> JSONResponse:

@@ -33,6 +33,10 @@ class RemoteTest:
                 raise TestError(500, f"the test's Ray actor failed: {e}") from None
             except ray.exceptions.RayActorError as e:
                 raise TestError(500, f"the test's Ray actor died: {e}") from None
+            except TestError:
+                raise
+            except ray.exceptions.RayError as e:  # anything else Ray raises: the test's failure, not the server's
+                raise TestError(500, f"the test's Ray actor failed: {e}") from None
 
         return called
 

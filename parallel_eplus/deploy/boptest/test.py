@@ -42,6 +42,9 @@ class TestError(Exception):
         super().__init__(message)
         self.status, self.message = status, message
 
+    def __reduce__(self):  # raised in a Ray actor (remote.py), rebuilt whole on the server's side
+        return TestError, (self.status, self.message)
+
 
 def number(value, name: str) -> float:
     """A finite number from a JSON value (a number, or a string holding one, as BOPTEST accepts); else 400."""
@@ -236,8 +239,8 @@ class BoptestTest:
 
     def _observe(self, info: dict, applied: list) -> None:
         """The state after a step (BOPTEST's payload: time, every input and measurement), kept for `results`."""
-        t = info["time"]
-        self.now_s = (t - dt.datetime(t.year, 1, 1)).total_seconds()
+        t = info["time"]  # the year's end is the next year's January 1, 00:00: seconds from the start's year
+        self.now_s = (t - dt.datetime(self.year, 1, 1)).total_seconds()
         state = {"time": self.now_s}
         for i, (p, v) in enumerate(zip(self.points.inputs, applied, strict=True)):
             own = self.building.own[i][0] if i < len(self.building.own) else None
