@@ -2,7 +2,8 @@
 
 `Branches` talks to an episode started with `SimulationConfig.branching` (engine/eplus_side/branch.py): `run` asks
 its process to fork once per action sequence, up to `parallel` children at a time, and returns each child's
-observation frames over its rows (None for a child that failed or overran its deadline). Call it only while the
+observation frames over its rows (None for a child that failed or overran its deadline); `follow` plays one whose
+every action the caller computes from its last observation (a rule in closed loop). Call it only while the
 episode awaits an action (after an observation and before the action is sent); the episode's own state is never
 touched. Every child is ended and its directory removed before `run` returns, on an error and on Ctrl-C too; the
 children die with the episode's process in any case (PR_SET_PDEATHSIG).
@@ -26,6 +27,8 @@ import numpy as np
 
 from parallel_eplus.engine.pipes import frames
 from parallel_eplus.engine.pipes.branching import ANSWERS, LOG, REQUESTS, ROWS
+from parallel_eplus.engine.pipes.pipe import PipePair
+from parallel_eplus.errors import ProtocolError
 
 log = logging.getLogger(__name__)
 
@@ -78,12 +81,48 @@ class Branches:
                 self._kill(child)
         return results
 
-    def _request(self, actions: np.ndarray) -> int:
+    def follow(self, first, policy, steps: int, step_timeout_s: float = 60.0) -> tuple[np.ndarray, np.ndarray] | None:
+        """One branch whose actions come from `policy(frame values) -> action` (physical units) step by step, the
+        awaited one being `first`, over `steps` steps (fewer where the run period ends): (its frames [T, width],
+        the actions it took [T, A]), or None where it failed. A closed-loop candidate: a rule played from here."""
+        pipes, child = PipePair(), None
+        rid = self._request(None, {"obs": str(pipes.obs_path), "act": str(pipes.act_path)})
+        running = {rid: {"k": 0, "pid": None, "pidfd": None, "dir": self.scratch / str(rid)}}
+        rows, actions, action = [], [], np.asarray(first, float)
+        try:
+            deadline = time.monotonic() + self.timeout_s
+            while running[rid]["pid"] is None:
+                if self._answers(running) or time.monotonic() > deadline:
+                    raise BranchError("a followed branch ended before it started")
+            child = running[rid]
+            pipes.watch(child["pid"], self.alive)  # its own pidfd: a reading wakes when the branch dies
+            for t in range(steps):
+                pipes.send(frames.encode(action))
+                actions.append(action)
+                code, values = pipes.recv(step_timeout_s, 0.0)
+                if code == frames.ERROR:
+                    raise BranchError(f"EnergyPlus failed in a followed branch (status {values[:1]})")
+                rows.append(np.array(values))
+                if code == frames.END:
+                    break
+                if t + 1 < steps:
+                    action = np.asarray(policy(values), float)
+        except (BranchError, TimeoutError, ChildProcessError, ProtocolError) as e:
+            self.failed += 1
+            log.warning("a followed branch failed (%s); it counts as infinitely costly", e)
+            return None
+        finally:
+            self._kill(child or running[rid])
+            pipes.close()
+        return np.array(rows), np.array(actions)
+
+    def _request(self, actions: np.ndarray | None, pipes: dict | None = None) -> int:
         rid = self._next_id
         self._next_id += 1
         here = self.scratch / str(rid)
         here.mkdir()
-        line = json.dumps({"id": rid, "dir": str(here), "actions": np.asarray(actions, float).tolist()}) + "\n"
+        what = pipes if pipes is not None else {"actions": np.asarray(actions, float).tolist()}
+        line = json.dumps({"id": rid, "dir": str(here), **what}) + "\n"
         data = line.encode()
         while data:  # a long request may not fit the FIFO at once: the episode reads it while we write
             try:

@@ -5,13 +5,16 @@ that, wherever it awaits an action, also serves requests to fork itself: each ch
 that point (copy on write, as engine/eplus_side/fork.py's templates are copied at the first control step), plays
 the action rows it was given (physical units, one per control step, from the awaited action on) and writes the
 observation frame of each step (time and sensors, `frames.TIME_FIELDS` + sensors float64 values a row) to
-`rows.f8` in its own directory, then exits. A child that fails (EnergyPlus's fatal error, a crash) exits with a
+`rows.f8` in its own directory, then exits. A followed branch (its request names a pipe pair instead of rows)
+takes each action from the env as an episode does, the env's controller answering each observation (a rule, played
+in closed loop), until the env ends it. A child that fails (EnergyPlus's fatal error, a crash) exits with a
 non-zero code and writes no rows. The parent never applies a branch's action: the env decides, then sends it.
 
 Its FIFOs, made by the parent beside its act pipe (`REQUESTS`, `ANSWERS`, in the env's private pipe directory,
-removed with it): a JSON line per request, `{"id", "dir", "actions"}`; answers `pid ID PID` per fork and
-`done PID CODE` per child reaped. Every child dies with its parent (PR_SET_PDEATHSIG), and the parent dies when
-the env goes (its act pipe reads EOF): nothing outlives the env. Our side: engine/episodes/branch.py.
+removed with it): a JSON line per request, `{"id", "dir", "actions"}` or `{"id", "dir", "obs", "act"}`; answers
+`pid ID PID` per fork and `done PID CODE` per child reaped. Every child dies with its parent (PR_SET_PDEATHSIG),
+and the parent dies when the env goes (its act pipe reads EOF): nothing outlives the env. Our side:
+engine/episodes/branch.py.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.engine.eplus_side.bridge import Bridge
+from parallel_eplus.engine.pipes import frames
 from parallel_eplus.engine.pipes.branching import ANSWERS, LOG, REQUESTS, ROWS
 
 _PR_SET_PDEATHSIG = 1
@@ -49,18 +53,19 @@ class BranchingBridge(Bridge):
         self.requests = os.open(pipe_dir / REQUESTS, os.O_RDWR | os.O_NONBLOCK)  # RDWR: opening never blocks
         self.answers = os.open(pipe_dir / ANSWERS, os.O_RDWR)
         self.children: dict[int, int] = {}  # pidfd -> pid
+        self.followed = False  # in a followed branch: each action from the env over a pipe pair of its own
         self._lines = b""
         self.script: np.ndarray | None = None  # in a branch: its action rows
         self.rows: list[list[float]] = []
 
     # -- the parent: requests served while an action is awaited ------------------------------------
     def _take_action(self) -> None:
-        if self.script is None:
+        if self.script is None and not self.followed:
             self._serve()
         if self.script is not None:  # a branch (forked just now, in `_serve`, or steps since)
             self._next_row()
             return
-        super()._take_action()
+        super()._take_action()  # the episode's action, or a followed branch's from its own pipe
 
     def _serve(self) -> None:
         """Fork per request and reap children until the action is there (a child returns from here as a branch)."""
@@ -125,8 +130,17 @@ class BranchingBridge(Bridge):
         _own_descriptions(here)
         os.chdir(here)
         self.obs_fd = self.act_fd = -1
+        self.dir = here
+        if "obs" in request:  # followed: the env answers each observation, as in an episode (its last: END)
+            obs_fd = os.open(request["obs"], os.O_WRONLY | os.O_NONBLOCK)
+            os.set_blocking(obs_fd, True)
+            self.act_fd = os.open(request["act"], os.O_RDONLY | os.O_NONBLOCK)
+            self.obs_fd, self.followed = obs_fd, True
+            self._wait, self._actions = frames.wait_readable(self.act_fd), frames.FrameReader(self.act_fd)
+            self.spin_s = 0.0
+            return
         self.script = np.asarray(request["actions"], np.float64)
-        self.cursor, self.rows, self.dir = 0, [], here
+        self.cursor, self.rows = 0, []
 
     def _next_row(self) -> None:
         self.awaiting = False
@@ -139,6 +153,8 @@ class BranchingBridge(Bridge):
     def _observe(self, state) -> None:
         if self.script is None:
             super()._observe(state)
+            if self.followed and self.done:  # never into EnergyPlus's end of run: its files are the episode's
+                os._exit(0)
             return
         if self.awaiting:
             self._next_row()

@@ -1,17 +1,20 @@
 """The oracle as an evaluation controller: at each decision, candidate sequences played in forks of the running
 episode, scored with the learned planner's cost, the best one's first interval applied.
 
-A candidate holds one target action per decision interval (an hour by default) over the horizon (a day); the
-actions it plays move toward each target by at most `max_increment` a control step (the learned planner's limit,
+A candidate is a target action per control step over the horizon (a day); the actions it plays move toward each
+target by at most `max_increment` a control step (the learned planner's limit,
 planner.py's `_follow`), within [-1, 1]. Each decision plays, up to `candidates` in all:
-- the warm start (the last decision's best, one interval on), the last action held, and the building's rule's
-  action now held (where it has a rule that sets every action);
-  and halfway from the warm start to the rule's;
+- the warm start (the last decision's best, one interval on), the last action held, the episode's initial action
+  held (the spec's, a safe anchor), then, played in closed loop in a fork of their own: the building's rule where
+  it has one that sets every action (started fresh from the state now, as `evaluate --rbc` plays it), and its own
+  thermostat schedules where every action is a thermostat with one (`OwnSchedules`), each followed by halfway from
+  the warm start to what it did (the closed-loop candidates are the one exception to `max_increment`);
 - then moves from the best so far: each action's targets raised and lowered by `step` (normalized units), and as
   many moves of that length in random directions (comfort is often a thin valley across the actions: the data
-  center's flow and supply temperature), over the whole horizon (even rounds) or its first interval only (odd
-  rounds: a pre-cooling or a setback ending early); a round that finds nothing better halves the step. A round
-  larger than what is left of the budget plays a random part of it.
+  center's flow and supply temperature), over the whole horizon (even rounds) or one interval only (odd rounds:
+  the first for half the moves, any for the rest; a pre-cooling, a setback ending early, an answer to a load's
+  step); a round that finds nothing better halves the step. A round larger than what is left of the budget plays
+  a random part of it.
 The cost of a played step is `Planner._add_step_cost`'s with one member, from what the fork observed: its energy
 under the building's objective times the reward's `power_weight`, and the comfort term (the K beyond each zone's
 bounds, widened by the spec's tolerance and shrunk by `margin`, where the band applies, times `comfort_weight` /
@@ -21,6 +24,7 @@ at its awaited action while the forks play, then takes the chosen one (engine/ep
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import logging
@@ -92,9 +96,9 @@ class OracleActor:
     def __init__(self, settings: OracleSettings):
         self.s = settings
         self.sim = None
-        self.rule = None
+        self.rules: list = []  # played in closed loop at each decision: the building's rule, its own schedules
         self.plan: np.ndarray | None = None  # the chosen path's actions for the rest of the interval [T, A]
-        self.targets: np.ndarray | None = None  # the chosen candidate's targets per interval [B, A] (warm start)
+        self.targets: np.ndarray | None = None  # the chosen candidate's targets per step [H, A] (the warm start)
         self.calls = 0
         self.decisions: list[dict] = []
 
@@ -109,53 +113,66 @@ class OracleActor:
         self.per = int(round(per))
         self.blocks = max(1, int(round(s.horizon_h * 60 / s.interval_min)))
         self.cost_of = PlanCost(sim.setup.comfort, s, sim.config.reward.power_weight, self.blocks * self.per)
-        self.last = _unit(sim)
+        self.last = self.initial = _unit(sim)
         self.warmup_steps = max(0, sim.config.warmup_days - 1) * b.steps_per_day
-        self.rule = _rule(b)
+        self.rules = [r for r in (_rule(b), OwnSchedules.of(b)) if r is not None]
 
     # -- acting --------------------------------------------------------------------------------
     def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:
         if self.sim is None:
             raise RuntimeError("the oracle acts only in an episode it is bound to (evaluate --oracle)")
-        ruled = None
-        if self.rule is not None:
-            ruled = np.asarray(self.rule(obs, info), np.float32)  # every step: its state (an integrator) runs on
         if self.calls % self.per == 0:
-            self.plan = self._decide(info, ruled)
+            self.plan = self._decide(obs, info)
         action = self.plan[self.calls % self.per]
         self.calls += 1
         self.last = action
         return action
 
-    def _decide(self, info: dict, ruled: np.ndarray | None) -> np.ndarray:
+    def _decide(self, obs: np.ndarray, info: dict) -> np.ndarray:
         t0 = time.perf_counter()
-        s, a = self.s, len(self.last)
+        s, a, h, per = self.s, len(self.last), self.blocks * self.per, self.per
         n = s.warmup_candidates if self.calls < self.warmup_steps else s.candidates
         seed = int.from_bytes(hashlib.blake2b(f"{s.seed}|{info['time'].isoformat()}".encode(),
                                               digest_size=8).digest(), "little")  # fmt: skip
         rng = np.random.default_rng(seed)
-        hold = np.broadcast_to(self.last, (self.blocks, a))
-        warm = hold if self.targets is None else np.concatenate([self.targets[1:], self.targets[-1:]])
-        pool = [warm, hold]
-        if ruled is not None and ruled.shape == (a,) and np.all(np.isfinite(ruled)):
-            rule = np.broadcast_to(np.clip(ruled, -1, 1), (self.blocks, a))
-            pool += [rule, (warm + rule) / 2]  # the rule's action now, and halfway to it
-        pool = pool[:n]
-        best = self._play(pool)
-        hold_cost = best["costs"][1] if len(pool) > 1 else None
-        used, step, rounds = len(pool), s.step, 0
+        # candidates are per-step targets [H, A], played as `ramp` makes them
+        hold = np.broadcast_to(self.last, (h, a))
+        warm = hold if self.targets is None else np.concatenate([self.targets[per:], np.repeat(self.targets[-1:], per,
+                                                                                                0)])  # fmt: skip
+        pool = [warm, hold, np.broadcast_to(self.initial, (h, a))]  # the initial action: a known-safe anchor
+        best = self._play(pool[:n])
+        hold_cost = best["costs"][1] if n > 1 else None
+        used = min(n, len(pool))
+        for rule in self.rules:  # each in closed loop from here, then halfway to what it did
+            if used >= n:
+                break
+            followed = self._follow_rule(rule, obs, info, h)
+            used += 1
+            if followed is not None:
+                if followed["cost"] < best["cost"]:
+                    best = followed | {"costs": best["costs"]}
+                if used < n:
+                    best = self._play([(warm + followed["targets"]) / 2], best)
+                    used += 1
+        step, rounds = s.step, 0
         while used < n:
-            # coordinate moves of one action at a time, the whole horizon (even rounds) or its first interval only
-            moves, span = [], slice(None) if rounds % 2 == 0 else slice(0, 1)
-            for d in rng.permutation(a):
+            moves = []
+
+            def span(whole: bool = rounds % 2 == 0) -> slice:  # the whole horizon, else one interval: first or any
+                if whole:
+                    return slice(None)
+                i = 0 if rng.random() < 0.5 else int(rng.integers(self.blocks))
+                return slice(i * per, (i + 1) * per)
+
+            for d in rng.permutation(a):  # each action up and down
                 for sign in (1.0, -1.0):
                     t = best["targets"].copy()
-                    t[span, d] += sign * step
+                    t[span(), d] += sign * step
                     moves.append(np.clip(t, -1.0, 1.0))
             for _ in range(a):  # and random directions: comfort is often a thin valley across the actions
                 t = best["targets"].copy()
                 direction = rng.standard_normal(a)
-                t[span] += step * direction / np.linalg.norm(direction)
+                t[span()] += step * direction / np.linalg.norm(direction)
                 moves.append(np.clip(t, -1.0, 1.0))
             moves = [moves[i] for i in rng.permutation(len(moves))] if len(moves) > n - used else moves
             moves = moves[: n - used]
@@ -164,20 +181,52 @@ class OracleActor:
             if played is best:  # nothing better: a finer step
                 step /= 2
             best, rounds = played, rounds + 1
-        self.targets = best["targets"]
+        self.targets = best["targets"] if best["path"] is not None else None
         ms = 1000 * (time.perf_counter() - t0)
         self.decisions.append({"time": info["time"].isoformat(), "candidates": used, "ms": round(ms, 1),
-                               "cost": float(best["cost"]), "hold_cost": hold_cost})
+                               "cost": float(best["cost"]), "hold_cost": hold_cost,
+                               "followed": best.get("rule")})  # fmt: skip
         self._write_stats()  # every decision: the episode's end is not the actor's to see
         if best["path"] is None:  # every fork failed: hold the last action
             log.warning("every candidate of the decision at %s failed; the last action is held", info["time"])
-            return np.broadcast_to(self.last, (self.per, a)).copy()
-        return best["path"][: self.per]
+            return np.broadcast_to(self.last, (per, a)).copy()
+        return best["path"][:per]
+
+    def _follow_rule(self, template, obs: np.ndarray, info: dict, steps: int) -> dict | None:
+        """The building's rule played in closed loop in a fork over the horizon, from the observation now (`obs`,
+        `info`), as `evaluate --rbc` plays it from a fresh start (a copy of it never stepped: one fed the oracle's
+        steps winds its integral up against zones it does not control) (its steps not limited by
+        `max_increment`: rate-limited, its integral winds up and overshoots): its actions as a candidate, with their
+        cost."""
+        sim, rule = self.sim, copy.deepcopy(template)
+        ruled = np.asarray(rule(obs, info), float)
+        if ruled.shape != (len(sim.low),) or not np.all(np.isfinite(ruled)):
+            return None
+        forecaster = getattr(sim, "_forecaster", None)
+
+        def policy(values: np.ndarray) -> list[float]:
+            obs, info, _ = sim.observer(values, sim.weather, forecaster)
+            return scale_action(np.clip(rule(obs, info), -1, 1), sim.low, sim.high, sim.action_names)
+
+        first = scale_action(np.clip(ruled, -1, 1), sim.low, sim.high, sim.action_names)
+        branches = Branches(sim.process.pipes.dir, frame_width(len(sim.sensor_names)), sim.running, 1)
+        try:
+            played = branches.follow(first, policy, steps)
+        finally:
+            branches.close()
+        if played is None or not len(played[0]):
+            return None
+        rows, physical = played
+        lo, hi = np.asarray(sim.low, float), np.asarray(sim.high, float)
+        path = (2 * (physical - lo) / (hi - lo) - 1).astype(np.float32)
+        if len(path) < steps:  # the run period ended first
+            path = np.concatenate([path, np.repeat(path[-1:], steps - len(path), 0)])
+        return {"targets": path, "path": path, "cost": self._cost(rows), "rule": type(template).__name__}
 
     def _play(self, pool: list[np.ndarray], best: dict | None = None) -> dict:
-        """Play candidate targets [B, A] each; the best of them and `best` (targets, path, cost, costs)."""
+        """Play candidate targets [H, A] each; the best of them and `best` (targets, path, cost, costs)."""
         targets = np.stack(pool).astype(np.float32)
-        paths = ramp(self.last, np.repeat(targets, self.per, axis=1), self.s.max_increment)
+        paths = ramp(self.last, targets, self.s.max_increment)
         costs = self._costs(paths)
         k = int(np.argmin(costs))
         if best is not None and not costs[k] < best["cost"]:
@@ -211,6 +260,30 @@ class OracleActor:
                  "candidates_per_decision_mean": float(np.mean([d["candidates"] for d in self.decisions])),
                  "per_decision": self.decisions}  # fmt: skip
         (Path(folder) / STATS_FILE).write_text(json.dumps(stats, indent=1))
+
+
+class OwnSchedules:
+    """The building's own controls as a rule, where every action is a thermostat setpoint with a schedule of its
+    own observed (`Building.own`): each action at its schedule's value at the last observation (a step late where a
+    schedule changes)."""
+
+    def __init__(self, names: list[str], low: np.ndarray, high: np.ndarray):
+        self.names, self.low, self.high = names, low, high
+
+    @classmethod
+    def of(cls, building) -> OwnSchedules | None:
+        own = building.own if building.named else ()
+        if len(own) != len(building.actions) or not all(o and o[0] and len(set(o)) == 1 for o in own):
+            return None
+        if not all(o[0] in building.sensor_names for o in own):
+            return None
+        low = np.array([a.low for a in building.actions], float)
+        high = np.array([a.high for a in building.actions], float)
+        return cls([o[0] for o in own], low, high)
+
+    def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:
+        value = np.clip([info[n] for n in self.names], self.low, self.high)
+        return (2 * (value - self.low) / (self.high - self.low) - 1).astype(np.float32)
 
 
 def _rule(building):
