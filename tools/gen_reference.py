@@ -282,6 +282,7 @@ def presets_page() -> str:
 # ------------------------------------------------------------------------------------------------------ settings
 def settings_page() -> str:
     from parallel_eplus.learning.model_based.settings import MBPOSettings, MPCSettings
+    from parallel_eplus.learning.oracle.settings import OracleSettings
     from parallel_eplus.learning.settings import SACSettings, show, type_name
 
     lines = [NOTICE, "# Learner settings\n",
@@ -290,8 +291,9 @@ def settings_page() -> str:
              "--config` file. `train --mpc help` prints the same list. Booleans take true/false, yes/no, on/off or "
              "1/0; `none` unsets a setting whose type allows it; a name not listed, or a value its type cannot "
              "mean, is refused before anything starts. How the planner uses them: "
-             "[model-based control](../model-based.md).\n"]  # fmt: skip
-    for cls in (MPCSettings, MBPOSettings, SACSettings):
+             "[model-based control](../model-based.md). `evaluate --oracle` takes its own the same way "
+             "([the oracle](../oracle.md)).\n"]  # fmt: skip
+    for cls in (MPCSettings, MBPOSettings, SACSettings, OracleSettings):
         doc = " ".join((cls.__doc__ or "").strip().split("\n\n")[0].split())
         lines += [f"## `{cls.flag}`\n", doc, ""]
         hints = cls.hints()
