@@ -43,9 +43,10 @@ SCENARIOS = ("typical_cool", "peak_cool", "typical_heat", "peak_heat")
 # (building, rule?) in the order they run: the paper's data center and the small office first (issue 89's first chunk)
 BUILDINGS = (("datacenter-2zone", True), ("office-small", False), ("datacenter-crac", False), ("office-medium", True))
 WEATHERS = ("CA", "IL")  # a training weather and a held-out one
-# energy: the spec's own objective (its energy terms; the medium office's HVAC energy); cost-SCENARIO: a copy of the spec with the cost objective (each
-# HVAC fuel's energy at its price when the step began) under BOPTEST's constant or dynamic electricity prices
-# (parallel_eplus/buildings/tariffs/boptest-*.toml). BOPTEST's highly dynamic scenario ships no prices here.
+# energy: the spec's own objective (its energy terms; the medium office's HVAC energy); cost-SCENARIO: a copy of the
+# spec with the cost objective (each HVAC fuel's energy at its price when the step began) under BOPTEST's constant or
+# dynamic electricity prices (parallel_eplus/buildings/tariffs/boptest-*.toml). BOPTEST's highly dynamic scenario
+# ships no prices here.
 OBJECTIVES = ("energy", "cost-constant", "cost-dynamic")
 LABELS = {"Baseline": "own", "Rule-based": "rule", "Oracle": "oracle"}
 FIGURES = ("energy_kwh", "hvac_energy_kwh", "cost", "discomfort_kh", "in_band_pct")
