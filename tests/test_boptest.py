@@ -318,11 +318,20 @@ def test_the_command_refuses_what_would_expose_or_misconfigure_it(tmp_path):
 
 def test_a_spec_folder_adds_its_test_cases(tmp_path):
     from parallel_eplus.buildings.resources import builtin_specs
-    from parallel_eplus.deploy.boptest.registry import testcases_of
+    from parallel_eplus.deploy.boptest.registry import Registry, testcases_of
+    from parallel_eplus.deploy.boptest.test import TestError
 
     (tmp_path / "my-office.toml").write_text(Path(builtin_specs()["office-small"]).read_text())
     cases = testcases_of(tmp_path)
     assert cases["my-office"] == (tmp_path / "my-office.toml").resolve() and "office-medium" in cases
+    (tmp_path / "broken.toml").write_text('name = "broken"\nidf = "nowhere.idf"\n')
+    registry = Registry(testcases_of(tmp_path), workers=1)
+    try:
+        with pytest.raises(TestError) as refused:
+            registry.select("broken", {})
+        assert refused.value.status == 500 and "test case 'broken': its spec" in refused.value.message
+    finally:
+        registry.close()
 
 
 def test_a_tests_kpis_are_evaluates_for_the_same_controller_and_period(tmp_path):

@@ -82,6 +82,11 @@ def create_app(registry: Registry, token: str | None = None) -> FastAPI:
         (log.warning if e.status < 500 else log.error)("%s %s: %s", request.method, request.url.path, e.message)
         return envelope(e.message, None, e.status)
 
+    @app.exception_handler(Exception)
+    async def failed(request: Request, e: Exception) -> JSONResponse:  # a bug of ours: still BOPTEST's envelope
+        log.exception("%s %s failed", request.method, request.url.path)
+        return envelope(f"{type(e).__name__}: {e}", None, 500)
+
     @app.on_event("shutdown")
     def shutdown() -> None:
         registry.close()

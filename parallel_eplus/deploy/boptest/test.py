@@ -75,7 +75,10 @@ class BoptestTest:
 
     def __init__(self, testcase: str, spec: str | Path, weather: str | None = None, cache: Path | None = None):
         self.testcase = testcase
-        self.building = b = load_building(spec)
+        try:
+            self.building = b = load_building(spec)
+        except (OSError, ValueError) as e:  # a spec of --specs that does not load (SpecError is a ValueError)
+            raise TestError(500, f"test case {testcase!r}: its spec {spec} does not load: {e}") from None
         self.weather = weather or next(iter(b.spec.weathers), "CA")
         try:
             self.epw = weather_path(b, self.weather)
