@@ -134,8 +134,9 @@ class Registry:
                         raise
                     raise TestError(404, f"test {testid} {self.stopped.get(testid, 'was stopped')} meanwhile") from None
         finally:
-            entry.busy -= 1
-            entry.last = time.monotonic()
+            with self._cond:
+                entry.busy -= 1
+                entry.last = time.monotonic()
 
     def stop(self, testid: str, why: str = "was stopped (PUT /stop)") -> None:
         """End the test's process and remove its files now, whatever it was doing; its next request is a 404."""
