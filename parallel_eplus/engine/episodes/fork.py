@@ -56,8 +56,9 @@ class Template:
         self.epw = epw
         self.dir = Path(tempfile.mkdtemp(prefix="template-", dir=pipe_dir))
         (self.dir / model_name).write_bytes(model)
-        cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_side.callback", "--template", "--pipes", str(pipe_dir),
-               "--idf", model_name, "--epw", str(epw), "--output-dir", ".", *args]  # fmt: skip
+        cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_side.callback", "--template",
+               "--pipes", str(pipe_dir), "--idf", model_name, "--epw", str(epw),
+               "--output-dir", ".", *args]  # fmt: skip
         with open(self.dir / "energyplus.log", "wb") as logf:
             self.proc = subprocess.Popen(
                 cmd, cwd=self.dir, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=logf, start_new_session=True,

@@ -20,13 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from parallel_eplus.engine.pipes import frames
-
-from parallel_eplus.engine.pipes import pipe
-
-from parallel_eplus.engine.pipes import spin
 from parallel_eplus.engine.episodes.fork import ANSWER_S, ForkedEpisode, Template
 from parallel_eplus.engine.episodes.warm import Episode, WarmProcess, engine_side_env
+from parallel_eplus.engine.pipes import frames, pipe, spin
 
 log = logging.getLogger(__name__)
 

@@ -18,9 +18,8 @@ from typing import Any
 
 from parallel_eplus.buildings.idf.takeover import NODE_SETPOINT, taken_setpoints
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.engine.episode import MODEL_FILE, prune_episodes
+from parallel_eplus.engine.episode import MODEL_FILE, EpisodePlan, prune_episodes
 from parallel_eplus.engine.episodes.fork import Template, Templates
-from parallel_eplus.engine.episode import EpisodePlan
 from parallel_eplus.engine.episodes.prepared import EpisodeStarter, PreparedEpisode
 from parallel_eplus.engine.episodes.process import EnergyPlusProcess
 from parallel_eplus.engine.setup import WorkerSetup

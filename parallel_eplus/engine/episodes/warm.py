@@ -8,9 +8,9 @@ alone 0.46 s of it (docs/speed.md). A process that stays reuses its memory, as E
 runs one period after another with a new state each time (bench/alone.py).
 
 Protocol: one JSON request a line on its stdin (`{"argv": [...], "log": path}`), run as `eplus_callback.main(argv)`
-with its output in `log` (its side: engine/eplus_side/warm.py); one line back on its stdout when the episode is over (`done CODE`). Our side watches
-that pipe: readable means the episode is over or the process died (EOF). The process exits when its stdin
-closes (we closed it, exited, or were killed); an episode of a dead env fails at its pipes first.
+with its output in `log` (its side: engine/eplus_side/warm.py); one line back on its stdout when the episode is over
+(`done CODE`). Our side watches that pipe: readable means the episode is over or the process died (EOF). The process
+exits when its stdin closes (we closed it, exited, or were killed); an episode of a dead env fails at its pipes first.
 
     python -m parallel_eplus.engine.eplus_side.callback --serve --pipes DIR   # DIR: the pipes it serves, for `clean`
 """
@@ -21,11 +21,8 @@ import contextlib
 import json
 import os
 import select
-import signal
 import subprocess
 import sys
-import traceback
-from collections.abc import Callable
 from pathlib import Path
 
 
@@ -44,7 +41,8 @@ class WarmProcess:
         self.proc: subprocess.Popen | None = None
 
     def start(self, pipe_dir: Path) -> None:
-        # The pipes it serves name its owner: `parallel-eplus clean` finds it if its owner dies (engine/pipes/leftovers.py).
+        # The pipes it serves name its owner: `parallel-eplus clean` finds it if its owner dies
+        # (engine/pipes/leftovers.py).
         cmd = [sys.executable, "-m", "parallel_eplus.engine.eplus_side.callback", "--serve", "--pipes", str(pipe_dir)]
         self.proc = subprocess.Popen(
             cmd,
@@ -89,8 +87,8 @@ class WarmProcess:
 
 
 class Episode:
-    """One episode in a WarmProcess, with what engine/episodes/process.py uses of `subprocess.Popen`: `pid` (the process's,
-    for a pidfd-less watch), `exit_fd` (readable once the episode is over), `poll`, `wait`, `kill`."""
+    """One episode in a WarmProcess, with what engine/episodes/process.py uses of `subprocess.Popen`: `pid` (the
+    process's, for a pidfd-less watch), `exit_fd` (readable once the episode is over), `poll`, `wait`, `kill`."""
 
     def __init__(self, owner: WarmProcess):
         self.owner = owner
