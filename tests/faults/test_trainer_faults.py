@@ -153,8 +153,10 @@ def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_compl
     assert "restarting its episode" in caplog.text
     assert final.is_file() and pd.read_csv(final.parent / "episodes.csv")["timesteps"].max() >= 768 - 2 * 96
     # The struck episode keeps its evidence whole, whatever --keep-episodes prunes: why, and EnergyPlus's own log
-    [failure] = (final.parent / "episodes").glob("worker-*/episode-*/failure.txt")
-    assert failure.parent.name == "episode-000002-CA" and failure.parent.parent.name == "worker-0"
+    # (on a loaded machine a 2 s step timeout may restart another episode too: the struck one is the one asked about)
+    failures = sorted((final.parent / "episodes").glob("worker-*/episode-*/failure.txt"))
+    failure = final.parent / "episodes" / "worker-0" / "episode-000002-CA" / "failure.txt"
+    assert failure in failures, failures
     assert "EnergyPlus" in failure.read_text() and (failure.parent / "eplusout.err").is_file()
 
 
