@@ -135,7 +135,7 @@ def test_the_multiplier_moves_the_policy_toward_the_band(planner_run, tmp_path, 
     policy that pays for comfort keeps the model's zones nearer the band (the constraint's cost of its rollouts)."""
     costs = {}
     for name, price in (("cheap", 0.1), ("dear", 100.0)):
-        mbpo_settings = MBPOSettings(**{**ROLLOUTS.__dict__, "pretrain_updates": 3000, "rollout_every": 1000,
+        mbpo_settings = MBPOSettings(**{**ROLLOUTS.__dict__, "pretrain_updates": 1200, "rollout_every": 400,
                                         "rollout_length": 4})  # fmt: skip
         comfort = ComfortConstraint(target_pct=99.0, multiplier_init=price)
         train(mbpo_config(tmp_path, name, planner_run, timesteps=2, comfort=comfort, mbpo=mbpo_settings),
@@ -143,7 +143,7 @@ def test_the_multiplier_moves_the_policy_toward_the_band(planner_run, tmp_path, 
         first = scalars(tmp_path / "tb" / name)["mbpo/model_cost"][0]  # the pretrained policy's last rollouts
         assert first.step == 0
         costs[name] = first.value
-    assert costs["dear"] < 0.8 * costs["cheap"], costs  # measured: 0.45 against 0.70
+    assert costs["dear"] < 0.8 * costs["cheap"], costs  # measured: 0.42 against 0.69 (1,200 updates)
 
 
 def test_settings_text_round_trips_and_refusals():
