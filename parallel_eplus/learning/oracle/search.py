@@ -9,6 +9,9 @@ planner.py's `_follow`), within [-1, 1]. Each decision plays, up to `candidates`
   it has one that sets every action (started fresh from the state now, as `evaluate --rbc` plays it), and its own
   thermostat schedules where every action is a thermostat with one (`OwnSchedules`), each followed by halfway from
   the warm start to what it did (the closed-loop candidates are the one exception to `max_increment`);
+- with `offsets`, the rest of the budget on the first of those rules with a constant offset added to its actions,
+  each candidate played in closed loop (a residual on the rule, searched as below: each action's offset up and
+  down, random directions, the step halved after a round that finds nothing better);
 - then moves from the best so far: each action's targets raised and lowered by `step` (normalized units), and as
   many moves of that length in random directions (comfort is often a thin valley across the actions: the data
   center's flow and supply temperature), over the whole horizon (even rounds) or one interval only (odd rounds:
@@ -114,6 +117,7 @@ class OracleActor:
         self.blocks = max(1, int(round(s.horizon_h * 60 / s.interval_min)))
         self.cost_of = PlanCost(sim.setup.comfort, s, sim.config.reward.power_weight, self.blocks * self.per)
         self.last = self.initial = _unit(sim)
+        self.offset = np.zeros(len(self.last))  # the first rule's best offset at the last decision (`_offsets`)
         self.warmup_steps = max(0, sim.config.warmup_days - 1) * b.steps_per_day
         self.rules = [r for r in (_rule(b), OwnSchedules.of(b)) if r is not None]
 
@@ -154,6 +158,8 @@ class OracleActor:
                 if used < n:
                     best = self._play([(warm + followed["targets"]) / 2], best)
                     used += 1
+        if s.offsets and self.rules and used < n:  # the first rule's actions offset, in closed loop: the rest
+            best, used = self._offsets(obs, info, h, best, used, n, rng)
         step, rounds = s.step, 0
         while used < n:
             moves = []
@@ -185,28 +191,57 @@ class OracleActor:
         ms = 1000 * (time.perf_counter() - t0)
         self.decisions.append({"time": info["time"].isoformat(), "candidates": used, "ms": round(ms, 1),
                                "cost": float(best["cost"]), "hold_cost": hold_cost,
-                               "followed": best.get("rule")})  # fmt: skip
+                               "followed": best.get("rule"), "offset": best.get("offset")})  # fmt: skip
         self._write_stats()  # every decision: the episode's end is not the actor's to see
         if best["path"] is None:  # every fork failed: hold the last action
             log.warning("every candidate of the decision at %s failed; the last action is held", info["time"])
             return np.broadcast_to(self.last, (per, a)).copy()
         return best["path"][:per]
 
-    def _follow_rule(self, template, obs: np.ndarray, info: dict, steps: int) -> dict | None:
+    def _offsets(self, obs, info, h: int, best: dict, used: int, n: int, rng) -> tuple[dict, int]:
+        """Search the offset added to every action the first rule sets, played in closed loop (a residual on the rule,
+        each candidate a followed fork): the last decision's offset, then each action's offset up and down by `step`
+        and as many random directions, the step halved after a round that finds nothing better."""
+        rule, a = self.rules[0], len(self.last)
+        trials = [self.offset] if np.any(self.offset) else []
+        step = self.s.step
+        centre = self.offset
+        while used < n:
+            if not trials:
+                trials = [centre + sign * step * np.eye(a)[d] for d in rng.permutation(a) for sign in (1.0, -1.0)]
+                trials += [centre + step * v / np.linalg.norm(v) for v in rng.standard_normal((a, a))]
+                trials = [trials[i] for i in rng.permutation(len(trials))][: n - used]
+                improved = False
+            else:
+                improved = True  # the warm offset: not a round of its own
+            for delta in trials:
+                followed = self._follow_rule(rule, obs, info, h, np.clip(delta, -1, 1))
+                used += 1
+                if followed is not None and followed["cost"] < best["cost"]:
+                    best, centre, improved = followed | {"costs": best["costs"]}, np.clip(delta, -1, 1), True
+            trials = []
+            if not improved:
+                step /= 2
+        self.offset = centre if best.get("offset") is not None else np.zeros(a)
+        return best, used
+
+    def _follow_rule(self, template, obs: np.ndarray, info: dict, steps: int,
+                     offset: np.ndarray | None = None) -> dict | None:  # fmt: skip
         """The building's rule played in closed loop in a fork over the horizon, from the observation now (`obs`,
         `info`), as `evaluate --rbc` plays it from a fresh start (a copy of it never stepped: one fed the oracle's
         steps winds its integral up against zones it does not control) (its steps not limited by
         `max_increment`: rate-limited, its integral winds up and overshoots): its actions as a candidate, with their
         cost."""
         sim, rule = self.sim, copy.deepcopy(template)
-        ruled = np.asarray(rule(obs, info), float)
+        shift = np.zeros(len(sim.low)) if offset is None else offset
+        ruled = np.asarray(rule(obs, info), float) + shift
         if ruled.shape != (len(sim.low),) or not np.all(np.isfinite(ruled)):
             return None
         forecaster = getattr(sim, "_forecaster", None)
 
         def policy(values: np.ndarray) -> list[float]:
             obs, info, _ = sim.observer(values, sim.weather, forecaster)
-            return scale_action(np.clip(rule(obs, info), -1, 1), sim.low, sim.high, sim.action_names)
+            return scale_action(np.clip(rule(obs, info) + shift, -1, 1), sim.low, sim.high, sim.action_names)
 
         first = scale_action(np.clip(ruled, -1, 1), sim.low, sim.high, sim.action_names)
         branches = Branches(sim.process.pipes.dir, frame_width(len(sim.sensor_names)), sim.running, 1)
@@ -221,7 +256,8 @@ class OracleActor:
         path = (2 * (physical - lo) / (hi - lo) - 1).astype(np.float32)
         if len(path) < steps:  # the run period ended first
             path = np.concatenate([path, np.repeat(path[-1:], steps - len(path), 0)])
-        return {"targets": path, "path": path, "cost": self._cost(rows), "rule": type(template).__name__}
+        return {"targets": path, "path": path, "cost": self._cost(rows), "rule": type(template).__name__,
+                "offset": None if offset is None else offset.round(4).tolist()}
 
     def _play(self, pool: list[np.ndarray], best: dict | None = None) -> dict:
         """Play candidate targets [H, A] each; the best of them and `best` (targets, path, cost, costs)."""

@@ -24,6 +24,9 @@ class OracleSettings(FromText):
                               "the rule's, then coordinate moves)")
     step: float = setting(0.2, "the first move of the targets (normalized units: 3 K of the data "
                           "center's supply setpoint); halved after a round that finds nothing better")
+    offsets: bool = setting(False, "spend the budget left after the closed-loop candidates on offsets added to the "
+                            "first rule's actions (the building's rule, else its own schedules), each played in "
+                            "closed loop: a residual on the rule")
     warmup_candidates: int = setting(4, "candidates per decision in a test period's warm-up before its last day "
                                      "(its days are not scored: enough to enter the period in a sensible state)")
     parallel: int = setting(2, "forks played at once (the cores to use)")
