@@ -94,7 +94,7 @@ def wheel(tmp_path_factory) -> Path:
     src = tmp_path / "src"
     files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
     for name in files:
-        if name.startswith(("parallel_eplus/", "idf/")) or name in ("pyproject.toml", "README.md"):
+        if name.startswith(("parallel_eplus/", "idf/")) or name in ("pyproject.toml", "README.md", "LICENSE", "NOTICE"):
             (src / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, src / name)
     for path in (ROOT / "parallel_eplus").rglob("*"):  # and this branch's files not committed yet
@@ -106,6 +106,19 @@ def wheel(tmp_path_factory) -> Path:
     subprocess.run(cmd, check=True, capture_output=True)
     (wheel,) = out.glob("parallel_eplus-*.whl")
     return wheel
+
+
+def test_the_wheel_carries_the_licences(wheel):
+    """Apache-2.0 for the package; EnergyPlus's licence beside the models derived from its examples, and in the
+    wheel's licence files with the NOTICE that says which files it covers."""
+    archive = zipfile.ZipFile(wheel)
+    names = archive.namelist()
+    energyplus = (ROOT / "idf" / "EnergyPlus-LICENSE.txt").read_text()
+    assert archive.read("parallel_eplus/buildings/models/EnergyPlus-LICENSE.txt").decode() == energyplus
+    licences = {n.split("/licenses/", 1)[1]: n for n in names if ".dist-info/licenses/" in n}
+    assert {"LICENSE", "NOTICE", "idf/EnergyPlus-LICENSE.txt"} <= set(licences), licences
+    assert energyplus in archive.read(licences["NOTICE"]).decode()
+    assert "Apache License" in archive.read(licences["LICENSE"]).decode()
 
 
 @pytest.mark.slow
