@@ -6,7 +6,9 @@ target by at most `max_increment` a control step (the learned planner's limit,
 planner.py's `_follow`), within [-1, 1]. Each decision plays, up to `candidates` in all:
 - the warm start (the last decision's best, one interval on), the last action held, the episode's initial action
   held (the spec's, a safe anchor), then, played in closed loop in a fork of their own: the building's rule where
-  it has one that sets every action (started fresh from the state now, as `evaluate --rbc` plays it), and its own
+  it has one that sets every action (as `evaluate --rbc` plays it, twice: started fresh, and in the state of a copy
+  of it stepped on every observation of the episode, which continues the rule where the oracle followed it), and
+  its own
   thermostat schedules where every action is a thermostat with one (`OwnSchedules`), each followed by halfway from
   the warm start to what it did (the closed-loop candidates are the one exception to `max_increment`);
 - with `offsets`, the rest of the budget on the first of those rules with a constant offset added to its actions,
@@ -100,6 +102,7 @@ class OracleActor:
         self.s = settings
         self.sim = None
         self.rules: list = []  # played in closed loop at each decision: the building's rule, its own schedules
+        self.shadow = None
         self.plan: np.ndarray | None = None  # the chosen path's actions for the rest of the interval [T, A]
         self.targets: np.ndarray | None = None  # the chosen candidate's targets per step [H, A] (the warm start)
         self.calls = 0
@@ -119,7 +122,11 @@ class OracleActor:
         self.last = self.initial = _unit(sim)
         self.offset = np.zeros(len(self.last))  # the first rule's best offset at the last decision (`_offsets`)
         self.warmup_steps = max(0, sim.config.warmup_days - 1) * b.steps_per_day
-        self.rules = [r for r in (_rule(b), OwnSchedules.of(b)) if r is not None]
+        rule = _rule(b)
+        self.rules = [r for r in (rule, OwnSchedules.of(b)) if r is not None]
+        # the building's rule stepped on every observation of the episode: played from its state, it continues the
+        # rule where the oracle has been following it (a fresh one restarts its integral at each decision)
+        self.shadow = copy.deepcopy(rule)
 
     # -- acting --------------------------------------------------------------------------------
     def __call__(self, obs: np.ndarray, info: dict) -> np.ndarray:
@@ -127,6 +134,8 @@ class OracleActor:
             raise RuntimeError("the oracle acts only in an episode it is bound to (evaluate --oracle)")
         if self.calls % self.per == 0:
             self.plan = self._decide(obs, info)
+        if self.shadow is not None:
+            self.shadow(obs, info)  # after the decision: its copies there take this observation themselves
         action = self.plan[self.calls % self.per]
         self.calls += 1
         self.last = action
@@ -147,7 +156,8 @@ class OracleActor:
         best = self._play(pool[:n])
         hold_cost = best["costs"][1] if n > 1 else None
         used = min(n, len(pool))
-        for rule in self.rules:  # each in closed loop from here, then halfway to what it did
+        for rule in [*self.rules[:1], *([self.shadow] if self.shadow is not None else []), *self.rules[1:]]:
+            # each in closed loop from here, then halfway to what it did
             if used >= n:
                 break
             followed = self._follow_rule(rule, obs, info, h)
@@ -227,11 +237,10 @@ class OracleActor:
 
     def _follow_rule(self, template, obs: np.ndarray, info: dict, steps: int,
                      offset: np.ndarray | None = None) -> dict | None:  # fmt: skip
-        """The building's rule played in closed loop in a fork over the horizon, from the observation now (`obs`,
-        `info`), as `evaluate --rbc` plays it from a fresh start (a copy of it never stepped: one fed the oracle's
-        steps winds its integral up against zones it does not control) (its steps not limited by
-        `max_increment`: rate-limited, its integral winds up and overshoots): its actions as a candidate, with their
-        cost."""
+        """A rule (a copy of `template`) played in closed loop in a fork over the horizon from the observation now
+        (`obs`, `info`), as `evaluate --rbc` plays it, its steps not limited by `max_increment` (rate-limited, its
+        integral winds up and overshoots); with `offset`, added to each of its actions: its actions as a candidate,
+        with their cost."""
         sim, rule = self.sim, copy.deepcopy(template)
         shift = np.zeros(len(sim.low)) if offset is None else offset
         ruled = np.asarray(rule(obs, info), float) + shift
