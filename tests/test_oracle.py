@@ -81,7 +81,7 @@ def _plan_cost(episode_dir: str, settings: OracleSettings) -> float:
 
 
 def test_the_oracle_plans_no_worse_than_the_own_controls(tmp_path):
-    options = "horizon_h=2,candidates=16"
+    options = "horizon_h=2,candidates=10"
     oracle = oracle_controller(options)
     df = run_sweep([Controller(BASELINE_LABEL, "baseline"), oracle], ["CA"], 1, 1, tmp_path, progress=False)
     assert not df.attrs["failures"] and len(df) == 2
