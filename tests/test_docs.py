@@ -80,6 +80,37 @@ def test_markdown_outside_docs_links_to_files_that_exist():
     assert not broken, broken
 
 
+# A work log's marks: a date that is not part of an ISO timestamp (a log line's "2026-12-07 03:25:38" or a dated
+# study; an API example's "2021-01-05T10:00:00" is data, so a date followed by T and a time is allowed), a machine's
+# load average, and an issue number. Studies and results READMEs keep theirs; the guide links there.
+WORK_LOG = re.compile(r"\b20\d{2}-\d{2}-\d{2}\b(?!T\d)|load average|\bissues? #?\d+", flags=re.I)
+GUIDE_LINES, GUIDE_PAGE_LINES = 3068, 300  # half of the 6,136 lines docs/ had before the guide was rewritten
+
+
+def _guide_pages() -> list[Path]:
+    """docs/*.md, the generated reference (docs/reference/) apart."""
+    return sorted((ROOT / "docs").glob("*.md"))
+
+
+def test_the_guide_carries_no_work_log():
+    """No dates, machine loads or issue numbers in the guide (ISO timestamps inside examples are data)."""
+    found = [
+        f"{page.relative_to(ROOT)}:{number}: {match.group(0)}"
+        for page in _guide_pages()
+        for number, line in enumerate(page.read_text().splitlines(), 1)
+        for match in WORK_LOG.finditer(line)
+    ]
+    assert not found, found
+
+
+def test_the_guide_stays_short():
+    """No page over 300 lines, and the guide as a whole at most half of what it was: a study's details go to its
+    studies/<name>/README.md or the results/ README it produced, option lists to the generated reference."""
+    lengths = {page.name: len(page.read_text().splitlines()) for page in _guide_pages()}
+    assert not {name: n for name, n in lengths.items() if n > GUIDE_PAGE_LINES}
+    assert sum(lengths.values()) <= GUIDE_LINES, sum(lengths.values())
+
+
 def test_the_readme_stays_the_short_guide():
     """The README is the short guide (under 10 KB); each section links its page in docs/."""
     readme = (ROOT / "README.md").read_text()
