@@ -196,9 +196,9 @@ def run_local(
                 controller, cfg = queue.popleft()
                 sim = Simulation(cfg, name=controller.label, siblings=workers, building=building)
                 job = {"controller": controller, "cfg": cfg, "sim": sim, "act": controller.make(sim.building)}
+                active.append(job)  # (closed below whatever fails from here)
                 if controller.kind == ORACLE_KIND:
                     job["act"].bind(sim)  # it forks this episode's process
-                active.append(job)
                 try:
                     sim.launch()
                     started.append(job)
