@@ -16,6 +16,9 @@ results/limit/table.md and limit.json from every finished cell (`run` does after
     .venv/bin/python studies/limit/run.py status                               # done, running, left
     .venv/bin/python studies/limit/run.py table
 
+More buildings: `run --add NAME=SPEC` (a DOE prototype's spec written by `studies/prototypes/prototypes.py prepare`),
+kept in WORK/buildings.json; their cells follow the built-in buildings' in each period.
+
 The learned planner's column needs a trained planner per building: `--planner BUILDING=runs/NAME/planner` (given to
 `run`, kept in WORK/planners.json); a cell without one is run without it and its planner column stays empty. The
 episodes stay in WORK (default ../limit-work beside the repository): only the tables are committed.
@@ -52,28 +55,38 @@ LABELS = {"Baseline": "own", "Rule-based": "rule", "Oracle": "oracle"}
 FIGURES = ("energy_kwh", "hvac_energy_kwh", "cost", "discomfort_kh", "in_band_pct")
 
 
-def plan() -> list[dict]:
+def added(work: Path = WORK) -> dict[str, dict]:
+    """Buildings added with `run --add NAME=SPEC` (a DOE prototype's spec): name -> spec, rule?"""
+    path = work / "buildings.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def plan(work: Path = WORK) -> list[dict]:
     """Every cell, in order: the energy objective's (the first weather's typical cooling fortnight of each building
     first), then the cost objectives'."""
+    buildings = [(b, rule, b) for b, rule in BUILDINGS] + [(b, a["rule"], a["spec"]) for b, a in added(work).items()]
     cells = []
     for objective in OBJECTIVES:
         for weather in WEATHERS:
             for scenario in SCENARIOS:
-                for building, rule in BUILDINGS:
+                for building, rule, spec in buildings:
                     cells.append({"building": building, "rule": rule, "scenario": scenario, "weather": weather,
-                                  "objective": objective})  # fmt: skip
+                                  "objective": objective, "spec": spec})  # fmt: skip
     return cells
 
 
 def spec_for(work: Path, c: dict) -> str:
     """The spec a cell runs: the built-in one (energy), or a copy of it under the cost objective and a price
     scenario's tariff, written into WORK/specs."""
+    from parallel_eplus.buildings.building import load_building
+
     if c["objective"] == "energy":
-        return c["building"]
+        return c["spec"]
     prices = c["objective"].removeprefix("cost-")
-    text = (ROOT / "parallel_eplus" / "buildings" / "specs" / f"{c['building']}.toml").read_text()
+    own = load_building(c["spec"]).spec  # its models as found from its spec, by absolute path below
+    text = own.path.read_text()
     head = f"# Written by studies/limit/run.py: {c['building']} under the cost objective, BOPTEST's {prices} prices.\n"
-    text = text.replace(f'name = "{c["building"]}"', f'name = "{c["building"]}-{c["objective"]}"', 1)
+    text = re.sub(r'^name = "[^"]*"', f'name = "{c["building"]}-{c["objective"]}"', text, count=1, flags=re.M)
     text, n = re.subn(r'^objective = "[^"]*"', 'objective = "cost"', text, count=1, flags=re.M)
     if not n:
         text, n = re.subn(r"^\[reward\]\n", '[reward]\nobjective = "cost"\n', text, count=1, flags=re.M)
@@ -83,9 +96,6 @@ def spec_for(work: Path, c: dict) -> str:
         text, m = re.subn(r"^\[kpis\]\n", "[kpis]\n" + tariff, text, count=1, flags=re.M)
     if not (n and m):
         raise SystemExit(f"{c['building']}'s spec has no [reward] or [kpis] table to set the cost objective in")
-    from parallel_eplus.buildings.building import load_building
-
-    own = load_building(c["building"]).spec  # its models as found from the built-in spec, by absolute path
     for key, model in (("idf", own.idf), ("baseline_idf", own.baseline_idf)):
         if model is not None:
             text = re.sub(rf'^{key} = "[^"]*"', f'{key} = "{model}"', text, count=1, flags=re.M)
@@ -146,6 +156,15 @@ def command(work: Path, c: dict) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     work = args.work
     work.mkdir(parents=True, exist_ok=True)
+    if args.add:
+        from parallel_eplus.buildings.building import load_building
+
+        known = added(work)
+        for item in args.add:
+            name, _, spec = item.partition("=")
+            b = load_building(spec)  # a spec that does not load fails here
+            known[name] = {"spec": str(Path(spec).resolve()), "rule": bool(b.spec.controller)}
+        (work / "buildings.json").write_text(json.dumps(known, indent=1))
     if args.planner:
         known = planners(work)
         for item in args.planner:
@@ -153,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
             known[building] = str(Path(path).resolve())
         (work / "planners.json").write_text(json.dumps(known, indent=1))
     start, budget = time.monotonic(), args.hours * 3600
-    cells = [c for c in plan() if not args.only or c["building"] in args.only.split(",")]
+    cells = [c for c in plan(work) if not args.only or c["building"] in args.only.split(",")]
     for c in cells:
         if done(work, c):
             continue
@@ -199,7 +218,7 @@ def oracle_stats(rows: list[dict]) -> dict:
 
 def table(args: argparse.Namespace) -> int:
     work, entries = args.work, []
-    for c in plan():
+    for c in plan(work):
         rows = finished(work, c)
         if not rows:
             continue
@@ -231,7 +250,7 @@ def table(args: argparse.Namespace) -> int:
 
 
 def status(args: argparse.Namespace) -> int:
-    cells = plan()
+    cells = plan(args.work)
     finished_cells = [c for c in cells if done(args.work, c)]
     print(f"{len(finished_cells)} of {len(cells)} cells done (work: {args.work})")
     for c in cells:
@@ -261,6 +280,7 @@ def main() -> int:
     p.add_argument("--hours", type=float, default=1.9, help="start no cell after this many hours (default 1.9)")
     p.add_argument("--only", help="these buildings' cells only (comma-separated)")
     p.add_argument("--planner", action="append", metavar="BUILDING=PATH", help="a trained planner for the column")
+    p.add_argument("--add", action="append", metavar="NAME=SPEC", help="one more building (its spec file), kept")
     p.add_argument("--work", type=Path, default=WORK, help=f"where the episodes go (default {WORK})")
     args = p.parse_args()
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
