@@ -107,8 +107,11 @@ MOVED: dict[str, str] = {
 
 
 def warn_moved(old: str, stacklevel: int = 3) -> None:
-    warnings.warn(f"{old} moved to {MOVED[old]}; the old path is removed in {REMOVED_IN}",
-                  DeprecationWarning, stacklevel=stacklevel)
+    warnings.warn(
+        f"{old} moved to {MOVED[old]}; the old path is removed in {REMOVED_IN}",
+        DeprecationWarning,
+        stacklevel=stacklevel,
+    )
 
 
 class _Alias(importlib.abc.Loader):
@@ -149,8 +152,11 @@ def forward(package: str, name: str):
         value = getattr(module, name)
     except AttributeError:
         raise AttributeError(f"module {package!r} has no attribute {name!r}") from None
-    warnings.warn(f"{package}.{name} moved to {module.__name__}.{name}; the old path is removed in {REMOVED_IN}",
-                  DeprecationWarning, stacklevel=3)
+    warnings.warn(
+        f"{package}.{name} moved to {module.__name__}.{name}; the old path is removed in {REMOVED_IN}",
+        DeprecationWarning,
+        stacklevel=3,
+    )
     setattr(sys.modules[package], name, value)  # warned once: `from package import name` reads it twice
     return value
 

@@ -85,11 +85,13 @@ class Client:
 
     async def __aenter__(self):
         from parallel_eplus.deploy.bacnet import app as bacnet
+
         self.app = await bacnet.start(f"{HOST}:{self.lp.ports['client']}", 597, "test client")
         return self
 
     async def __aexit__(self, *exc):
         from parallel_eplus.deploy.bacnet import app as bacnet
+
         await bacnet.stop(self.app)
 
     def _point(self, name: str):

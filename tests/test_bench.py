@@ -67,6 +67,7 @@ def test_raw_replay_is_the_envs_physics_without_the_pipes(tmp_path, no_leaks, br
     """The floor the benchmark measures against: replaying an env run's actions in raw EnergyPlus gives
     the very same simulation, timestep by timestep (so raw and env do the same work)."""
     from parallel_eplus.engine.eplus_side import native
+
     if bridge == "python":
         monkeypatch.setattr(native, "bridge_library", lambda: None)
     elif native.bridge_library() is None:

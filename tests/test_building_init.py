@@ -81,7 +81,7 @@ def test_init_prototype_from_the_energyplus_wheel(tmp_path, capsys):
     # Its five packaged units each follow their own zone (SetpointManager:SingleZone:Reheat): no shared supply-air
     # knob, which would end every zone's feedback; each node is still offered alone.
     assert "# all 5 air loops' supply air" not in text and "5 single-zone unit(s) left out" in text
-    assert text.count("_supply_equipment_outlet_node_setpoint_c\"") == 5
+    assert text.count('_supply_equipment_outlet_node_setpoint_c"') == 5
     # Comfort is scored while its People follow their schedule; energy counts every fuel it meters.
     assert spec.reward.occupied is not None and spec.reward.occupied.observation == "occupancy"
     assert any(o.variable == "Schedule Value" and o.key == "BLDG_OCC_SCH_wo_SB" for o in spec.observations)

@@ -112,8 +112,9 @@ def test_a_rule_that_corrects_the_own_schedules_holds_each_thermostat_its_margin
     from parallel_eplus.evaluation.controllers import RBC_LABEL
 
     text = spec_file("office-small").read_text()
-    rule = ('controller = "parallel_eplus.buildings.rules.own_margin:OwnMargin"\n'
-            'controller_settings = { margin_k = 0.5 }\n')
+    rule = (
+        'controller = "parallel_eplus.buildings.rules.own_margin:OwnMargin"\ncontroller_settings = { margin_k = 0.5 }\n'
+    )
     spec = tmp_path / "margin.toml"
     spec.write_text(text.replace("[weathers]", rule + "[weathers]", 1))
     df = run_sweep([Controller(RBC_LABEL, "rbc")], ["CA"], DAYS, 1, tmp_path / "out", False, building=str(spec))

@@ -256,8 +256,17 @@ def test_a_policy_whose_thermostats_cross_is_exported_and_served_uncrossed(tmp_p
     text = text.replace("low = 15.0\nhigh = 22.0\ninitial = 21.0", "low = 24.0\nhigh = 26.0\ninitial = 24.0", 1)
     spec = tmp_path / "office-crossed.toml"
     spec.write_text(text)
-    cfg = TrainConfig(workers=1, weathers=["CA"], run_days=1, timesteps=144, batch_size=144, building=str(spec),
-                      run_name="crossed", runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"))
+    cfg = TrainConfig(
+        workers=1,
+        weathers=["CA"],
+        run_days=1,
+        timesteps=144,
+        batch_size=144,
+        building=str(spec),
+        run_name="crossed",
+        runs_dir=str(tmp_path / "runs"),
+        tensorboard_dir=str(tmp_path / "tb"),
+    )
     model = train(cfg, progress=False)
     out = tmp_path / "controller"
     export(model.parent, out)

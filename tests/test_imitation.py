@@ -132,8 +132,17 @@ def test_sac_from_the_clone_acts_its_warm_up_with_the_cloned_actor_not_random_ac
     steps are the cloned actor's (its log-std head flat at the clone's spread), so the warm-up episodes stay near the
     built-in controls' comfort and HVAC energy: uniform random setpoints held the office in its bounds 79 % of the
     time at twice the HVAC energy."""
-    cfg = small_config(tmp_path, "sac-clone", building="office-small", algorithm="sac", init_from_baseline=True,
-                       comfort=ComfortConstraint(target_pct=97.5), weathers=["CA"], workers=1, timesteps=576)
+    cfg = small_config(
+        tmp_path,
+        "sac-clone",
+        building="office-small",
+        algorithm="sac",
+        init_from_baseline=True,
+        comfort=ComfortConstraint(target_pct=97.5),
+        weathers=["CA"],
+        workers=1,
+        timesteps=576,
+    )
     model = train(cfg, progress=False)
     run = tmp_path / "runs" / "sac-clone"
     assert json.loads((run / "config.json").read_text())["sac"]["learning_starts"] > 576  # all of it warm-up
@@ -148,8 +157,9 @@ def test_sac_from_the_clone_acts_its_warm_up_with_the_cloned_actor_not_random_ac
 
 
 @pytest.mark.slow
-def test_the_medium_office_s_own_controls_are_read_back_at_every_step_among_its_own_detailed_outputs(tmp_path,
-                                                                                                     no_leaks):
+def test_the_medium_office_s_own_controls_are_read_back_at_every_step_among_its_own_detailed_outputs(
+    tmp_path, no_leaks
+):
     """The DOE medium office reports some of its own outputs at the HVAC's `Detailed` frequency, which adds rows to
     eplusout.csv between the steps: the read-backs are the steps', one per observation, the thermostats on their
     schedules and the supply air on its manager's setpoint."""

@@ -11,6 +11,7 @@ from parallel_eplus.buildings.datacenter import STEPS_PER_DAY
 def _bridges() -> list:
     """Both EnergyPlus-side bridges; the C one only where it compiles (it does wherever CI runs)."""
     from parallel_eplus.engine.eplus_side import native
+
     c = pytest.param(True, id="c-bridge")
     if native.bridge_library() is None:
         c = pytest.param(True, id="c-bridge", marks=pytest.mark.skip(reason="no C compiler"))
@@ -79,6 +80,7 @@ def test_a_malformed_action_frame_stops_energyplus_with_the_reason(use_c, no_lea
 
 def test_the_c_bridge_compiles_into_a_fresh_cache_or_falls_back_with_a_warning(tmp_path, monkeypatch, caplog):
     from parallel_eplus.engine.eplus_side import native
+
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     native.bridge_library.cache_clear()
     try:

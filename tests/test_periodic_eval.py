@@ -132,4 +132,3 @@ def test_evaluation_periods_can_cover_the_seasons(tmp_path, no_leaks):
     assert set(json.loads((run / "eval_baseline.json").read_text())) == {"CA|1", "CA|1|peak_cool"}
     periods = json.loads((run / "eval-periods" / "scenarios.json").read_text())
     assert periods["CA"]["peak_cool"]["start_day"] > 150  # summer
-

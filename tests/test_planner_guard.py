@@ -112,8 +112,17 @@ def test_the_served_planner_carries_the_guard_in_its_answers_and_acts_as_the_in_
     contract = Contract.read(tmp_path / "served")
     assert contract.data["planner"]["settings"]["guard_k"] == 0.1 and contract.data["guard"]["required"] is False
     data = contract.data  # its fallback off: a 30 C zone is far from the data, and the fallback is not this test's
-    runtime = PlannerRuntime(tmp_path / "served", Contract(dict(data, fallback=dict(
-        data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None))))
+    runtime = PlannerRuntime(
+        tmp_path / "served",
+        Contract(
+            dict(
+                data,
+                fallback=dict(
+                    data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None
+                ),
+            )
+        ),
+    )
     mpc = office(options)
     a_last = np.array([[0.5, -0.5]], np.float32)
     physical = mpc.action_low + (a_last[0] + 1) / 2 * (mpc.action_high - mpc.action_low)
@@ -130,7 +139,8 @@ def test_the_served_planner_carries_the_guard_in_its_answers_and_acts_as_the_in_
         answer = runtime.act(body)
         plan, guard = answer["plan"], answer["guard"]
         expected = mpc.action_low + (mpc.act(obs, [{"time": when, "weather": "CA"}], a_last)[0] + 1) / 2 * (
-            mpc.action_high - mpc.action_low)
+            mpc.action_high - mpc.action_low
+        )
         served = np.array([answer["setpoints"][n]["value"] for n in names])
         np.testing.assert_allclose(served, expected, atol=1e-5)
         assert guard == mpc.guard.states[0].as_dict()
@@ -186,8 +196,17 @@ def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_pr
     export(tmp_path / "planner", tmp_path / "served", record_days=1, workers=1)
     data = Contract.read(tmp_path / "served").data  # its fallback off: this test is the margin's
     assert data["planner"]["settings"]["baseline_margin"] == margin
-    runtime = PlannerRuntime(tmp_path / "served", Contract(dict(data, fallback=dict(
-        data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None))))
+    runtime = PlannerRuntime(
+        tmp_path / "served",
+        Contract(
+            dict(
+                data,
+                fallback=dict(
+                    data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None
+                ),
+            )
+        ),
+    )
     truth = inside.forecasts("CA").file.truth(step_times(JULY, inside.step_minutes, inside.settings.horizon))
     names, sensors = [o["name"] for o in data["outputs"]], [i["name"] for i in data["inputs"]]
     answer = runtime.act({"time": JULY.isoformat(), "sensors": dict(zip(sensors, map(float, obs[0]), strict=True)),

@@ -253,9 +253,12 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
     t_max, ruled = advance(rule.cfg, rule.points, 16.0, readings)
     assert answer["fallback"] and answer["rule_state"] == {"t_max_c": t_max}  # (Tampa: far from its CO data too)
     assert answer["setpoints"]["supply_air_c"]["value"] == pytest.approx(low + (ruled[2] + 1) / 2 * (high - low))
-    refused = (("rule_readings", {"rule_readings": None}), ("rule_state", {"rule_state": {"t_max_c": 30}}),
-               ("setpoint_clgsetp_sch", {"rule_readings": {"setpoint_clgsetp_sch": {"value": 75, "unit": "F"}}}),
-               ("rule_readings.zone_c", {"rule_readings": {"setpoint_clgsetp_sch": 24.0, "zone_c": 24.0}}))
+    refused = (
+        ("rule_readings", {"rule_readings": None}),
+        ("rule_state", {"rule_state": {"t_max_c": 30}}),
+        ("setpoint_clgsetp_sch", {"rule_readings": {"setpoint_clgsetp_sch": {"value": 75, "unit": "F"}}}),
+        ("rule_readings.zone_c", {"rule_readings": {"setpoint_clgsetp_sch": 24.0, "zone_c": 24.0}}),
+    )
     for field, change in refused:
         with pytest.raises(InputError, match=field):
             runtime.act({**body, **change})

@@ -50,8 +50,9 @@ def test_each_objective_weighs_the_predicted_parts_as_the_reward_does():
     assert weights.at(STARTS) == pytest.approx(np.array(expected, np.float32))
     hvac = EnergyWeights.of(LAYOUT, "hvac", {"hvac_power_w": "Electricity"}, {}, {})
     assert hvac.at(STARTS[:1]).tolist() == [[0.0, 1.0]]
-    emissions = EnergyWeights.of(LAYOUT, "emissions", {"hvac_power_w": "NaturalGas"}, {}, {"Electricity": 0.4,
-                                                                                             "NaturalGas": 0.2})
+    emissions = EnergyWeights.of(
+        LAYOUT, "emissions", {"hvac_power_w": "NaturalGas"}, {}, {"Electricity": 0.4, "NaturalGas": 0.2}
+    )
     assert emissions.at(STARTS[:1]).tolist() == [[0.0, 0.5]]
     assert EnergyWeights.of(LAYOUT, "energy", {}, {}, {}).at(STARTS[:1]).tolist() == [[1.0, 1.0]]
     no_parts = Layout(LAYOUT.sensors, LAYOUT.temperatures, ("power_w",), 4, 6)  # an unobserved HVAC meter
@@ -156,10 +157,12 @@ def test_a_candidate_pays_each_charge_s_price_for_the_rise_above_the_month_s_pea
     prices, running = d.outlook([when], {})
     paid = prices.sum() * d.per_dollar * mpc.power_weight  # per kW above every peak
     assert cost(zero, DemandOutlook(prices[None], running[None], d.part, d.per_dollar)) - base == pytest.approx(
-        paid * watts / 1000, rel=1e-4)  # a month with no peak yet: all of it
+        paid * watts / 1000, rel=1e-4
+    )  # a month with no peak yet: all of it
     near = np.where(prices > 0, watts / 1000 - 2.0, 0.0).astype(np.float32)
     assert cost(zero, DemandOutlook(prices[None], near[None], d.part, d.per_dollar)) - base == pytest.approx(
-        2 * paid, rel=1e-3)  # 2 kW above this month's peaks
+        2 * paid, rel=1e-3
+    )  # 2 kW above this month's peaks
     high = np.full_like(running, 1e6)
     assert cost(zero, DemandOutlook(prices[None], high[None], d.part, d.per_dollar)) == base
 

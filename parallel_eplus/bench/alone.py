@@ -51,8 +51,14 @@ def alone_model(
     """The episode's model (EnergyPlus's CSV off, as training runs it) with the EMS program appended."""
     target.parent.mkdir(parents=True, exist_ok=True)
     control = building.control()
-    prepare_idf(control.idf, target, run_days, energyplus_csv=False, takeover=taken_setpoints(control.actions),
-                ventilation=building.spec.demand_ventilation)
+    prepare_idf(
+        control.idf,
+        target,
+        run_days,
+        energyplus_csv=False,
+        takeover=taken_setpoints(control.actions),
+        ventilation=building.spec.demand_ventilation,
+    )
     with target.open("a", encoding="latin-1") as f:
         f.write("\n\n" + ems_objects(building, action, calling_point))
     return target

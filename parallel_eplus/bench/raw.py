@@ -95,8 +95,14 @@ def _bench_jobs(cfg: BenchConfig, workdir: Path, replays: np.ndarray, energyplus
     idf = workdir / MODEL_FILE  # one model file for all: each run writes its outputs in its own directory
     control = building.control()
     days = -(-len(replays) // building.steps_per_day)
-    prepare_idf(control.idf, idf, days, energyplus_csv, takeover=taken_setpoints(control.actions),
-                ventilation=building.spec.demand_ventilation)
+    prepare_idf(
+        control.idf,
+        idf,
+        days,
+        energyplus_csv,
+        takeover=taken_setpoints(control.actions),
+        ventilation=building.spec.demand_ventilation,
+    )
     epw = building.spec.weathers.get(cfg.weather) or resolve_weather(cfg.weather)
     model = building.spec.name if cfg.building else "temp_fan"
     return [

@@ -71,8 +71,10 @@ class HttpController:
             self.charges = self.contract["demand_peaks_kw"]["charges"]
             here = tariff.demand_names
             if here != self.charges:
-                raise ValueError(f"controller at {self.url} prices demand charges {self.charges}; the tariff here has "
-                                 f"{here}: the client keeps the peaks with the building's own tariff")
+                raise ValueError(
+                    f"controller at {self.url} prices demand charges {self.charges}; the tariff here has "
+                    f"{here}: the client keeps the peaks with the building's own tariff"
+                )
             self.meter = self.contract["planner"]["demand"]["power"]
 
     def _request(self, method: str, path: str, body: dict | None = None) -> dict:
@@ -91,8 +93,11 @@ class HttpController:
                 if attempt:
                     raise ValueError(f"controller at {self.url}: {method} {path} failed ({e}); is it serving?") from e
         if response.status == 401:  # the server's words name the header, never the token
-            how = ("it refused the token given (--token-file, else $" + TOKEN_VARIABLE + ")" if self.auth else
-                   "it needs a token: give --token-file FILE (the token on its first line) or set " + TOKEN_VARIABLE)
+            how = (
+                "it refused the token given (--token-file, else $" + TOKEN_VARIABLE + ")"
+                if self.auth
+                else "it needs a token: give --token-file FILE (the token on its first line) or set " + TOKEN_VARIABLE
+            )
             raise ValueError(f"controller at {self.url} answered 401 to {method} {path}: {how} ({text[:200]!r})")
         if response.status != 200:
             raise ValueError(f"controller at {self.url} answered {response.status} to {method} {path}: {text[:300]!r}")

@@ -118,7 +118,11 @@ def _loads_of(episode_dir: Path, weather: str, failed: bool, error: str | None) 
 
 
 def find_periods(
-    scenario: str, weathers: list[str], building: str | Building | None, out_dir: Path, workers: int = 1,
+    scenario: str,
+    weathers: list[str],
+    building: str | Building | None,
+    out_dir: Path,
+    workers: int = 1,
     progress: bool = True,
 ) -> dict[str, Period]:
     """Each weather's period for `scenario`, from a year of the built-in controls (run once per weather and kept in

@@ -172,7 +172,10 @@ def _job_config(
 
 
 def run_local(
-    jobs: list[tuple[Controller, SimulationConfig]], workers: int, bar, keep_going: bool = False,
+    jobs: list[tuple[Controller, SimulationConfig]],
+    workers: int,
+    bar,
+    keep_going: bool = False,
     building: Building | None = None,
 ) -> tuple[list[dict], list[dict]]:
     """The jobs as EnergyPlus processes of this machine, up to `workers` at once: (rows, failures). `building`: the

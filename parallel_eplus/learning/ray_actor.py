@@ -107,6 +107,7 @@ def _node_spin_s(workers: int) -> float:
     import ray
 
     from parallel_eplus.engine.pipes import spin
+
     node = ray.get_runtime_context().get_node_id()
     cpus = next((n["Resources"].get("CPU", 0) for n in ray.nodes() if n["NodeID"] == node), 0)
     return spin.default_spin_s(int(cpus + -(-cpus // workers)))

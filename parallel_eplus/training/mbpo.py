@@ -33,9 +33,11 @@ def model_rollouts(cfg: TrainConfig, venv, checkpoint: Path | None, progress: bo
             raise ValueError(f"--init-from {cfg.init_from}: a planner of building {mpc.building!r}; this run's is "
                              f"{cfg.building!r} (give it --building {mpc.building})")  # fmt: skip
         if starts.obs and len(starts.obs[0]) != width:
-            raise ValueError(f"--init-from {cfg.init_from}: its planner's states hold {len(starts.obs[0])} values, "
-                             f"this run observes {width}: give the planner run's --time-features and "
-                             "--schedule-features, or a planner folder alone (planner/) to start without its states")
+            raise ValueError(
+                f"--init-from {cfg.init_from}: its planner's states hold {len(starts.obs[0])} values, "
+                f"this run observes {width}: give the planner run's --time-features and "
+                "--schedule-features, or a planner folder alone (planner/) to start without its states"
+            )
         log.info("%s starts from the model and data of %s: %d transitions, %d start states", cfg.run_name,
                  cfg.init_from, len(data), len(starts))  # fmt: skip
     else:

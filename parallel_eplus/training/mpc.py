@@ -77,16 +77,25 @@ class _Loop:
         self.evaluator, self._t0 = evaluator, time.monotonic()
         self.cfg, self.venv, self.s, self.new_model = cfg, venv, cfg.mpc, new_model
         self.building = load_building(cfg.building)
-        self.mpc = MPC(cfg.building, self.s, cfg.comfort.margin_c, cfg.reward.power_weight, venv.num_envs, cfg.seed,
-                       objective=cfg.objective)
+        self.mpc = MPC(
+            cfg.building,
+            self.s,
+            cfg.comfort.margin_c,
+            cfg.reward.power_weight,
+            venv.num_envs,
+            cfg.seed,
+            objective=cfg.objective,
+        )
         self.data = Transitions(self.mpc.layout)
         self.lagrangian = Lagrangian.start(cfg.comfort) if cfg.constrained and self.s.comfort_weight is None else None
         fixed = self.s.comfort_weight
         self.mpc.comfort_weight = cfg.comfort.multiplier_init if fixed is None else fixed  # 0: comfort unpaid
         self.steps, self.replay, self.own_level = 0, {}, None
         if self.s.student == "gradient" and cfg.forecast_hours:
-            raise ValueError("--mpc student=gradient: a policy observing --forecast cannot be rebuilt along the "
-                             "model's rollouts; leave --forecast out (the clock's features are rebuilt)")
+            raise ValueError(
+                "--mpc student=gradient: a policy observing --forecast cannot be rebuilt along the "
+                "model's rollouts; leave --forecast out (the clock's features are rebuilt)"
+            )
         self.logger = tensorboard_logger(Path(cfg.tensorboard_dir) / str(cfg.run_name))
         self.student = Student(cfg, venv, self.building, new_model, self.logger)
         self.shim = CallbackHost(venv, self.logger)
@@ -244,9 +253,13 @@ class _Loop:
                             ", ".join(missing))  # fmt: skip
         jump = self.mpc.own_jump()
         if self.s.comfort_reference == "baseline" and jump > self.s.max_increment:
-            log.warning("comfort_reference=baseline: the building's own thermostats jump %.2f (normalized) in one "
-                        "step, beyond max_increment=%g: the planner reaches the occupied setpoint a step late and pays "
-                        "nothing for it; --mpc max_increment=2.0 lets it jump as they do", jump, self.s.max_increment)
+            log.warning(
+                "comfort_reference=baseline: the building's own thermostats jump %.2f (normalized) in one "
+                "step, beyond max_increment=%g: the planner reaches the occupied setpoint a step late and pays "
+                "nothing for it; --mpc max_increment=2.0 lets it jump as they do",
+                jump,
+                self.s.max_increment,
+            )
 
     def _refit(self, epochs: int) -> None:
         refit(self.mpc, self.data, self.building, self.s.horizon, epochs, self.logger, self.cfg.run_dir)
@@ -276,8 +289,10 @@ class _Loop:
         self.replay = {w: np.asarray(a) for w, a in state["replay"].items()}
         if self.s.comfort_level == "baseline":
             if state.get("own_level") is None:
-                raise ValueError(f"--resume with comfort_level=baseline: {checkpoint} has no record of the building's "
-                                 "own comfort (a run started without it); start a new run")
+                raise ValueError(
+                    f"--resume with comfort_level=baseline: {checkpoint} has no record of the building's "
+                    "own comfort (a run started without it); start a new run"
+                )
             self.own_level = OwnLevel.from_state(state["own_level"])
         if self.lagrangian is not None and state["lagrangian"] is not None:
             self.lagrangian.multiplier = state["lagrangian"]

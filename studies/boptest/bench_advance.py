@@ -135,8 +135,10 @@ def main() -> int:
     print(f"  {'':16s} {'mean':>7s}  {'added':>7s}  {'ratio':>5s}  {'median':>7s}  {'added':>7s}")
     for name, values in per.items():
         ms, med = statistics.median(values), statistics.median(medians[name])
-        print(f"  {name:16s} {ms:7.3f}  {ms - base:+7.3f}  {ms / base:5.2f}  {med:7.3f}  {med - base_median:+7.3f}  "
-              f"ms/step ({counts[name]} steps)")
+        print(
+            f"  {name:16s} {ms:7.3f}  {ms - base:+7.3f}  {ms / base:5.2f}  {med:7.3f}  {med - base_median:+7.3f}  "
+            f"ms/step ({counts[name]} steps)"
+        )
     return 0
 
 

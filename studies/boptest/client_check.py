@@ -69,8 +69,9 @@ def main() -> int:
         seen["inputs"] = sorted(get_inputs_testid.sync(testid, client=c).payload.to_dict())
         seen["measurements"] = len(get_measurements_testid.sync(testid, client=c).payload.to_dict())
         seen["forecast_points"] = sorted(get_forecast_points_testid.sync(testid, client=c).payload.to_dict())
-        state = put_initialize_testid.sync(testid, client=c, body=PutInitializeTestidBody(start_time=10 * 86400,
-                                                                                       warmup_period=86400))
+        state = put_initialize_testid.sync(
+            testid, client=c, body=PutInitializeTestidBody(start_time=10 * 86400, warmup_period=86400)
+        )
         seen["initialize_time"] = state.payload.time
         put_step_testid.sync(testid, client=c, body=PutStepTestidBody(step=1800))
         seen["step"] = get_step_testid.sync(testid, client=c).payload
@@ -81,8 +82,9 @@ def main() -> int:
             u = {"heating_setpoint_u": 294.15, "heating_setpoint_activate": 1} if k % 2 else {}
             res = post_advance_testid.sync(testid, client=c, body=PostAdvanceTestidBody.from_dict(u))
         seen["advance_time"] = res.payload.time
-        f = put_forecast_testid.sync(testid, client=c, body=ForecastQuery(point_names=["TDryBul"], horizon=7200,
-                                                                         interval=3600))
+        f = put_forecast_testid.sync(
+            testid, client=c, body=ForecastQuery(point_names=["TDryBul"], horizon=7200, interval=3600)
+        )
         seen["forecast"] = f.payload.to_dict()
         query = ResultsQuery(point_names=["heating_setpoint_u"], start_time=10 * 86400, final_time=res.payload.time)
         r = put_results_testid.sync(testid, client=c, body=query)

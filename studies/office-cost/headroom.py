@@ -78,9 +78,18 @@ def main() -> None:
     for mean in ("hvac_kwh_share", "fans_kw", "fans_share"):
         t.loc["all five", mean] = t.loc[WEATHERS, mean].mean()
     own = t.own_energy + t.own_demand
-    head = ["weather", "own bill ($)", "energy charges", "demand charges", "HVAC's share of the meter's kWh",
-            "HVAC's share of energy charges", "fans' draw (kW)", "fans' share of HVAC kWh",
-            "bill without HVAC × own", "bill without conditioning × own"]
+    head = [
+        "weather",
+        "own bill ($)",
+        "energy charges",
+        "demand charges",
+        "HVAC's share of the meter's kWh",
+        "HVAC's share of energy charges",
+        "fans' draw (kW)",
+        "fans' share of HVAC kWh",
+        "bill without HVAC × own",
+        "bill without conditioning × own",
+    ]
     print("| " + " | ".join(head) + " |\n|" + " --- |" * len(head))
     for w in t.index:
         m = "mean " if w == "all five" else ""

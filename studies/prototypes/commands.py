@@ -80,8 +80,17 @@ def scenarios_of(own: Path) -> dict:
     return known
 
 
-def score(study: Study, name: str, spec: Path, runs: str, kept: Path, controllers: list[str], deadline: float,
-          own: Path | None = None, need: float = 300.0) -> tuple[str, str]:
+def score(
+    study: Study,
+    name: str,
+    spec: Path,
+    runs: str,
+    kept: Path,
+    controllers: list[str],
+    deadline: float,
+    own: Path | None = None,
+    need: float = 300.0,
+) -> tuple[str, str]:
     """`evaluate` of `controllers` (`--rbc`, or planners) in `spec` on the 20 fortnights, each scenario's csv kept in
     `kept` (committed: the next session, maybe another machine, reads it) and its runs in WORK/<name>/<runs>/:
     ("done" | "chunk" | "failed", why). A scenario starts only with `need` seconds left in the chunk. `own`: a
@@ -103,8 +112,21 @@ def score(study: Study, name: str, spec: Path, runs: str, kept: Path, controller
             else:
                 (out / "scenarios.json").write_text(json.dumps(scenarios_of(own), indent=2))
         LOG.info("%s: %s on %s", name, runs, scenario)
-        args = ["--building", str(spec), *([] if own else ["--baseline"]), *controllers, "--scenario", scenario,
-                "--weathers", EVAL_WEATHERS, "--workers", str(study.workers), "--out", str(out), "--quiet"]
+        args = [
+            "--building",
+            str(spec),
+            *([] if own else ["--baseline"]),
+            *controllers,
+            "--scenario",
+            scenario,
+            "--weathers",
+            EVAL_WEATHERS,
+            "--workers",
+            str(study.workers),
+            "--out",
+            str(out),
+            "--quiet",
+        ]
         r = subprocess.run(cli("evaluate", *args), capture_output=True, text=True, cwd=study.folder(name))
         if r.returncode:
             LOG.warning("%s: %s failed on %s: %s", name, runs, scenario, failure(r))

@@ -126,8 +126,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=Study.steps)
     p.add_argument("--seeds", default="0", help="comma-separated")
     p.add_argument("--minutes", type=float, default=110.0, help="the chunk: stop (checkpointed) after this long")
-    p.add_argument("--recipe", choices=sorted(RECIPES) + sorted(PLAYED), default="banded",
-                   help="the recipe: trained (RECIPES), or a trained one's planners played otherwise (PLAYED)")
+    p.add_argument(
+        "--recipe",
+        choices=sorted(RECIPES) + sorted(PLAYED),
+        default="banded",
+        help="the recipe: trained (RECIPES), or a trained one's planners played otherwise (PLAYED)",
+    )
     a = p.parse_args(argv)
     trained, played = (PLAYED[a.recipe][0], a.recipe) if a.recipe in PLAYED else (a.recipe, "")
     results = REPO / "results" / "prototypes"

@@ -13,8 +13,11 @@ from study import SCENARIOS, Study, finished, models, read_status, results_folde
 
 def ratios(folder: Path) -> dict | None:
     """The planner's figures over the four scenarios and five weathers, each as a ratio to the building's own."""
-    frames = [pd.read_csv(folder / f"{s}.csv").copy().assign(scenario=s)  # copy: one block, not one per column
-              for s in SCENARIOS if (folder / f"{s}.csv").is_file()]
+    frames = [
+        pd.read_csv(folder / f"{s}.csv").copy().assign(scenario=s)  # copy: one block, not one per column
+        for s in SCENARIOS
+        if (folder / f"{s}.csv").is_file()
+    ]
     if len(frames) < len(SCENARIOS):
         return None
     df = pd.concat(frames)
@@ -31,8 +34,12 @@ def ratios(folder: Path) -> dict | None:
         figures[f"{column}_own"] = base
         figures[f"{column}_learned"] = per_run.mean()
         if len(per_run) > 1:  # several seeds: their range beside the mean (one seed is an anecdote)
-            figures |= {f"{column}_lo": ratio.min(), f"{column}_hi": ratio.max(),
-                        f"{column}_learned_lo": per_run.min(), f"{column}_learned_hi": per_run.max()}
+            figures |= {
+                f"{column}_lo": ratio.min(),
+                f"{column}_hi": ratio.max(),
+                f"{column}_learned_lo": per_run.min(),
+                f"{column}_learned_hi": per_run.max(),
+            }
     figures["in_band_pct"] = learned.in_band_pct.mean()
     figures["in_band_pct_own"] = own.in_band_pct.mean()
     return figures
@@ -78,8 +85,9 @@ def markdown(df: pd.DataFrame, study: Study) -> str:
             in_band = f"{r.in_band_pct_own:.2f} % → {r.in_band_pct:.2f} %"
         stage = r.stage + (f": {r.reason}" if r.reason else "")
         figures = " | ".join(_spread(r, c) for c in ("hvac_energy_kwh", "bill", "peak_15min_kw"))
-        lines.append(f"| {r.building} | {r.actions} | {r['supply-air loops']} | {figures} | {kh} | {in_band} "
-                     f"| {stage} |")
+        lines.append(
+            f"| {r.building} | {r.actions} | {r['supply-air loops']} | {figures} | {kh} | {in_band} | {stage} |"
+        )
     done = df.dropna(subset=["hvac_energy_kwh"]) if "hvac_energy_kwh" in df else df.iloc[:0]
     if len(done):
         saves = ((done.hvac_energy_kwh < SAVES) | (done.get("bill", 1) < SAVES)).sum()
@@ -211,8 +219,11 @@ def ruled_lines(study: Study) -> list[str]:
     """A pointer to the planners trained on the reset (`--mpc own_plan=rule`), where their pilots are committed."""
     if not (study.out / "ruled" / "README.md").is_file():
         return []
-    return ["", "The planner trained on the reset as its own plan (`--mpc own_plan=rule`, `--recipe ruled`), where the",
-            "starter takes over air loops: [ruled/](ruled/README.md)."]
+    return [
+        "",
+        "The planner trained on the reset as its own plan (`--mpc own_plan=rule`, `--recipe ruled`), where the",
+        "starter takes over air loops: [ruled/](ruled/README.md).",
+    ]
 
 
 def _why_not(study: Study) -> str:

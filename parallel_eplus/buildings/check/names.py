@@ -153,8 +153,15 @@ def check_spec(
     with tempfile.TemporaryDirectory(prefix="eplus-check-") as tmp:
         request = Path(tmp, "request.json")
         request.write_text(json.dumps(_requests(spec)))
-        cmd = [sys.executable, "-m", "parallel_eplus.buildings.check.names", "--probe", str(request),
-               "--weather", str(epw)]
+        cmd = [
+            sys.executable,
+            "-m",
+            "parallel_eplus.buildings.check.names",
+            "--probe",
+            str(request),
+            "--weather",
+            str(epw),
+        ]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=CHECK_TIMEOUT_S, cwd=tmp)
         except subprocess.TimeoutExpired:  # run() kills the child before raising

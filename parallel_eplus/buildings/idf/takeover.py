@@ -189,4 +189,3 @@ def rewrite(text: str, o, keep: list[str], set_fields) -> tuple[str, str]:
     name = f"{o.fields[0]} nodes kept by parallel-eplus"
     nodelist = "  NodeList,\n" + ",\n".join(f"    {n}" for n in [name, *keep]) + ";  ! set by parallel-eplus"
     return set_fields(text, o, {index: name}), nodelist
-

@@ -132,4 +132,3 @@ def plan_ventilation(text: str, objects) -> DemandVentilation:
         notes.append(f'Controller:OutdoorAir "{name}": outdoor air on demand for {", ".join(zones)} '
                      "(Controller:MechanicalVentilation added, its fixed minimum 0)")  # fmt: skip
     return DemandVentilation(tuple(sets), tuple(added), tuple(notes))
-

@@ -1,2 +1,1 @@
-"""What energy costs: a fuel's tariff (`tariff.py`) and the month's bill with its demand charges (`bill.py`).
-"""
+"""What energy costs: a fuel's tariff (`tariff.py`) and the month's bill with its demand charges (`bill.py`)."""

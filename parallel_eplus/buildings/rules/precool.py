@@ -49,8 +49,11 @@ class PreCool:
                              "[kpis] tariff (docs/kpis.md)")  # fmt: skip
         self.window = max(timed, key=lambda d: d.price).window
         # per cooling-setpoint action: its index and the hidden sensors reading its actuators' own schedules
-        self.cooling = [(i, list(own)) for i, (a, own) in enumerate(zip(b.actions, b.own, strict=True))
-                        if a.actuators and all(own) and all(x.control_type.lower() == COOLING for x in a.actuators)]
+        self.cooling = [
+            (i, list(own))
+            for i, (a, own) in enumerate(zip(b.actions, b.own, strict=True))
+            if a.actuators and all(own) and all(x.control_type.lower() == COOLING for x in a.actuators)
+        ]
         if not self.cooling:
             raise ValueError(f"{b.spec.name}: no thermostat cooling-setpoint action with its own schedule to pre-cool")
         self.low = np.array([a.low for a in b.actions])
@@ -59,7 +62,7 @@ class PreCool:
     def offset(self, t) -> float:
         """K below the own cooling setpoint for the step starting at `t`: `depth_k` in the lead hours, falling
         linearly to 0 at the window's end, 0 on other days and hours."""
-        (start, end), = self.window.hours
+        ((start, end),) = self.window.hours
         day = (self.window.weekdays is None or t.weekday() in self.window.weekdays) and (
             self.window.months is None or t.month in self.window.months)  # fmt: skip
         hour = t.hour + t.minute / 60

@@ -105,8 +105,11 @@ def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str
             span = (min(seen[k][0] for k in group), max(seen[k][1] for k in group))
             loops = "_".join(names) if len(names) <= 2 else f"{names[0]}_and_{len(names) - 1}_more"
             name = f"supply_air_{snake(loops)}_c"
-            note = (f"all {len(group)} air loops' supply air with one own plan together" if len(group) > 1
-                    else "the one air loop's supply air on its own plan") + f"{seen_text(span)}: {', '.join(names)}"
+            note = (
+                f"all {len(group)} air loops' supply air with one own plan together"
+                if len(group) > 1
+                else "the one air loop's supply air on its own plan"
+            ) + f"{seen_text(span)}: {', '.join(names)}"
         lines += candidate(name, "System Node Setpoint", "Temperature Setpoint", [o(k) for k in group], low, high,
                            clamp(middle, low, high), "C", note)  # fmt: skip
     taken = set(supplies)
@@ -146,8 +149,11 @@ def node_candidates(t: Topology, s: Survey, o, zone_nodes: set[str]) -> list[str
 
 def _design_kg_s(s: Survey, fan: str) -> float:
     """A fan's sized maximum flow (eplusout.eio), in kg/s at sea-level air density; 0 if EnergyPlus reported none."""
-    sized = [v for (kind, name, what), v in s.sizing.items()
-             if kind.lower().startswith("fan:") and name == fan.upper() and "Maximum" in what and "m3/s" in what]
+    sized = [
+        v
+        for (kind, name, what), v in s.sizing.items()
+        if kind.lower().startswith("fan:") and name == fan.upper() and "Maximum" in what and "m3/s" in what
+    ]
     return round(AIR_DENSITY * max(sized), 2) if sized else 0.0  # fmt: skip
 
 
@@ -160,7 +166,8 @@ def fan_candidates(s: Survey, o) -> list[str]:
         seen, design = (round(v[1], 2) if v and v[1] > 0 else 0.0), _design_kg_s(s, key)
         top = max(seen, design) or 1.0
         note = f"fan {o(key)}: at most {seen} kg/s in the short run" + (
-            f", sized for {design} kg/s" if design else "; check its maximum flow in the IDF")
+            f", sized for {design} kg/s" if design else "; check its maximum flow in the IDF"
+        )
         lines += candidate(f"{snake(o(key))}_kg_s", "Fan", "Fan Air Mass Flow Rate", o(key), round(0.25 * top, 2),
                            top, top, "kg/s", note)  # fmt: skip
     pressure = s.keys("Actuator", "Fan", "Fan Pressure Rise")

@@ -184,8 +184,8 @@ def starter_spec(idf: Path, weather: Path, out: Path, s: Survey, name: str | Non
     thermostat = temps != ite and _thermostats_cover(idf, temps, obs_keys)
     lines += [
         "[reward]  # HVAC energy, comfort within each zone's own setpoints in occupied hours (the preset's)"
-        if thermostat else "[reward]  # the paper's form: a bonus near `center`, a penalty outside [lower, upper], "
-        "minus power",
+        if thermostat
+        else "[reward]  # the paper's form: a bonus near `center`, a penalty outside [lower, upper], minus power",
         f"temperatures = [{', '.join(map(_str, temps))}]",
     ]
     if ite and temps != ite:
@@ -274,8 +274,10 @@ def _ventilation(idf: Path) -> list[str]:
     if not plan.added:
         return []
     held = f"{len(plan.added)} of {len(plan.notes)} outdoor-air controllers hold their design"
-    return [f'# ventilation = "demand"  # {held}',
-            "#   minimum whenever they run; on demand, the controller's copy follows the people (docs/buildings.md)"]
+    return [
+        f'# ventilation = "demand"  # {held}',
+        "#   minimum whenever they run; on demand, the controller's copy follows the people (docs/buildings.md)",
+    ]
 
 
 def _thermostats_cover(idf: Path, temps: list[str], keys: dict[str, str]) -> bool:

@@ -54,6 +54,7 @@ def ar1_solar_error(n: int, level: str, rng: np.random.Generator) -> np.ndarray:
         e[j] = rng.laplace(p["phi"] * e[j - 1] + p["ag"], p["bg"])
     return e
 
+
 _COLUMNS = (6, 8, 13)  # EPW columns (0-based): dry bulb (C), relative humidity (%), global horizontal (Wh/m2)
 
 

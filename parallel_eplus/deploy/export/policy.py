@@ -46,8 +46,6 @@ def run_settings(model_zip: Path) -> dict:
     return json.loads(config.read_text()) if config.is_file() else {}
 
 
-
-
 def _refuse_unexportable(model_zip: Path, saved: dict) -> None:
     if float(saved.get("residual_scale", 0.0)) and saved.get("residual_space") == "builtin":
         raise ValueError(

@@ -41,8 +41,9 @@ class ServedRule:
         try:
             self.cfg, self.points = from_description(entry)
         except (KeyError, TypeError) as e:
-            raise ValueError(f"the contract's `rule` is not one this version reads ({e}): export the planner "
-                             "again") from None
+            raise ValueError(
+                f"the contract's `rule` is not one this version reads ({e}): export the planner again"
+            ) from None
         self.sensor_names = sensor_names
         self.extra = [r["name"] for r in entry["readings"]]
 

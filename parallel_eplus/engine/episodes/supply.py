@@ -180,7 +180,10 @@ def _commanded(setup: WorkerSetup) -> tuple:
     kept = [a.key for e in setup.elements for a in e.actuators
             if a.component_type.lower() == NODE_SETPOINT and a.key not in keys]  # fmt: skip
     if kept:
-        log.warning("relinquish: %s keep the model's own setpoint managers (none a SetpointManager:Scheduled whose "
-                    "schedule a released node could get back); a value commanded there is written after them and may "
-                    "not reach the managers that follow the node", ", ".join(kept))
+        log.warning(
+            "relinquish: %s keep the model's own setpoint managers (none a SetpointManager:Scheduled whose "
+            "schedule a released node could get back); a value commanded there is written after them and may "
+            "not reach the managers that follow the node",
+            ", ".join(kept),
+        )
     return taken

@@ -214,8 +214,9 @@ class MPCSettings(FromText):
         if self.guard_k is not None and self.guard_k < 0:
             raise ValueError(f"guard_k {self.guard_k}: K beyond the baseline's predicted discomfort, >= 0")
         if not 0 <= self.baseline_margin <= 1:
-            raise ValueError(f"baseline_margin {self.baseline_margin}: K inside the building's own setpoints, "
-                             "within [0, 1]")
+            raise ValueError(
+                f"baseline_margin {self.baseline_margin}: K inside the building's own setpoints, within [0, 1]"
+            )
         if self.band_lead < 0:
             raise ValueError(f"band_lead {self.band_lead}: steps before the band, >= 0")
         if self.guard_steps < 1:

@@ -265,8 +265,13 @@ class OracleActor:
         path = (2 * (physical - lo) / (hi - lo) - 1).astype(np.float32)
         if len(path) < steps:  # the run period ended first
             path = np.concatenate([path, np.repeat(path[-1:], steps - len(path), 0)])
-        return {"targets": path, "path": path, "cost": self._cost(rows), "rule": type(template).__name__,
-                "offset": None if offset is None else offset.round(4).tolist()}
+        return {
+            "targets": path,
+            "path": path,
+            "cost": self._cost(rows),
+            "rule": type(template).__name__,
+            "offset": None if offset is None else offset.round(4).tolist(),
+        }
 
     def _play(self, pool: list[np.ndarray], best: dict | None = None) -> dict:
         """Play candidate targets [H, A] each; the best of them and `best` (targets, path, cost, costs)."""

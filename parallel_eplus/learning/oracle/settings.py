@@ -20,23 +20,43 @@ class OracleSettings(FromText):
 
     horizon_h: float = setting(24.0, "hours each candidate is played ahead in a fork of the running simulation")
     interval_min: int = setting(60, "minutes between decisions; a candidate holds one target per interval")
-    candidates: int = setting(24, "candidate sequences played per decision (the warm start, the last action, "
-                              "the rule's, then coordinate moves)")
-    step: float = setting(0.2, "the first move of the targets (normalized units: 3 K of the data "
-                          "center's supply setpoint); halved after a round that finds nothing better")
-    offsets: bool = setting(False, "spend the budget left after the closed-loop candidates on offsets added to the "
-                            "first rule's actions (the building's rule, else its own schedules), each played in "
-                            "closed loop: a residual on the rule")
-    warmup_candidates: int = setting(4, "candidates per decision in a test period's warm-up before its last day "
-                                     "(its days are not scored: enough to enter the period in a sensible state)")
+    candidates: int = setting(
+        24,
+        "candidate sequences played per decision (the warm start, the last action, the rule's, then coordinate moves)",
+    )
+    step: float = setting(
+        0.2,
+        "the first move of the targets (normalized units: 3 K of the data "
+        "center's supply setpoint); halved after a round that finds nothing better",
+    )
+    offsets: bool = setting(
+        False,
+        "spend the budget left after the closed-loop candidates on offsets added to the "
+        "first rule's actions (the building's rule, else its own schedules), each played in "
+        "closed loop: a residual on the rule",
+    )
+    warmup_candidates: int = setting(
+        4,
+        "candidates per decision in a test period's warm-up before its last day "
+        "(its days are not scored: enough to enter the period in a sensible state)",
+    )
     parallel: int = setting(2, "forks played at once (the cores to use)")
     seed: int = setting(0, "the sampler's seed (each decision's own from it and the decision's time)")
-    max_increment: float = setting(0.15, "largest change of each action per control step (normalized units), as "
-                                   "the learned planner's: a jump to a new target is made up over the next steps")
-    comfort_weight: float = setting(10.0, "the comfort term's weight (the learned planner's Lagrange multiplier's "
-                                    "place; the energy term is about 1 a step)")
-    margin: float = setting(0.25, "K inside each zone's bounds (widened by the spec's tolerance, as `evaluate` "
-                            "counts in band) where the comfort term starts: the learned planner's --comfort-margin")
+    max_increment: float = setting(
+        0.15,
+        "largest change of each action per control step (normalized units), as "
+        "the learned planner's: a jump to a new target is made up over the next steps",
+    )
+    comfort_weight: float = setting(
+        10.0,
+        "the comfort term's weight (the learned planner's Lagrange multiplier's "
+        "place; the energy term is about 1 a step)",
+    )
+    margin: float = setting(
+        0.25,
+        "K inside each zone's bounds (widened by the spec's tolerance, as `evaluate` "
+        "counts in band) where the comfort term starts: the learned planner's --comfort-margin",
+    )
     terminal_weight: float = setting(0.0, "the horizon's last step's comfort term counts 1 + this many times")
 
     def __post_init__(self):

@@ -38,6 +38,7 @@ def newest_checkpoint(path: Path) -> Path:
 
 POLICY_ARRAYS = ("policy_obs", "policy_act", "policy_prev", "policy_time", "policy_weather")
 
+
 class Checkpoint:
     def __init__(self, folder: Path, keep: int = 2):
         self.folder, self.keep = folder, keep

@@ -91,33 +91,41 @@ class MPC:
         date falls back on the weekly majority (daylight-saving time and holidays blurred): said, not refused."""
         thermostat = self.comfort_times.mode == THERMOSTAT
         if self.settings.comfort_reference == "baseline" and not (thermostat and any(self.thermostat_sides)):
-            raise ValueError(f"comfort_reference=baseline: {self.building or 'the building'} has no thermostat action "
-                             "(a zone's heating or cooling setpoint) that follows a schedule its comfort bounds "
-                             "read (`band = \"thermostat\"`)")
+            raise ValueError(
+                f"comfort_reference=baseline: {self.building or 'the building'} has no thermostat action "
+                "(a zone's heating or cooling setpoint) that follows a schedule its comfort bounds "
+                'read (`band = "thermostat"`)'
+            )
         s = self.settings
         if (s.consensus or s.min_saving or s.baseline_radius is not None or s.guard_k is not None
                 or s.baseline_margin or s.band_thermostats != "free" or s.baseline_source != "building") and \
                 s.comfort_reference != "baseline":  # fmt: skip
-            raise ValueError("--mpc consensus, min_saving, baseline_radius, guard_k, baseline_margin, band_thermostats "
-                             "and baseline_source weigh the search's plan against the baseline: add "
-                             "comfort_reference=baseline")
+            raise ValueError(
+                "--mpc consensus, min_saving, baseline_radius, guard_k, baseline_margin, band_thermostats "
+                "and baseline_source weigh the search's plan against the baseline: add "
+                "comfort_reference=baseline"
+            )
         if s.baseline_source == "rule":
             try:
                 rule = load_building(self.building).controller_class()
             except ValueError as e:
                 raise ValueError(f"baseline_source=rule: {e}") from None
             if not getattr(rule, "relinquishes", False):
-                raise ValueError(f"baseline_source=rule: {rule.__name__} must release (NaN) the actions it does not "
-                                 "set, as parallel_eplus.buildings.rules.air_reset:SupplyAirReset does "
-                                 "(`relinquishes = True`)")
+                raise ValueError(
+                    f"baseline_source=rule: {rule.__name__} must release (NaN) the actions it does not "
+                    "set, as parallel_eplus.buildings.rules.air_reset:SupplyAirReset does "
+                    "(`relinquishes = True`)"
+                )
             try:
                 self.rule(0)  # made with the spec's controller_settings: a wrong one fails before any episode
             except ValueError as e:
                 raise ValueError(f"baseline_source=rule: {e}") from None
         dated = self.comfort_times.dated_applies
         if self.comfort_times.occupied_only and thermostat and not (dated >= 0).any() and self.comfort_times.seen.any():
-            log.warning("comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
-                        "they were kept); it uses the weekly majority, which blurs daylight-saving time and holidays")
+            log.warning(
+                "comfort_hours=occupied: this planner's calendar has no occupied hours by date (saved before "
+                "they were kept); it uses the weekly majority, which blurs daylight-saving time and holidays"
+            )
 
     @property
     def follows(self) -> np.ndarray:
@@ -200,8 +208,9 @@ class MPC:
         a_last = np.asarray(a_last, np.float32)
         demand = self.demand.outlook(obs, infos, self.settings.horizon) if self.demand else None
         seeds = [decision_seed(self.seed, info["time"].isoformat(), s[i]) for i, info in enumerate(infos)]
-        reference = (self.baseline_plan(infos, bounds, a_last, obs) if self.settings.comfort_reference == "baseline"
-                     else None)
+        reference = (
+            self.baseline_plan(infos, bounds, a_last, obs) if self.settings.comfort_reference == "baseline" else None
+        )
         hold = self._guard_check(s, infos) if reference is not None else None
         self.last = self.planner.plan(PlanRequest(
             s, a_last, exo, applies, bounds, self.comfort_weight, self.support, self.warm[: len(s)], seeds,
@@ -278,8 +287,16 @@ class MPC:
     def from_state(cls, state: dict, workers: int = 1, seed: int = 0) -> MPC:
         settings = MPCSettings.of_saved(state["settings"], "a planner checkpoint")
         model = Ensemble.from_state(state["ensemble"])
-        mpc = cls(state["building"], settings, state["margin_c"], state["power_weight"], workers, seed, model,
-                  state.get("objective", "energy"))  # planners saved before objectives: energy
+        mpc = cls(
+            state["building"],
+            settings,
+            state["margin_c"],
+            state["power_weight"],
+            workers,
+            seed,
+            model,
+            state.get("objective", "energy"),
+        )  # planners saved before objectives: energy
         mpc.comfort_weight = float(state["comfort_weight"])
         mpc.support = tuple(np.asarray(state[k], np.float32) for k in ("support_low", "support_high"))
         mpc.comfort_times.load(state)

@@ -26,8 +26,13 @@ def save_state(folder: Path, mpc: MPC, data: Transitions, starts: Starts) -> Non
     with io.atomic_path(folder / TRANSITIONS) as tmp, open(tmp, "wb") as f:  # a file: savez adds no suffix
         data.save(f)
     with io.atomic_path(folder / STARTS) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, obs=np.asarray(starts.obs), prev=np.asarray(starts.prev),
-                            times=np.asarray(starts.times, "datetime64[s]"), weathers=np.asarray(starts.weathers))
+        np.savez_compressed(
+            f,
+            obs=np.asarray(starts.obs),
+            prev=np.asarray(starts.prev),
+            times=np.asarray(starts.times, "datetime64[s]"),
+            weathers=np.asarray(starts.weathers),
+        )
 
 
 def record_own_controls(cfg, mpc: MPC, data: Transitions, starts: Starts, progress: bool) -> None:

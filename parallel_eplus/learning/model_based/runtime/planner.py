@@ -292,8 +292,9 @@ class Planner:
         steps = np.diff(np.concatenate([a_last[:, None], plan], axis=1), axis=1)
         increments = np.concatenate([steps[:, 1:], np.zeros((w, 1, a_n), np.float32)], axis=1)
         ms = 1000 * (time.perf_counter() - t0)
-        return Plan(plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms, own_action,
-                    own_next)
+        return Plan(
+            plan[:, 0].astype(np.float32), increments, cost[rows, best], spread[rows, best], ms, own_action, own_next
+        )
 
     def _first_step(self, s: np.ndarray, a_last: np.ndarray, action: np.ndarray, exo: np.ndarray) -> np.ndarray:
         """[W, K]: the members' mean zone temperatures at the end of one step of `action` [W, A] from `s`."""
@@ -326,8 +327,9 @@ class Planner:
         cost, worst = np.zeros((e, b) if members else b, np.float32), np.zeros(b, np.float32)
         weights = None if r.energy_weights is None else np.repeat(np.asarray(r.energy_weights, np.float32), n, axis=0)
         if demand is not None:  # [W*N, H, C]; the rise above the running peak so far, kW [W*N, C]
-            d_prices, d_running = (np.repeat(np.asarray(v, np.float32), n, axis=0) for v in (demand.prices,
-                                                                                             demand.running))
+            d_prices, d_running = (
+                np.repeat(np.asarray(v, np.float32), n, axis=0) for v in (demand.prices, demand.running)
+            )
             rise = np.zeros((b, d_prices.shape[2]), np.float32)
         for step in range(h):
             inputs[..., ns + a_n : x0] = actions[:, :, step]

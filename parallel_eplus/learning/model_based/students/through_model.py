@@ -115,9 +115,16 @@ class Rollouts:
             bounds.append(mpc.comfort_times.bounds(times))
         f32 = lambda a: th.as_tensor(np.asarray(a), dtype=th.float32)  # noqa: E731
         obs = np.stack([starts.obs[r] for r in rows])
-        return {"obs": f32(obs), "prev": f32(np.stack([starts.prev[r] for r in rows])), "exo": f32(np.stack(exo)),
-                "outdoor": f32(np.stack(outdoor)), "applies": f32(np.stack(applies)), "bounds": f32(np.stack(bounds)),
-                "clock": f32(np.array(clock, np.float32)), "weights": f32(np.stack(weights))}
+        return {
+            "obs": f32(obs),
+            "prev": f32(np.stack([starts.prev[r] for r in rows])),
+            "exo": f32(np.stack(exo)),
+            "outdoor": f32(np.stack(outdoor)),
+            "applies": f32(np.stack(applies)),
+            "bounds": f32(np.stack(bounds)),
+            "clock": f32(np.array(clock, np.float32)),
+            "weights": f32(np.stack(weights)),
+        }
 
     def act(self, obs: th.Tensor) -> th.Tensor:
         """The policy's mean action on raw observations [..., n_obs] (SB3's extractor flattens all but the first
