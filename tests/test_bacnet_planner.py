@@ -3,6 +3,7 @@ simulated device."""
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 from pathlib import Path
 
@@ -79,7 +80,8 @@ def test_a_planner_supervises_a_day_over_bacnet_as_it_answers_in_process(loop, t
 
     steps = PlannerSteps(planner, Contract.read(planner))  # a reading it cannot take: the building's own controls
     assert steps.answer({"outdoor_temp_c": 12.0}, {}, "2017-07-01T14:00:00", 5) is None
-    assert list(steps.last.values()) == pytest.approx(steps.runtime.own[6, 14].tolist())  # then in force: theirs
+    then = steps.runtime.own(dt.datetime(2017, 7, 1, 14))  # what the own controls set at that date and time
+    assert list(steps.last.values()) == pytest.approx(then.tolist())  # then in force: theirs
     contract = json.loads((planner / "controller.json").read_text())
     contract["forecast"]["missing"] = "refuse"
     (planner / "controller.json").write_text(json.dumps(contract))

@@ -19,6 +19,7 @@ from parallel_eplus.buildings.building import load_building, weather_path
 from parallel_eplus.buildings.weather.forecast import WEATHER, PerfectForecast
 from parallel_eplus.deploy.export.policy import export
 from parallel_eplus.deploy.serve.contract import Contract
+from parallel_eplus.deploy.serve.own_setpoints import OwnSetpoints
 from parallel_eplus.evaluation.controllers import http_controller
 from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.model_based.control.mpc import MPC
@@ -95,8 +96,8 @@ def test_export_writes_the_planner_and_checks_it_served_against_in_process(expor
     assert c["forecast"]["sensor"] == "outdoor_temp_c" and c["forecast"]["missing"] == "refuse"
     assert c["fallback"]["max_spread_k"] >= 0.5 and c["fallback"]["max_input_z"] == 6.0
     assert [o["initial"] for o in c["outputs"]] == [a.initial for a in load_building("datacenter-2zone").actions]
-    own = np.load(exported / "planner.npz")["own_controls"]
-    assert own.shape == (12, 24, 4) and np.all((own[..., :2] >= 10) & (own[..., :2] <= 40))
+    own = np.load(exported / "planner.npz")["own_controls"]  # the own controls' setpoints step by step, as runs
+    assert own.shape[1] == 4 and np.all((own[..., :2] >= 10) & (own[..., :2] <= 40))
 
 
 @pytest.mark.slow
@@ -157,7 +158,7 @@ def test_a_reading_far_from_the_data_falls_back_to_the_buildings_own_setpoints(c
     answer = r.json()
     assert r.status_code == 200 and answer["fallback"] is True and answer["plan"] is None
     assert "west_temp_c is" in answer["reason"] and "standard deviations" in answer["reason"]
-    own = np.load(exported / "planner.npz")["own_controls"][0, 10]  # January, 10:00
+    own = OwnSetpoints(dict(np.load(exported / "planner.npz")), 15)(dt.datetime(2021, 1, 5, 10))  # as recorded then
     assert [v["value"] for v in answer["setpoints"].values()] == pytest.approx(own.tolist())
     assert "fallback at 2021-01-05T10:00:00: west_temp_c" in caplog.text
 

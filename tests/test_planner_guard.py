@@ -118,7 +118,11 @@ def test_the_served_planner_carries_the_guard_in_its_answers_and_acts_as_the_in_
             dict(
                 data,
                 fallback=dict(
-                    data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None
+                    data["fallback"],
+                    max_spread_k=float("inf"),
+                    max_input_z=float("inf"),
+                    max_forecast_gap_c=None,
+                    max_step_spread_k=None,
                 ),
             )
         ),
@@ -202,7 +206,11 @@ def test_own_margin_holds_each_thermostat_that_far_inside_its_own_setpoint_in_pr
             dict(
                 data,
                 fallback=dict(
-                    data["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"), max_forecast_gap_c=None
+                    data["fallback"],
+                    max_spread_k=float("inf"),
+                    max_input_z=float("inf"),
+                    max_forecast_gap_c=None,
+                    max_step_spread_k=None,
                 ),
             )
         ),

@@ -20,7 +20,8 @@ def add_commands(sub) -> None:
     ex.add_argument("--fallback-input-z", type=float, default=6.0, metavar="Z",
                     help="planner: fall back when a model input is more than Z standard deviations from its data")
     ex.add_argument("--record-days", type=int, metavar="N",
-                    help="planner: days of its own controls recorded for the fallback (default: the run's, up to 365)")
+                    help="planner: days of its own controls recorded for the fallback (default: 365, whatever the "
+                    "run trained on)")  # fmt: skip
     ex.add_argument("--workers", type=int, default=2, help="planner: EnergyPlus runs at once (own controls)")
     ex.add_argument("--planner-options", metavar="NAME=VALUE,...",
                     help="planner: settings overriding its saved ones, as `evaluate --planner` "

@@ -76,9 +76,9 @@ class PlannerSteps:
 
     def _given_back(self, time: str) -> None:
         """The step goes to the building's own controls (the supervisor relinquishes): what is in force then is
-        theirs, which the next request's last setpoints take as their typical values at this month and hour (those
-        recorded at export); the search starts afresh."""
+        theirs, which the next request's last setpoints take as what they set at this date and time (recorded at
+        export); the search starts afresh."""
         when = dt.datetime.fromisoformat(time)
-        own = np.clip(self.runtime.own[when.month - 1, when.hour], self.runtime.low, self.runtime.high)
+        own = np.clip(self.runtime.own(when), self.runtime.low, self.runtime.high)
         self.last, self.plan = dict(zip(self.outputs, map(float, own), strict=True)), None
         return None

@@ -1,11 +1,14 @@
 """`parallel-eplus export runs/<mpc-run>`: a model-based planner as files a server runs without torch or EnergyPlus.
 
 Written: ensemble.onnx (every member's one-step prediction for a batch of candidates, ensemble_graph.py),
-planner.npz (the action support, the comfort calendar, the normalizers, and the building's own setpoints by month
-and hour for the fallback) and controller.json (the contract: readings, setpoints, the last setpoints and the
-forecast block a request carries, the planner's settings, the fallback's thresholds, provenance). The own setpoints
-come from a run of the building's own controls on the planner's training weathers, made here (a year takes a
-minute or two). Before anything is final, the served planner (planner_runtime.py) answers sampled decisions of
+planner.npz (the action support, the comfort calendar, the normalizers, and the building's own setpoints at every
+step of a year for the fallback, own_setpoints.py) and controller.json (the contract: readings, setpoints, the last
+setpoints and the forecast block a request carries, a first request the planner answers (`example`), the planner's
+settings, the fallback's thresholds, provenance). The own setpoints come from a year of the building's own controls
+on the planner's training weathers, made here (a minute or two), whatever the run trained on: the schedules are
+the building's, not the run's. On that record the members' disagreement about the coming step is calibrated
+(`max_step_spread_k`: twice the largest on it), and the contract's first setpoints (`outputs[].initial`) are ones
+the model has seen. Before anything is final, the served planner (planner_runtime.py) answers sampled decisions of
 that run and must give exactly the in-process planner's setpoints.
 """
 
@@ -28,6 +31,7 @@ from parallel_eplus.buildings.resources import saved_building
 from parallel_eplus.buildings.scaling import to_unit
 from parallel_eplus.buildings.weather.forecast import WEATHER, WEATHER_UNITS
 from parallel_eplus.deploy.serve.contract import CONTRACT_FILE, Contract, output_entries, sensor_entries
+from parallel_eplus.deploy.serve.own_setpoints import own_table
 from parallel_eplus.deploy.serve.planner_runtime import ENSEMBLE_FILE, PLANNER_ARRAYS, PlannerRuntime, calendar_arrays
 from parallel_eplus.deploy.serve.served_rule import rule_entry
 from parallel_eplus.learning.model_based.runtime.ensemble_graph import INPUT, OUTPUT
@@ -40,26 +44,22 @@ PLANNER_FORMAT = 2  # a planner's contract: servers that read only policies (for
 SAMPLED_DECISIONS = 48
 PLANNER_SETTINGS = tuple(f.name for f in fields(PlannerSettings))  # what a served plan needs
 PARITY_TOLERANCE = 1e-5  # physical units, as a policy's export (float32 actions scaled in float64)
+CALIBRATION_ROWS = 2000  # steps of the own record on which the members' disagreement is measured
+STEP_SPREAD_FACTOR = 2.0  # max_step_spread_k: this times the largest disagreement on the own record
+MIN_STEP_SPREAD_K = 0.05
+INITIAL_Z = 2.0  # an output's spec `initial` further than this from the data's mean is replaced (outputs[].initial)
 
 
-def own_controls(building: str | None, weathers: list[str], days: int, workers: int, progress: bool = True):
-    """([12, 24, actions], the run): the building's own setpoints (physical) by month and hour at the step's start,
-    the mean over a run of its own controls on `weathers`; months the run did not reach take the nearest month's."""
+def own_controls(building: str | None, weathers: list[str], days: int, workers: int, step_minutes: float,
+                 progress: bool = True):  # fmt: skip
+    """(planner.npz's own-setpoint arrays, the run): what the building's own controls set (physical) at each step of
+    a run of `days` on `weathers`; the table from the first weather's (own_setpoints.py)."""
     from parallel_eplus.learning.imitation import record_baseline
 
     with tempfile.TemporaryDirectory(prefix="parallel-eplus-own-") as folder:
         demos = record_baseline(building, weathers, days, workers, Path(folder), progress=progress)
-    n = demos.physical.shape[1]
-    total, count = np.zeros((12, 24, n)), np.zeros((12, 24, 1))
-    for t, a in zip(demos.times, demos.physical, strict=True):
-        total[t.month - 1, t.hour] += a
-        count[t.month - 1, t.hour] += 1
-    hours = total.sum(0) / np.maximum(count.sum(0), 1)  # by hour over every month seen
-    table = np.where(count > 0, total / np.maximum(count, 1), hours[None])
-    seen = np.flatnonzero(count[:, :, 0].sum(1) > 0)
-    for m in range(12):  # a short run: the nearest month seen
-        if m not in seen:
-            table[m] = table[seen[np.argmin(np.abs(seen - m))]]
+    first = [r for r, w in enumerate(demos.weathers) if w == demos.weathers[0]]
+    table = own_table([demos.times[r] for r in first], demos.physical[first], step_minutes)
     return table, demos
 
 
@@ -72,7 +72,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
                    record_days: int | None = None, options: str | None = None, progress: bool = True,
                    ) -> Path:  # fmt: skip
     """Write the planner at `source` (planner.pt) into `out_dir`; returns the contract's path. `record_days`: how
-    long the own controls are recorded for the fallback's setpoints (default: the run's episodes, up to a year).
+    long the own controls are recorded for the fallback's setpoints (default: a year, whatever the run's episodes).
     `options`: settings overriding the planner's own, as `evaluate --planner` gives them (not its forecast: the
     served planner reads the one each request carries). `progress`: a progress bar while recording."""
     from parallel_eplus.learning.model_based.control.mpc import MPC
@@ -92,23 +92,23 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         rule = rule_entry(mpc.rule(0), [s.name for s in building.observed])
     spec = building.spec
     weathers = saved.get("weathers") or list(spec.weathers)[:1] or ["CA"]
-    days = record_days or min(int(saved.get("run_days", 365)), 365)
+    days = record_days or 365
     log.info("recording the building's own controls on %s (%d days) for the fallback's setpoints", weathers, days)
-    own, demos = own_controls(mpc.building, weathers, days, workers, progress)
+    own, demos = own_controls(mpc.building, weathers, days, workers, mpc.step_minutes, progress)
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     arrays = mpc.model.arrays()
     io.write_bytes(out_dir / ENSEMBLE_FILE, build_graph(arrays))
     with io.atomic_path(out_dir / PLANNER_ARRAYS) as tmp, open(tmp, "wb") as f:
-        np.savez(f, support_low=mpc.support[0], support_high=mpc.support[1], own_controls=own.astype(np.float64),
-                 x_mean=arrays.x_mean, x_std=arrays.x_std, **calendar_arrays(mpc.comfort_times))  # fmt: skip
+        np.savez(f, support_low=mpc.support[0], support_high=mpc.support[1], **own, x_mean=arrays.x_mean,
+                 x_std=arrays.x_std, **calendar_arrays(mpc.comfort_times))  # fmt: skip
 
     outdoor = next((o.name for o in building.observed if o.variable.lower() == "site outdoor air drybulb temperature"),
                    None)  # fmt: skip
     inputs, outputs = sensor_entries(building), output_entries(building)
-    for entry, action in zip(outputs, building.actions, strict=True):  # what a first request's last setpoints are
-        entry["initial"] = action.initial
+    for entry, value in zip(outputs, _initial(building.actions, demos, arrays, mpc.layout), strict=True):
+        entry["initial"] = value  # what a first request's last setpoints are
     settings = asdict(mpc.settings)
     contract = {
         "format": PLANNER_FORMAT,
@@ -153,8 +153,9 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         },  # fmt: skip
         "fallback": {"max_input_z": max_input_z, "max_forecast_gap_c": max_forecast_gap_c if outdoor else None,
                      "max_spread_k": max_spread_k, "exogenous": mpc.exogenous_names,
-                     "own_controls": f"{PLANNER_ARRAYS}: own_controls [month, hour, output], the building's own "
-                     f"setpoints recorded on {', '.join(weathers)} over {days} days"},  # fmt: skip
+                     "own_controls": f"{PLANNER_ARRAYS}: own_controls [runs, output], own_controls_at [runs], "
+                     f"own_controls_weekday [366]: the building's own setpoints at each step of {days} days from "
+                     f"January 1 on {weathers[0]}, read at the nearest date with the request's weekday"},  # fmt: skip
         "control_step_s": int(60 * mpc.step_minutes),
         "building": {"name": spec.name, "spec": spec.path.name, "sha256": _sha256(spec.path)},
         "policy": {"algorithm": "mpc", "model": source.name, "sha256": _sha256(source), "run":
@@ -162,12 +163,17 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
                    "weathers": saved.get("weathers"), "timesteps": saved.get("timesteps"), "building": building_name},
         "exported": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }  # fmt: skip
-    spreads, diff, peaked = _check(out_dir, contract, mpc, demos)
+    spreads, diff, peaked, held = _check(out_dir, contract, mpc, demos)
     if contract["fallback"]["max_spread_k"] is None:  # 3 x the largest spread on the building's own days, >= 0.5 K
         contract["fallback"]["max_spread_k"] = round(max(0.5, 3 * float(np.max(spreads))), 3)
+    # what the model has seen, its members agree on: twice their largest disagreement on the own record trips
+    contract["fallback"]["max_step_spread_k"] = round(max(MIN_STEP_SPREAD_K, STEP_SPREAD_FACTOR * float(held.max())), 3)
     contract["export_check"] = {"decisions": len(spreads), "max_abs_diff": diff, "spread_k_median":
                                 round(float(np.median(spreads)), 4), "spread_k_max": round(float(np.max(spreads)), 4),
-                                "decisions_with_demand_peaks": peaked}
+                                "decisions_with_demand_peaks": peaked, "step_spread_rows": len(held),
+                                "step_spread_k_median": round(float(np.median(held)), 4),
+                                "step_spread_k_max": round(float(held.max()), 4)}
+    contract["example"] = _example(out_dir, contract, mpc, demos)
     path = out_dir / CONTRACT_FILE
     io.write_text(path, json.dumps(contract, indent=2) + "\n")
     log.info("exported the planner %s -> %s (%d sampled decisions equal in process; fallback beyond %.2f K spread)",
@@ -191,33 +197,85 @@ def _tariff_values(weights, spec, out_dir: Path) -> dict[str, object]:
     return values
 
 
-def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float, int]:
+def _body(contract: dict, mpc, demos, r: int) -> tuple[dict, dict]:
+    """Step `r` of the own-controls run as a request (its readings, the last step's setpoints, the weather file's
+    forecast), and as the in-process planner's info."""
+    names = [o["name"] for o in contract["outputs"]]
+    sensors = [i["name"] for i in contract["inputs"]]
+    t, weather, obs = demos.times[r], demos.weathers[r], demos.observations[r]
+    info = {"time": t, "weather": weather}
+    if contract["rule"]:  # what the rule reads, in process (info) as in the request (sensors, rule_readings)
+        info |= dict(zip(sensors, map(float, obs[: len(sensors)]), strict=True))
+        info |= {upper: float(demos.bounds[r][k][1]) for k, (_, upper) in enumerate(mpc.rule(0).points.zones)}
+    times = step_times(t, mpc.step_minutes, mpc.settings.horizon)
+    truth = mpc.forecasts(weather).file.truth(times)
+    body = {
+        "time": t.isoformat(), "sensors": dict(zip(sensors, map(float, obs[: len(sensors)]), strict=True)),
+        "last_setpoints": dict(zip(names, map(float, demos.physical[max(r - 1, 0)]), strict=True)),
+        "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)},
+    }  # fmt: skip
+    if contract["rule"]:
+        body["rule_readings"] = {e["name"]: info[e["name"]] for e in contract["rule"]["readings"]}
+    return body, info
+
+
+def _initial(actions, demos, arrays, layout) -> list[float]:
+    """Each output's first setpoint (`outputs[].initial`): the spec's `initial` where the data the model learned
+    from holds it (within INITIAL_Z standard deviations of its mean as a last and as a next action), else the value
+    the building's own controls set most often that is nearest the data's mean (a setback group's 21 °C at 29
+    standard deviations from a model that saw 15.6 °C: issue 87)."""
+    ns, a_n, out = layout.n_state, len(actions), []
+    for i, action in enumerate(actions):
+        mean = np.array([arrays.x_mean[ns + i], arrays.x_mean[ns + a_n + i]])
+        std = np.array([arrays.x_std[ns + i], arrays.x_std[ns + a_n + i]])
+
+        def z(value, action=action, mean=mean, std=std) -> float:
+            return float(np.max(np.abs(to_unit(np.float64(value), action.low, action.high) - mean) / std))
+
+        if z(action.initial) <= INITIAL_Z:
+            out.append(action.initial)
+            continue
+        values, counts = np.unique(np.round(demos.physical[:, i], 4), return_counts=True)
+        inside = [v for v in values if z(v) <= INITIAL_Z] or [min(values, key=z)]
+        out.append(float(max(inside, key=lambda v: counts[np.searchsorted(values, v)])))
+        log.info("%s: first setpoint %g (the spec's %g is %.1f standard deviations from the data)", action.name,
+                 out[-1], action.initial, z(action.initial))  # fmt: skip
+    return out
+
+
+def _example(out_dir: Path, contract: dict, mpc, demos) -> dict:
+    """The contract's documented first request (`example`): a step of the own-controls run with the outputs'
+    `initial` as its last setpoints, one the planner answers without falling back (checked here with the final
+    thresholds); the step's own setpoints as last ones where no step takes the `initial` ones."""
+    runtime = PlannerRuntime(out_dir, Contract(contract))
+    initial = {o["name"]: o["initial"] for o in contract["outputs"]}
+    rows = np.linspace(1, len(demos) - 1, SAMPLED_DECISIONS).astype(int)
+    for last in (initial, None):
+        for r in rows:
+            body = _body(contract, mpc, demos, int(r))[0]
+            if last is not None:
+                body["last_setpoints"] = dict(last)
+            if not runtime.act(body)["fallback"]:
+                return body
+    log.warning("every sampled step of the own controls' record falls back: the contract's example does too")
+    return body
+
+
+def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float, int, np.ndarray]:
     """Served vs in-process on decisions sampled from the own-controls run: (each decision's spread, the largest
-    setpoint difference, physical units, how many carried demand peaks). Any difference is refused. Under demand
-    charges each decision carries the month's running peaks from the readings of the day before it, in process and
-    in its request."""
+    setpoint difference, physical units, how many carried demand peaks, and the members' disagreement about the
+    coming step on up to CALIBRATION_ROWS steps of the run). Any difference is refused. Under demand charges each
+    decision carries the month's running peaks from the readings of the day before it, in process and in its
+    request."""
     draft = dict(contract, fallback=dict(contract["fallback"], max_spread_k=float("inf"), max_input_z=float("inf"),
-                                         max_forecast_gap_c=None))  # fmt: skip
+                                         max_forecast_gap_c=None, max_step_spread_k=None))  # fmt: skip
     runtime = PlannerRuntime(out_dir, Contract(draft))
     rows = np.linspace(1, len(demos) - 1, SAMPLED_DECISIONS).astype(int)
     names = [o["name"] for o in contract["outputs"]]
-    sensors = [i["name"] for i in contract["inputs"]]
     spreads, diff, peaked = [], 0.0, 0
     for r in rows:
+        body, info = _body(contract, mpc, demos, r)
         t, weather, obs = demos.times[r], demos.weathers[r], demos.observations[r]
-        info = {"time": t, "weather": weather}
-        if contract["rule"]:  # what the rule reads, in process (info) as in the request (sensors, rule_readings)
-            info |= dict(zip(sensors, map(float, obs[: len(sensors)]), strict=True))
-            info |= {upper: float(demos.bounds[r][k][1]) for k, (_, upper) in enumerate(mpc.rule(0).points.zones)}
-        times = step_times(t, mpc.step_minutes, mpc.settings.horizon)
-        truth = mpc.forecasts(weather).file.truth(times)
-        body = {
-            "time": t.isoformat(), "sensors": dict(zip(sensors, map(float, obs[: len(sensors)]), strict=True)),
-            "last_setpoints": dict(zip(names, map(float, demos.physical[r - 1]), strict=True)),
-            "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)},
-        }  # fmt: skip
-        if contract["rule"]:
-            body["rule_readings"] = {e["name"]: info[e["name"]] for e in contract["rule"]["readings"]}
         mpc.reset(0)
         if mpc.demand:  # the month's peaks so far, kept in process and sent as a client keeps them
             day = int(round(24 * 60 / mpc.step_minutes))
@@ -234,4 +292,6 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
         spreads.append(answer["spread_k"])
     if diff > PARITY_TOLERANCE:
         raise ValueError(f"the served planner's setpoints differ from the in-process planner's by {diff:g}")
-    return np.array(spreads), diff, peaked
+    calibration = np.unique(np.linspace(1, len(demos) - 1, min(CALIBRATION_ROWS, len(demos) - 1)).astype(int))
+    held = runtime.held_spreads([_body(contract, mpc, demos, int(r))[0] for r in calibration])
+    return np.array(spreads), diff, peaked, held

@@ -7,10 +7,12 @@ plan, `plan`, which the answer returns for the next request to warm-start from),
 request, so the same request gets the same answer, and a served episode equals the in-process one.
 
 It knows when not to be trusted (`fallback`): when a reading lies far outside the data the model learned from,
-when the forecast contradicts the outdoor sensor, or when the ensemble's members disagree about a zone's
-temperature along the plan by more than the contract's threshold. The answer then carries `"fallback": true`, the
-reason, and the setpoints the building's own controls used at that month and hour (recorded at export); a
-building-management system should hand control back to its own loops (docs/deploy.md).
+when the forecast contradicts the outdoor sensor, when the ensemble's members disagree about a zone's temperature
+at the end of the coming step (the setpoints held) by more than the contract's threshold (`max_step_spread_k`,
+calibrated at export on the building's own record: what the model has not seen, its members disagree on), or
+about a zone's temperature along the plan by more than `max_spread_k`. The answer then carries `"fallback": true`,
+the reason, and the setpoints the building's own controls set at that date and time (recorded at export over a
+year, own_setpoints.py); a building-management system should hand control back to its own loops (docs/deploy.md).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 from parallel_eplus.buildings.scaling import from_unit, to_unit
 from parallel_eplus.buildings.weather.forecast import WEATHER
 from parallel_eplus.deploy.serve.contract import Contract, InputError
+from parallel_eplus.deploy.serve.own_setpoints import OwnSetpoints
 from parallel_eplus.learning.model_based.runtime.calendar import Calendar, own_reference
 from parallel_eplus.learning.model_based.runtime.demand import DemandCharges, DemandOutlook
 from parallel_eplus.learning.model_based.runtime.energy_weights import EnergyWeights
@@ -83,7 +86,7 @@ class PlannerRuntime:
             from parallel_eplus.deploy.serve.served_rule import ServedRule
 
             self.rule = ServedRule(contract.data["rule"], [s["name"] for s in contract.sensors])
-        self.own = arrays["own_controls"]  # [12, 24, A] physical: the building's own setpoints by month and hour
+        self.own = OwnSetpoints(arrays, self.step_minutes)  # the building's own setpoints at a date and time
         self.x_mean, self.x_std = arrays["x_mean"], arrays["x_std"]
         self.low = np.array([o["low"] for o in contract.outputs])
         self.high = np.array([o["high"] for o in contract.outputs])
@@ -92,19 +95,32 @@ class PlannerRuntime:
         self.outdoor = self.forecast.get("sensor")  # the observed outdoor dry bulb, where the building has one
 
     # -- one request ----------------------------------------------------------------------------
-    def act(self, body: dict) -> dict:
+    def _read(self, body: dict):
+        """A request's readings, time, last setpoints (normalized), step times, forecast [H, 3] and its source, the
+        model's state [1, S] and exogenous inputs [1, H, X]; refuses what is wrong, naming the field."""
         obs = self.contract.observation(body)[0]  # refuses bad readings and time, naming the field
         when = Contract._time(body.get("time"))
         last = self._last_setpoints(body.get("last_setpoints"))
         a_last = to_unit(last, self.low, self.high).astype(np.float32)
         times = step_times(when, self.step_minutes, self.settings.horizon)
         weather, source = self._forecast(body.get("forecast"), body.get("sensors", {}))
-        warm = self._warm(body.get("plan"))
         s = self.layout.state(obs[None, : len(self.layout.sensors)])
         exo = exogenous(weather, times, self.schedule)
         if self.settings.occupancy_input:  # whether the building is occupied then, as the calendar recorded it
             exo = with_occupancy(exo, self.calendar.occupied(times))
-        exo = exo[None]
+        return obs, when, a_last, times, weather, source, s, exo[None]
+
+    def held_spreads(self, bodies: list[dict]) -> np.ndarray:
+        """[N]: `step_spread` of each request, without planning (export calibrates `max_step_spread_k` on them)."""
+        rows = []
+        for body in bodies:
+            _, _, a_last, _, _, _, s, exo = self._read(body)
+            rows.append(self.held_row(s[0], a_last, exo[0]))
+        return self.step_spread(np.stack(rows))
+
+    def act(self, body: dict) -> dict:
+        obs, when, a_last, times, weather, source, s, exo = self._read(body)
+        warm = self._warm(body.get("plan"))
         seed = decision_seed(self.seed, when.isoformat(), s[0])
         weights = None if self.energy.objective == "energy" else self.energy.at([when, *times[:-1]])[None]
         bounds = self.calendar.bounds(times)
@@ -130,6 +146,7 @@ class PlannerRuntime:
             demand = DemandOutlook(prices[None], running[None], self.demand.part, self.demand.per_dollar)
         guard = self._guard(body.get("guard"), s, when) if reference is not None else None
         applies = self.calendar(times)[None]
+        step_spread = float(self.step_spread(self.held_row(s[0], a_last, exo[0])[None])[0])
         plan = self.planner.plan(PlanRequest(
             s, a_last[None], exo, applies, bounds[None], self.comfort_weight, self.support, warm[None], [seed],
             energy_weights=weights, reference=reference, demand=demand, follows=follows,
@@ -146,10 +163,12 @@ class PlannerRuntime:
         if guard is not None:  # its state, for the next request to send back (`guard`)
             guard[0].record(plan, bounds[None, 0], applies[:, 0])
             answer["guard"] = guard[0].states[0].as_dict()
-        reason = self._distrust(s[0], a_last, exo[0], weather, body.get("sensors", {}), float(plan.spread_k[0]))
+        answer["step_spread_k"] = round(step_spread, 4)
+        reason = self._distrust(s[0], a_last, exo[0], weather, body.get("sensors", {}), float(plan.spread_k[0]),
+                                step_spread)  # fmt: skip
         if reason:
             log.warning("fallback at %s: %s", body.get("time"), reason)
-            own = self.own[when.month - 1, when.hour].copy()
+            own = self.own(when)
             if ruled is not None:  # where the rule sets a setpoint, the rule's (the own plan the planner rode)
                 sets = np.isfinite(ruled)
                 own[sets] = from_unit(ruled, self.low, self.high)[sets]
@@ -234,10 +253,20 @@ class PlannerRuntime:
             raise InputError("plan", f"must be the last answer's plan: {h} lists of {a} numbers")
         return warm.astype(np.float32)  # the search clips every increment it tries
 
-    def _distrust(self, s, a_last, exo, weather, sensors: dict, spread_k: float) -> str | None:
+    def held_row(self, s: np.ndarray, a_last: np.ndarray, exo: np.ndarray) -> np.ndarray:
+        """The model's input for the coming step with the last setpoints held: what the fallback's checks read."""
+        return np.concatenate([s, a_last, a_last, exo[0]]).astype(np.float32)
+
+    def step_spread(self, rows: np.ndarray) -> np.ndarray:
+        """[N]: the members' largest disagreement (standard deviation, K) about a zone's temperature at the end of
+        the coming step, from held rows [N, inputs] (`held_row`): the model's own measure of what it has not seen."""
+        out = self.planner.forward(np.broadcast_to(rows, (self.planner.members, *rows.shape)))
+        return out[:, :, : self.planner.n_temps].std(0, ddof=1).max(-1)
+
+    def _distrust(self, s, a_last, exo, weather, sensors: dict, spread_k: float, step_spread: float) -> str | None:
         """Why this answer should not be trusted, or None."""
         f = self.fallback
-        row = np.concatenate([s, a_last, a_last, exo[0]])
+        row = self.held_row(s, a_last, exo)
         z = np.abs(row - self.x_mean) / self.x_std
         worst = int(np.argmax(z))
         if z[worst] > f["max_input_z"]:
@@ -257,6 +286,11 @@ class PlannerRuntime:
             k = int(np.argmax(jumps))
             return (f"forecast.outdoor_drybulb_c jumps {jumps[k]:.1f} K from its value {k} ({weather[k, 0]:.1f} °C) "
                     f"to its value {k + 1} ({weather[k + 1, 0]:.1f} °C) in one step (threshold {limit} K)")  # fmt: skip
+        limit = f.get("max_step_spread_k")  # contracts exported before 2026-12-07 have none
+        if limit is not None and step_spread > limit:
+            return (f"the model's members disagree by {step_spread:.2f} K about a zone temperature at the end of the "
+                    f"coming step with the last setpoints held: the model has not seen this state (threshold "
+                    f"{limit} K, calibrated on the building's own record)")  # fmt: skip
         if spread_k > f["max_spread_k"]:
             return (f"the model's members disagree by {spread_k:.2f} K about a zone temperature along the plan "
                     f"(threshold {f['max_spread_k']} K)")  # fmt: skip
