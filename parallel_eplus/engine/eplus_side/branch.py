@@ -58,6 +58,21 @@ class BranchingBridge(Bridge):
         self.script: np.ndarray | None = None  # in a branch: its action rows
         self.rows: list[list[float]] = []
 
+    def _guard(self, state, fn) -> None:
+        """In a branch, a failure ends the process at once: EnergyPlus stopped would write its end-of-run files by
+        path, into the episode's own directory."""
+        if self.script is None and not self.followed:
+            super()._guard(state, fn)
+            return
+        try:
+            fn(state)
+        except BaseException:  # noqa: BLE001 - the env sees the exit code (a followed branch: its pipe closing)
+            traceback.print_exc()
+            with contextlib.suppress(Exception):
+                sys.stdout.flush()
+                sys.stderr.flush()
+            os._exit(1)
+
     # -- the parent: requests served while an action is awaited ------------------------------------
     def _take_action(self) -> None:
         if self.script is None and not self.followed:
