@@ -57,6 +57,7 @@ def test_a_branch_is_the_episode_and_a_failed_one_leaves_nothing(tmp_path):
         finally:
             branches.close()
         assert played[1] is None and branches.failed == 1
+        assert not (sim.episode_dir / "eplusout.end").exists()  # a failed branch wrote no end of run into the episode
         assert not scratch.exists() and not _children(sim.proc.pid)
         main = []
         for _ in range(16):
