@@ -61,6 +61,7 @@ class BranchingBridge(Bridge):
     def _guard(self, state, fn) -> None:
         """In a branch, a failure ends the process at once: EnergyPlus stopped would write its end-of-run files by
         path, into the episode's own directory."""
+        self._state = state  # a branch registers its message callback on it (`_become_branch`)
         if self.script is None and not self.followed:
             super()._guard(state, fn)
             return
@@ -144,6 +145,10 @@ class BranchingBridge(Bridge):
         os.close(log)
         _own_descriptions(here)
         os.chdir(here)
+        # EnergyPlus's fatal error would end its run and write its end files by path, into the episode's directory:
+        # the branch exits at its first word of it instead
+        self._on_message = lambda message: os._exit(1) if message.lstrip().startswith(b"**FATAL") else None
+        self.api.runtime.callback_message(self._state, self._on_message)
         self.obs_fd = self.act_fd = -1
         self.dir = here
         if "obs" in request:  # followed: the env answers each observation, as in an episode (its last: END)
