@@ -142,3 +142,21 @@ def test_bench_planner_times_a_committed_planner_and_its_policy_as_the_run_obser
         assert 0 < r[name]["cpu_ms"]["median"] <= r[name]["cpu_ms"]["p99"]
     assert r["planner"]["cpu_ms"]["median"] > r["policy"]["cpu_ms"]["median"]
     assert "policy network" in format_decisions(r)
+
+
+@pytest.mark.slow
+def test_bench_planner_served_times_each_post_act_as_evaluate_s_client_sends_it_and_the_server_s_cpu(no_leaks):
+    """`bench --planner RUN --served`: the planner exported, served in its own process and run in closed loop
+    through evaluate's client for a day: every step one POST /act, timed as the integrator sees it, beside the
+    server's CPU per decision and the load average."""
+    from parallel_eplus.bench.decisions import format_decisions, served
+    from parallel_eplus.engine.config import SimulationConfig
+
+    run = Path(__file__).parents[1] / "results/model-based/datacenter-2zone/runs/datacenter-2zone-mpc-seed0"
+    s = served(run / "best/planner/planner.pt", SimulationConfig(weather="CA", run_days=1), "candidates=32")
+    assert s["requests"] == 96 and 0 < s["round_trip_ms"]["p50"] <= s["round_trip_ms"]["p99"]
+    assert s["server_cpu_ms_per_decision"] > 0 and len(s["load_average"]) == 2
+    line = format_decisions({"building": "b", "weather": "CA", "settings": {"candidates": 32, "iterations": 3,
+                            "shrink": 1.0}, "planner": {"cpu_ms": {"median": 1, "p99": 2}, "wall_ms": {
+                            "median": 1, "p99": 2}}, "served": s}).splitlines()[-1]  # fmt: skip
+    assert "POST /act" in line and "p99" in line and "load" in line

@@ -244,7 +244,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
         from parallel_eplus.bench.decisions import decisions, format_decisions
 
-        r = decisions(args.planner, repeats=args.repeats, options=args.planner_options)
+        r = decisions(args.planner, repeats=args.repeats, options=args.planner_options, serve=args.served)
         print(format_decisions(r))
         out = args.out.with_name("bench_planner.json") if args.out.name == "bench.json" else args.out
         out.parent.mkdir(parents=True, exist_ok=True)

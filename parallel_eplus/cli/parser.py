@@ -189,6 +189,11 @@ def build_parser() -> argparse.ArgumentParser:
         preface=PLANNER_OPTIONS, help="with --planner: as evaluate --planner (`help` lists them)",
     )  # fmt: skip
     be.add_argument(
+        "--served", action="store_true",
+        help="with --planner: also export it, serve it over loopback and run it in closed loop through evaluate's "
+        "client: each POST /act's round trip (p50, p99) and the server's CPU per decision, with the load average",
+    )  # fmt: skip
+    be.add_argument(
         "--replay-run", type=Path, metavar="RUN_DIR",
         help="instead: replay a training run's actions in raw EnergyPlus (needs its step tables: --keep-episodes)",
     )  # fmt: skip

@@ -14,6 +14,7 @@ import json
 import logging
 import math
 import os
+import time
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -54,6 +55,7 @@ class HttpController:
         if token and not (self.host in ("localhost", "::1") or self.host.startswith("127.")):
             log.warning("PLAIN HTTP to %s: the bearer token crosses the network in clear", self.host)
         self.conn: http.client.HTTPConnection | None = None
+        self.act_ms: list[float] = []  # each POST /act's round trip, ms
         self.contract = self._request("GET", "/contract")
         self.names = [i["name"] for i in self.contract["inputs"] if i["source"] == "sensor"]
         self.low = np.array([o["low"] for o in self.contract["outputs"]])
@@ -130,7 +132,9 @@ class HttpController:
         if self.demand is not None:  # the building's meter: the month's running peaks so far, as its BMS keeps them
             self.demand.observe(info["time"], sensors[self.meter])
             body["demand_peaks_kw"] = self.demand.month_peaks(self.charges, info["time"])
+        start = time.perf_counter()
         answer = self._request("POST", "/act", body)
+        self.act_ms.append(1000 * (time.perf_counter() - start))  # as the integrator sees it: the round trip
         physical = np.array([answer["setpoints"][n]["value"] for n in self.outputs])
         if not all(map(math.isfinite, physical)):
             raise ValueError(f"controller at {self.url} returned non-finite setpoints: {answer}")
@@ -159,7 +163,18 @@ class HttpController:
             raise ValueError(f"controller at {self.url} asks for forecast {names}; this client sends {WEATHER}")
         return {n: values[:, i].tolist() for i, n in enumerate(names)}
 
+    def latency(self) -> dict[str, float] | None:
+        """The POST /act round trips so far: p50, p99 and mean, ms (None: none yet)."""
+        if not self.act_ms:
+            return None
+        ms = np.array(self.act_ms)
+        return {"requests": len(ms), "p50": float(np.percentile(ms, 50)), "p99": float(np.percentile(ms, 99)),
+                "mean": float(ms.mean())}  # fmt: skip
+
     def close(self) -> None:
+        if (summary := self.latency()) is not None and self.conn is not None:
+            log.info("%s: %d POST /act, p50 %.1f ms, p99 %.1f ms", self.url, summary["requests"], summary["p50"],
+                     summary["p99"])  # fmt: skip
         if self.conn is not None:
             self.conn.close()
             self.conn = None
