@@ -7,6 +7,7 @@ import datetime as dt
 import json
 import logging
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -75,7 +76,7 @@ def test_the_ensemble_graph_predicts_what_the_torch_ensemble_does():
     mpc = MPC.load(RUN / "best/planner/planner.pt")
     forward = OnnxEnsemble(build_graph(mpc.model.arrays()))
     rng = np.random.default_rng(0)
-    x = (mpc.model.x_mean.numpy() + mpc.model.x_std.numpy() * rng.standard_normal((5, 64, forward.n_inputs)))
+    x = mpc.model.x_mean.numpy() + mpc.model.x_std.numpy() * rng.standard_normal((5, 64, forward.n_inputs))
     import torch as th
 
     with th.no_grad():
@@ -117,27 +118,39 @@ def test_the_same_request_gets_the_same_answer_and_its_plan_warm_starts_the_next
 
 BAD = {
     "no forecast": ({"forecast": None}, "forecast"),
-    "a short forecast": ({"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "outdoor_rh_pct": [50.0] * 3}},
-                         "forecast.outdoor_rh_pct"),  # fmt: skip
-    "a NaN in the forecast": ({"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)),
-                                            "outdoor_drybulb_c": [float("nan")] * 8}}, "forecast.outdoor_drybulb_c[0]"),
-    "a forecast longer than the contract's horizon": ({"forecast": forecast(dt.datetime(2021, 1, 5, 10), steps=12)},
-                                                      "forecast.outdoor_drybulb_c"),  # fmt: skip
+    "a short forecast": (
+        {"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "outdoor_rh_pct": [50.0] * 3}},
+        "forecast.outdoor_rh_pct",
+    ),  # fmt: skip
+    "a NaN in the forecast": (
+        {"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "outdoor_drybulb_c": [float("nan")] * 8}},
+        "forecast.outdoor_drybulb_c[0]",
+    ),
+    "a forecast longer than the contract's horizon": (
+        {"forecast": forecast(dt.datetime(2021, 1, 5, 10), steps=12)},
+        "forecast.outdoor_drybulb_c",
+    ),  # fmt: skip
     "a humidity no weather has, late in the forecast": (
         {"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "outdoor_rh_pct": [50.0] * 7 + [130.0]}},
-        "forecast.outdoor_rh_pct[7]"),  # fmt: skip
+        "forecast.outdoor_rh_pct[7]",
+    ),  # fmt: skip
     "a sun brighter than the sun, late in the forecast": (
         {"forecast": {**forecast(dt.datetime(2021, 1, 5, 10)), "global_horizontal_w_m2": [0.0] * 6 + [5000.0] * 2}},
-        "forecast.global_horizontal_w_m2[6]"),  # fmt: skip
+        "forecast.global_horizontal_w_m2[6]",
+    ),  # fmt: skip
     "a time with a UTC offset": ({"time": "2021-01-05T10:00:00+02:00"}, "time"),
     "a time in UTC": ({"time": "2021-01-05T08:00:00Z"}, "time"),
     "no last setpoints": ({"last_setpoints": None}, "last_setpoints"),
-    "a last setpoint out of range": ({"last_setpoints": {**LAST, "west_fan_kg_s": 70.0}},
-                                     "last_setpoints.west_fan_kg_s"),  # fmt: skip
+    "a last setpoint out of range": (
+        {"last_setpoints": {**LAST, "west_fan_kg_s": 70.0}},
+        "last_setpoints.west_fan_kg_s",
+    ),  # fmt: skip
     "a plan of the wrong shape": ({"plan": [[0.0, 0.0]]}, "plan"),
     "no time": ({"time": None}, "time"),
-    "a missing reading": ({"sensors": {k: v for k, v in READINGS.items() if k != "east_temp_c"}},
-                          "sensors.east_temp_c"),  # fmt: skip
+    "a missing reading": (
+        {"sensors": {k: v for k, v in READINGS.items() if k != "east_temp_c"}},
+        "sensors.east_temp_c",
+    ),  # fmt: skip
 }
 
 
@@ -379,6 +392,7 @@ def test_evaluate_sends_the_token_from_a_file_or_the_environment_and_never_shows
         done = run("--controller-url", url, "--token-file", str(token), "--out", str(tmp_path / "done"))
         assert done.returncode == 0, done.stderr[-3000:]
         assert "MPC planner via HTTP (datacenter-2zone-mpc-seed0)" in done.stdout
+        assert re.search(r": 96 POST /act, p50 [\d.]+ ms, p99 [\d.]+ ms", done.stderr), done.stderr[-2000:]
         monkeypatch.setenv(TOKEN_VARIABLE, TOKEN)  # the environment's, without the flag
         assert client_token(None) == TOKEN
         assert http_controller(url, client_token(None)).served["model"] == "planner.pt"

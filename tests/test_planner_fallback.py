@@ -93,8 +93,10 @@ def test_a_reading_and_a_forecast_the_model_never_met_fall_back_to_the_own_setpo
     example = json.loads((exported / "controller.json").read_text())["example"]
     zones = [s for s in example["sensors"] if s.endswith("_temp_c") and s != "outdoor_temp_c"]
     own = OwnSetpoints(dict(np.load(exported / "planner.npz")), 15)(dt.datetime.fromisoformat(example["time"]))
-    for answer in (_unseen(runtime, example, **dict.fromkeys(zones, 30.0)),  # within max_input_z of the data
-                   _unseen(runtime, example, outdoor_temp_c=48.0)):  # 48 °C and full sun on a January day
+    for answer in (
+        _unseen(runtime, example, **dict.fromkeys(zones, 30.0)),  # within max_input_z of the data
+        _unseen(runtime, example, outdoor_temp_c=48.0),
+    ):  # 48 °C and full sun on a January day
         assert answer["fallback"] is True and "disagree" in answer["reason"] and "coming step" in answer["reason"]
         values = [v["value"] for v in answer["setpoints"].values()]  # the thermostats' as recorded; the supply air
         assert np.allclose(values[:2], own[:2]) and (values[0], values[1]) == (26.7, 15.6)  # the rule's (it rides it)

@@ -9,32 +9,53 @@ from pathlib import Path
 def add_commands(sub) -> None:
     """The two subcommands, declared here so cli/parser.py gains one line."""
     ex = sub.add_parser("export", help="a trained policy or planner as ONNX with its contract controller.json")
-    ex.add_argument("policy", type=Path, metavar="RUN_OR_MODEL",
-                    help="a run folder, its model.zip or a checkpoint; a model-based run (or planner/): its planner")
+    ex.add_argument(
+        "policy",
+        type=Path,
+        metavar="RUN_OR_MODEL",
+        help="a run folder, its model.zip or a checkpoint; a model-based run (or planner/): its planner",
+    )
     ex.add_argument("-o", "--out", type=Path, default=Path("controller"), help="folder to write (default controller)")
-    ex.add_argument("--persistence", action="store_true",
-                    help="planner: answer requests without a forecast, holding the outdoor reading (answers say so)")
-    ex.add_argument("--fallback-spread-k", type=float, metavar="K",
-                    help="planner: fall back when the model's members disagree by more than K about a zone along the "
-                    "plan (default: 3 x the largest spread on the building's own days, at least 0.5 K)")
-    ex.add_argument("--fallback-input-z", type=float, default=6.0, metavar="Z",
-                    help="planner: fall back when a model input is more than Z standard deviations from its data")
+    ex.add_argument(
+        "--persistence",
+        action="store_true",
+        help="planner: answer requests without a forecast, holding the outdoor reading (answers say so)",
+    )
+    ex.add_argument(
+        "--fallback-spread-k",
+        type=float,
+        metavar="K",
+        help="planner: fall back when the model's members disagree by more than K about a zone along the "
+        "plan (default: 3 x the largest spread on the building's own days, at least 0.5 K)",
+    )
+    ex.add_argument(
+        "--fallback-input-z",
+        type=float,
+        default=6.0,
+        metavar="Z",
+        help="planner: fall back when a model input is more than Z standard deviations from its data",
+    )
     ex.add_argument("--record-days", type=int, metavar="N",
                     help="planner: days of its own controls recorded for the fallback (default: 365, whatever the "
                     "run trained on)")  # fmt: skip
     ex.add_argument("--workers", type=int, default=2, help="planner: EnergyPlus runs at once (own controls)")
-    ex.add_argument("--planner-options", metavar="NAME=VALUE,...",
-                    help="planner: settings overriding its saved ones, as `evaluate --planner` "
-                    "(e.g. band_thermostats=baseline)")
+    ex.add_argument(
+        "--planner-options",
+        metavar="NAME=VALUE,...",
+        help="planner: settings overriding its saved ones, as `evaluate --planner` (e.g. band_thermostats=baseline)",
+    )
     ex.add_argument("--quiet", action="store_true", help="no progress bar (a log or CI's output stays readable)")
     ex.set_defaults(func=cmd_export, needs="export")
     se = sub.add_parser("serve", help="serve an exported controller over HTTP: POST /act, GET /health, GET /contract")
     se.add_argument("controller", type=Path, metavar="DIR", help="a folder written by `export`")
     se.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
     se.add_argument("--port", type=int, default=8000)
-    se.add_argument("--token-file", type=Path, metavar="FILE",
-                    help="a secret on its first line: every request must send Authorization: Bearer <it> "
-                    "(required off loopback)")
+    se.add_argument(
+        "--token-file",
+        type=Path,
+        metavar="FILE",
+        help="a secret on its first line: every request must send Authorization: Bearer <it> (required off loopback)",
+    )
     se.add_argument("--ssl-keyfile", type=Path, help="TLS: the server's private key (PEM), with --ssl-certfile")
     se.add_argument("--ssl-certfile", type=Path, help="TLS: the server's certificate chain (PEM)")
     bn = se.add_argument_group("BACnet supervisor (docs/bacnet.md; needs the [bacnet] extra)")

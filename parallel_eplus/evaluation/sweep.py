@@ -190,7 +190,7 @@ def run_local(
             raise error
         failures.append(failure_row(job["controller"], job["cfg"], error))
         active.remove(job)
-        job["sim"].close()
+        _close(job)
 
     try:
         while queue or active:
@@ -235,12 +235,20 @@ def run_local(
                 summary = job["info"]["episode_summary"]
                 c = job["controller"]
                 rows.append({"controller": c.label, "run": c.run, **summary, "episode_dir": job["info"]["episode_dir"]})
-                job["sim"].close()
+                _close(job)
                 bar.set_postfix(done=len(rows), last=f"{job['controller'].label} {summary['weather']}")
     finally:
         for job in active:
-            job["sim"].close()
+            _close(job)
     return rows, failures
+
+
+def _close(job: dict) -> None:
+    """A job's simulation, then its controller where it holds something (a served controller's connection: closing
+    it logs its POST /act round trips)."""
+    job["sim"].close()
+    if callable(close := getattr(job["act"], "close", None)):
+        close()
 
 
 def _band_columns(b: Building) -> dict:

@@ -168,11 +168,16 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         contract["fallback"]["max_spread_k"] = round(max(0.5, 3 * float(np.max(spreads))), 3)
     # what the model has seen, its members agree on: twice their largest disagreement on the own record trips
     contract["fallback"]["max_step_spread_k"] = round(max(MIN_STEP_SPREAD_K, STEP_SPREAD_FACTOR * float(held.max())), 3)
-    contract["export_check"] = {"decisions": len(spreads), "max_abs_diff": diff, "spread_k_median":
-                                round(float(np.median(spreads)), 4), "spread_k_max": round(float(np.max(spreads)), 4),
-                                "decisions_with_demand_peaks": peaked, "step_spread_rows": len(held),
-                                "step_spread_k_median": round(float(np.median(held)), 4),
-                                "step_spread_k_max": round(float(held.max()), 4)}
+    contract["export_check"] = {
+        "decisions": len(spreads),
+        "max_abs_diff": diff,
+        "spread_k_median": round(float(np.median(spreads)), 4),
+        "spread_k_max": round(float(np.max(spreads)), 4),
+        "decisions_with_demand_peaks": peaked,
+        "step_spread_rows": len(held),
+        "step_spread_k_median": round(float(np.median(held)), 4),
+        "step_spread_k_max": round(float(held.max()), 4),
+    }
     contract["example"] = _example(out_dir, contract, mpc, demos)
     path = out_dir / CONTRACT_FILE
     io.write_text(path, json.dumps(contract, indent=2) + "\n")
