@@ -1,5 +1,5 @@
-"""The lint the suite runs: `ruff check` (pyproject.toml's [tool.ruff] rules) with the pinned ruff of the `dev` extra.
-`ruff format` is not enforced: docs/contributing.md says why."""
+"""The lint the suite runs with the pinned ruff of the `dev` extra: `ruff check` (pyproject.toml's [tool.ruff] rules)
+and `ruff format --check` (`ruff format .` fixes what it finds)."""
 
 import subprocess
 import sys
@@ -12,6 +12,12 @@ def test_ruff_check_passes():
     ruff = Path(sys.executable).with_name("ruff")
     done = subprocess.run([str(ruff), "check", "."], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
+
+
+def test_ruff_format_leaves_every_file_as_it_is():
+    ruff = Path(sys.executable).with_name("ruff")
+    done = subprocess.run([str(ruff), "format", "--check", "."], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, "run `ruff format .`:\n" + done.stdout[-4000:] + done.stderr[-2000:]
 
 
 def test_ruff_is_the_pinned_version():
