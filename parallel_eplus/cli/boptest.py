@@ -15,7 +15,7 @@ def add_boptest(sub) -> argparse.ArgumentParser:
     bt.add_argument("--specs", type=Path, metavar="DIR", help="a folder of building specs (.toml) served as test "
                     "cases beside the shipped buildings (a spec's file name is its test case's name)")  # fmt: skip
     bt.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
-    bt.add_argument("--port", type=int, default=8000)
+    bt.add_argument("--port", type=int, default=8000, help="TCP port to listen on (default 8000)")
     bt.add_argument("--token-file", type=Path, metavar="FILE",
                     help="a secret on its first line: every request must send Authorization: Bearer <it> "
                     "(required off loopback)")  # fmt: skip
