@@ -21,13 +21,10 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import fcntl
 import json
 import os
 import select
-import shutil
 import signal
-import stat
 import sys
 import traceback
 from pathlib import Path
@@ -35,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from parallel_eplus.engine.eplus_side.bridge import Bridge
+from parallel_eplus.engine.eplus_side.descriptors import own_descriptions, reopened_copy
 from parallel_eplus.engine.pipes import frames
 from parallel_eplus.engine.pipes.branching import ANSWERS, LOG, REQUESTS, ROWS
 
@@ -201,29 +199,12 @@ class BranchingBridge(Bridge):
 
 
 def _own_descriptions(here: Path) -> None:
-    """Every descriptor open on a regular file gets a file description of its own (after a fork, parent and child
-    share each one's offset): an input is reopened read-only at its offset; an output goes to /dev/null, except
-    one EnergyPlus may read back (`COPIED_OUTPUTS`: SQLite's), copied into `here` and reopened at its offset."""
-    for name in os.listdir("/proc/self/fd"):
-        fd = int(name)
-        if fd <= 2:
-            continue
-        try:
-            target = Path(os.readlink(f"/proc/self/fd/{fd}"))
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                continue
-        except OSError:  # the listing's own descriptor, closed by now
-            continue
-        flags = fcntl.fcntl(fd, fcntl.F_GETFL)
-        offset = os.lseek(fd, 0, os.SEEK_CUR)
-        if flags & os.O_ACCMODE == os.O_RDONLY:
-            new = os.open(target, os.O_RDONLY)
-        elif target.suffix in COPIED_OUTPUTS:
-            shutil.copyfile(target, here / target.name)
-            new = os.open(here / target.name, (flags & os.O_ACCMODE) | (flags & os.O_APPEND))
-        else:
-            new = os.open(os.devnull, os.O_WRONLY)
-        with contextlib.suppress(OSError):  # /dev/null ignores its offset
-            os.lseek(new, offset, os.SEEK_SET)
-        os.dup2(new, fd)
-        os.close(new)
+    """Descriptions of the branch's own (descriptors.py): an output goes to /dev/null, except one EnergyPlus may read
+    back (`COPIED_OUTPUTS`: SQLite's), copied into `here`."""
+
+    def output(target: Path, flags: int) -> int:
+        if target.suffix in COPIED_OUTPUTS:
+            return reopened_copy(target, here, flags)
+        return os.open(os.devnull, os.O_WRONLY)
+
+    own_descriptions(output)

@@ -22,13 +22,11 @@ Its stdin closing (the env closed it, exited or was killed) kills its children a
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 import select
 import shutil
 import signal
-import stat
 import sys
 import traceback
 from pathlib import Path
@@ -36,6 +34,7 @@ from typing import Any
 
 from parallel_eplus.engine.eplus_side import native
 from parallel_eplus.engine.eplus_side.bridge import Bridge
+from parallel_eplus.engine.eplus_side.descriptors import own_descriptions, reopened_copy
 from parallel_eplus.engine.pipes import frames
 
 TEMPLATE_LOG = "energyplus.log"  # the template's own log, in its directory; each child writes its episode's
@@ -164,27 +163,12 @@ def _become_episode(bridge: Bridge, request: dict, template_dir: Path) -> None:
 
 
 def _own_descriptions(template_dir: Path, episode: Path) -> None:
-    """Every descriptor open on a regular file gets an open file description of its own, at the same offset: an
-    output of the template's directory is copied into the episode's, an input reopened read-only."""
-    for name in os.listdir("/proc/self/fd"):
-        fd = int(name)
-        if fd <= 2:
-            continue
-        try:
-            target = Path(os.readlink(f"/proc/self/fd/{fd}"))
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                continue
-        except OSError:  # the listing's own descriptor, closed by now
-            continue
-        flags = fcntl.fcntl(fd, fcntl.F_GETFL)
-        offset = os.lseek(fd, 0, os.SEEK_CUR)
-        if flags & os.O_ACCMODE == os.O_RDONLY:
-            new = os.open(target, os.O_RDONLY)
-        elif target.parent == template_dir:
-            shutil.copyfile(target, episode / target.name)
-            new = os.open(episode / target.name, (flags & os.O_ACCMODE) | (flags & os.O_APPEND))
-        else:
+    """Descriptions of the episode's own (descriptors.py): an output of the template's directory is copied into the
+    episode's; an output anywhere else is an error."""
+
+    def output(target: Path, flags: int) -> int:
+        if target.parent != template_dir:
             raise OSError(f"a file open for writing outside the template's directory: {target}")
-        os.lseek(new, offset, os.SEEK_SET)
-        os.dup2(new, fd)
-        os.close(new)
+        return reopened_copy(target, episode, flags)
+
+    own_descriptions(output)
