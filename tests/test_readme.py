@@ -1,5 +1,6 @@
 """The README's Python snippets run as written (real EnergyPlus, short run periods)."""
 
+import json
 import re
 from pathlib import Path
 
@@ -106,8 +107,17 @@ def test_the_claim_about_other_buildings_is_read_from_results_prototypes():
     import re
 
     text = " ".join(README.read_text().split())
-    assert "`results/optimize/`, the 16 DOE prototypes through `optimize`'s defaults, is not run yet" in text
-    assert not (ROOT / "results" / "optimize").exists(), "results/optimize/ exists now: read the README's claim from it"
+    # the portfolio (studies/portfolio) runs in chunks: until its 16 buildings are answered, the README says how far
+    done = [
+        s.parent.name
+        for s in (ROOT / "results" / "optimize").glob("*/status.json")
+        if json.loads(s.read_text()).get("stages", {}).get("report", {}).get("state") == "done"
+    ]
+    assert len(done) < 16, "the portfolio is complete: read the README's claim from results/optimize/summary.md"
+    assert (
+        f"`results/optimize/`, the 16 DOE prototypes through `optimize`'s defaults, runs in chunks "
+        f"(studies/portfolio; {len(done)} of 16 answered so far)" in text
+    )
     with open(PROTOTYPES / "prototypes.csv") as f:
         rows = list(csv.DictReader(f))
     saving = sum(min(float(r["hvac_energy_kwh"]), float(r["bill"])) <= 0.995 for r in rows)
