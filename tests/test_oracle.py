@@ -25,17 +25,18 @@ from parallel_eplus.learning.oracle.settings import OracleSettings
 from .conftest import our_processes
 
 
-def _children(pid: int) -> list[int]:
-    """The live (not yet reaped) children of `pid`."""
-    found = []
+def _children(pid: int) -> dict[int, str]:
+    """The live (not yet reaped) children of `pid`, with their command lines."""
+    found = {}
     for proc in Path("/proc").iterdir():
         if proc.name.isdigit():
             try:
                 stat = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+                command = (proc / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
             except OSError:
                 continue
             if int(stat[1]) == pid and stat[0] != "Z":
-                found.append(int(proc.name))
+                found[int(proc.name)] = command
     return found
 
 
@@ -83,6 +84,7 @@ def _plan_cost(episode_dir: str, settings: OracleSettings) -> float:
 
 def test_the_oracle_plans_no_worse_than_the_own_controls(tmp_path):
     options = "horizon_h=2,candidates=10"
+    before = _children(os.getpid())  # an xdist worker may hold other tests' children (a Ray node): not this test's
     oracle = oracle_controller(options)
     df = run_sweep([Controller(BASELINE_LABEL, "baseline"), oracle], ["CA"], 1, 1, tmp_path, progress=False)
     assert not df.attrs["failures"] and len(df) == 2
@@ -92,4 +94,5 @@ def test_the_oracle_plans_no_worse_than_the_own_controls(tmp_path):
     assert planned <= own, f"the oracle's plan costs {planned:.1f}, the own controls' {own:.1f}"
     stats = Path(rows["Oracle"]["episode_dir"]) / "oracle.json"
     assert stats.is_file() and '"decisions": 24' in stats.read_text()
-    assert not our_processes() and not _children(os.getpid())
+    left = {pid: command for pid, command in _children(os.getpid()).items() if pid not in before}
+    assert not our_processes() and not left, left
