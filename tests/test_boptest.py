@@ -348,7 +348,10 @@ def test_a_tests_kpis_are_evaluates_for_the_same_controller_and_period(tmp_path)
         steps = 0
         while test.advance({})[1]:
             steps += 1
+            if steps % 50 == 0:  # the running totals part way; the rest folded in after the episode's end
+                same_kpis(test.kpi()[1], test.kpi_recomputed())
         kpi = test.kpi()[1]
+        same_kpis(kpi, test.kpi_recomputed())
     finally:
         test.close()
     row = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["IL"], 1, 1, tmp_path, progress=False,
@@ -359,3 +362,43 @@ def test_a_tests_kpis_are_evaluates_for_the_same_controller_and_period(tmp_path)
     assert kpi["emis_tot"] == pytest.approx(row["emissions_kg_m2"], rel=1e-9)
     assert kpi["pele_tot"] == pytest.approx(row["hvac_electricity_peak_kw_m2"], rel=1e-9)
     assert kpi["pgas_tot"] == pytest.approx(row["hvac_naturalgas_peak_kw_m2"], rel=1e-9)
+
+
+def same_kpis(incremental: dict, recomputed: dict) -> None:
+    """`/kpi`'s running totals against the recomputation over every step: the same figures, to float rounding."""
+    assert set(incremental) == set(recomputed)
+    for key, value in recomputed.items():
+        if value is None:
+            assert incremental[key] is None, key
+        else:
+            assert incremental[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
+
+
+def test_kpis_kept_as_running_totals_equal_a_recomputation_over_every_step():
+    """`/kpi` folds in only the steps new since the last request: after each of several advances (the heating
+    setpoint overwritten on some, so gas and electricity both run), and after a price scenario starts the KPIs
+    afresh, they equal the KPIs recomputed over every scored step at once."""
+    from parallel_eplus.deploy.boptest.test import BoptestTest
+
+    test = BoptestTest(TESTCASE, TESTCASE, "IL")
+    try:
+        test.initialize(START, 3600)
+        test.set_step(1200)
+        heat = {"heating_setpoint_u": 295.15, "heating_setpoint_activate": 1}
+        for k in range(12):
+            test.advance(heat if k % 3 else {})
+            if k in (0, 1, 4, 11):
+                kpi = test.kpi()[1]
+                same_kpis(kpi, test.kpi_recomputed())
+        assert kpi["pgas_tot"] > 0 and kpi["pele_tot"] > 0 and kpi["cost_tot"] > 0 and kpi["time_rat"] >= 0
+        constant = kpi["cost_tot"] / kpi["ener_tot"]
+        test.set_scenario({"electricity_price": "dynamic"})
+        assert test.kpi()[1]["ener_tot"] == 0 == test.kpi_recomputed()["ener_tot"]
+        for k in range(6):
+            test.advance(heat if k % 2 else {})
+            if k in (2, 5):
+                kpi = test.kpi()[1]
+                same_kpis(kpi, test.kpi_recomputed())
+        assert kpi["ener_tot"] > 0 and kpi["cost_tot"] / kpi["ener_tot"] != pytest.approx(constant)
+    finally:
+        test.close()

@@ -11,6 +11,7 @@ Ray actor (remote.py).
 
 from __future__ import annotations
 
+import copy
 import datetime as dt
 import logging
 import math
@@ -21,11 +22,10 @@ from parallel_eplus.buildings.building import load_building, weather_path
 from parallel_eplus.buildings.scaling import normalize
 from parallel_eplus.buildings.scoring.kpis import floor_area
 from parallel_eplus.deploy.boptest.forecast import ForecastError, price_forecast, weather_forecast
-from parallel_eplus.deploy.boptest.kpi import core_kpis, scenario_comfort
+from parallel_eplus.deploy.boptest.kpi import Totals, core_kpis, kpi_payload, scenario_comfort
 from parallel_eplus.deploy.boptest.points import PRICE_POINTS, Points, activation
 from parallel_eplus.deploy.boptest.scenario import Scenario, ScenarioError, price_tariffs, test_period
 from parallel_eplus.engine.config import SimulationConfig
-from parallel_eplus.engine.episode import read_steps
 from parallel_eplus.errors import EnergyPlusError
 
 log = logging.getLogger(__name__)
@@ -102,6 +102,13 @@ class BoptestTest:
         self.results: dict[str, list] = {}
         self.time_ratios: list[float] = []
         self._tic: float | None = None
+        self._ratio_sum = 0.0  # of time_ratios, kept as they come
+        # the KPIs, incremental: the episode's step records, the first row they score, the rows folded so far
+        # into `_totals` (made for one electricity price: a new price starts them afresh)
+        self._recorder = None
+        self._kpi_row = self._folded = 0
+        self._totals: Totals | None = None
+        self._totals_price: str | None = None
         self._area: float | None = None
         self._inputs = {p.name: i for i, p in enumerate(self.points.inputs)}
         self._activations = {activation(p.name): i for i, p in enumerate(self.points.inputs)}
@@ -163,6 +170,7 @@ class BoptestTest:
         self.ended, self.end_s = False, end
         try:
             obs, info = self.sim.start()
+            self._recorder = self.sim.records  # kept: the episode's end writes them out and lets the sim's go
             self.year = info["time"].year
             released = [math.nan] * len(self.points.inputs)
             self._observe(info, [None] * len(released))
@@ -172,6 +180,7 @@ class BoptestTest:
             self.close()
             raise TestError(500, f"Failed to initialize the test: {e}") from None
         self.start_s = self.kpi_s = aligned
+        self._restart_kpis()
         note = "" if aligned == start else f" (start_time {start:g} s rounded up to the model's timestep, {self.dt} s)"
         message = f"Test simulation initialized successfully to {aligned:g}s with warmup period of {warmup:g}s{note}."
         return message, self.state
@@ -186,7 +195,9 @@ class BoptestTest:
         if self.ended or self.now_s >= self.end_s:
             return "End of test case scenario time period reached.", {}
         if self._tic is not None:
-            self.time_ratios.append((time.monotonic() - self._tic) / self.step_s)
+            ratio = (time.monotonic() - self._tic) / self.step_s
+            self.time_ratios.append(ratio)
+            self._ratio_sum += ratio
         action, applied = [], []
         for p, v, on in zip(self.points.inputs, values, active, strict=True):
             a = self.building.actions[self._inputs[p.name]]
@@ -307,27 +318,57 @@ class BoptestTest:
             changed["time_period"] = state
         else:  # BOPTEST starts its KPIs afresh when the scenario changes
             self.kpi_s, self.time_ratios, self._tic = self.now_s, [], None
+            self._restart_kpis()
         return "Test case scenario was set successfully.", changed
 
     def kpi(self):
-        if self.sim is None:
-            return "Queried KPIs successfully (no step yet: initialize and advance).", core_kpis(
-                _empty(), self.building.comfort, None, []
-            )
-        if self.sim.records is not None:
-            steps = self.sim.records.frame()
-        elif self.sim.episode_dir is not None and (self.sim.episode_dir / "steps.parquet").is_file():
-            steps = read_steps(self.sim.episode_dir)
-        else:
-            steps = _empty()
-        if len(steps):
-            first = dt.datetime(self.year, 1, 1) + dt.timedelta(seconds=self.kpi_s)
-            steps = steps[steps["time"] > first]
-        if self._area is None and self.sim.episode_dir is not None:
+        """The KPIs so far: the steps new since the last request folded into the running totals (kpi.py)."""
+        if self.sim is None or self._recorder is None:
+            return "Queried KPIs successfully (no step yet: initialize and advance).", self._no_kpis()
+        price = self.scenario.electricity_price
+        if self._totals is None or self._totals_price != price:
+            self._totals, self._totals_price, self._folded = Totals(self._comfort()), price, self._kpi_row
+        n = self._recorder.n
+        if n > self._folded:
+            self._totals.add(self._scored(self._folded, n))
+            self._folded = n
+        return "Queried KPIs successfully.", kpi_payload(self._totals, self._floor_area(), self._time_rat())
+
+    def kpi_recomputed(self) -> dict:
+        """The KPIs recomputed over every scored step at once, as `kpi` computed them before it kept running totals:
+        what `kpi`'s must equal (the tests check it)."""
+        if self.sim is None or self._recorder is None:
+            return self._no_kpis()
+        steps = self._scored(self._kpi_row, self._recorder.n)
+        mean = sum(self.time_ratios) / len(self.time_ratios) if self.time_ratios else None
+        return core_kpis(steps, self._comfort(), self._floor_area(), mean)
+
+    def _restart_kpis(self) -> None:
+        """The KPIs count from here (initialize, a new scenario)."""
+        self._kpi_row = self._folded = self._recorder.n if self._recorder is not None else 0
+        self._totals, self._ratio_sum = None, 0.0
+
+    def _scored(self, first: int, last: int):
+        """The step table of the recorded rows [first, last) after the KPIs' start time."""
+        part = copy.copy(self._recorder)  # the recorder's own table-building, over these rows only
+        part.rows, part.times = self._recorder.rows[first:last], self._recorder.times[first:last]
+        steps = part.frame()
+        return steps[steps["time"] > dt.datetime(self.year, 1, 1) + dt.timedelta(seconds=self.kpi_s)]
+
+    def _comfort(self):
+        return scenario_comfort(self.building.comfort, self.tariffs.get(self.scenario.electricity_price))
+
+    def _floor_area(self) -> float | None:
+        if self._area is None and self.sim is not None and self.sim.episode_dir is not None:
             self._area = self.building.comfort.kpis.floor_area_m2 if self.building.comfort.kpis else None
             self._area = self._area or floor_area(self.sim.episode_dir / "eplusout.eio")
-        comfort = scenario_comfort(self.building.comfort, self.tariffs.get(self.scenario.electricity_price))
-        return "Queried KPIs successfully.", core_kpis(steps, comfort, self._area, self.time_ratios)
+        return self._area
+
+    def _time_rat(self) -> float | None:
+        return self._ratio_sum / len(self.time_ratios) if self.time_ratios else None
+
+    def _no_kpis(self) -> dict:
+        return core_kpis(_empty(), self.building.comfort, None, None)
 
     def process_ids(self) -> list[int]:
         """The EnergyPlus process this test runs (for the tests' checks)."""
@@ -335,6 +376,7 @@ class BoptestTest:
         return [proc.pid] if proc is not None else []
 
     def close(self) -> None:
+        self._recorder, self._totals = None, None
         if self.sim is not None:
             sim, self.sim = self.sim, None
             sim.close()
