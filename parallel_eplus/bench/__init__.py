@@ -15,7 +15,9 @@
    batch), against the local backend: the Ray backend's price, re-measured whenever speed work lands;
 6. time to first observation, peak RSS of one EnergyPlus worker and of the learner;
 7. with `short`: short episodes (short.py): ten consecutive 1- and 7-day episodes in one env against EnergyPlus alone
-   running the same ten periods, reset latency, TRPO steps/s at 1, 7, 14 and 365-day episodes.
+   running the same ten periods, reset latency, TRPO steps/s at 1, 7, 14 and 365-day episodes;
+8. with `boptest`: what `parallel-eplus boptest`'s POST /advance adds per control step over EnergyPlus stepped alone
+   in process, over the same period (boptest.py: the server in a process of its own, HTTP on loopback).
 
 Random actions in 3 are drawn like an untrained TRPO policy's (N(0, 1) clipped to [-1, 1]), so 3 and
 4 ask EnergyPlus for the same kind of work: control changes EnergyPlus's own cost several-fold.
@@ -35,6 +37,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from parallel_eplus.bench.alone import alone_seconds
+from parallel_eplus.bench.boptest import advance_overhead, overhead_rows
 from parallel_eplus.bench.config import BenchConfig, _exploring_actions
 from parallel_eplus.bench.rates import env_run, independent_rate, training_rate, vector_rate
 from parallel_eplus.bench.raw import _physical, raw_rate, raw_seconds, replay_run
@@ -118,6 +121,8 @@ def run(cfg: BenchConfig, out: Path | None = None) -> dict:
             results["train_ray_over_local"] = ray_tr["steps_per_s"] / tr["steps_per_s"]
         if cfg.short:
             results["short"] = short_episodes(cfg, tmp / "short")
+        if cfg.boptest:
+            results["boptest"] = advance_overhead(cfg, tmp / "boptest")
         results["worker_peak_rss_mb"] = worker_rss_mb
         results["learner_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     if out is not None:
@@ -191,6 +196,7 @@ def format_table(r: dict) -> str:
          f"target <= 15 min; EnergyPlus's own time and the updates: {r['million_steps_floor_minutes']:.1f} min"),
         ("time to first observation", f"{r['first_obs_s']:.2f} s", "target <= 2 s"),
         *(_short_rows(r["short"]) if "short" in r else []),
+        *(overhead_rows(r["boptest"]) if "boptest" in r else []),
         ("peak RSS: EnergyPlus worker / learner", f"{r['worker_peak_rss_mb']:.0f} / {r['learner_peak_rss_mb']:.0f} MB",
          "worker target <= 300 MB"),
     ]  # fmt: skip

@@ -27,6 +27,7 @@ class BenchConfig:
     ray: bool = True  # also time training through a local Ray (the Ray backend's row)
     building: str | None = None  # a spec path or built-in name; None: the data center (temp_fan)
     short: bool = False  # also short episodes (short.py): consecutive episodes, resets, TRPO by episode length
+    boptest: bool = False  # also BOPTEST's API (boptest.py): what POST /advance adds per step, over `raw_days`
 
 
 def bench_building(cfg: BenchConfig) -> Building:

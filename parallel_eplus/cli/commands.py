@@ -262,7 +262,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return 0
     cfg = BenchConfig(
         weather=args.weather, raw_days=args.days, vector_steps=args.vector_steps, train_steps=args.train_steps,
-        workers=args.workers, repeats=args.repeats, building=args.building, short=args.short,
+        workers=args.workers, repeats=args.repeats, building=args.building, short=args.short, boptest=args.boptest,
         ray=not args.no_ray and importlib.util.find_spec("ray") is not None,
     )  # fmt: skip
     results = run(cfg, args.out)

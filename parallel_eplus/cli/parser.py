@@ -180,6 +180,9 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--no-ray", action="store_true", help="skip the Ray backend's row (a local Ray's training rate)")
     be.add_argument("--short", action="store_true", help="also short episodes: consecutive ones against EnergyPlus "
                     "alone, reset latency, TRPO steps/s at 1, 7, 14 and 365-day episodes (docs/speed.md)")  # fmt: skip
+    be.add_argument("--boptest", action="store_true", help="also BOPTEST's API: what each POST /advance to "
+                    "`parallel-eplus boptest` adds over EnergyPlus stepped alone, ms per step (p50, p99), over --days "
+                    "(docs/boptest.md)")  # fmt: skip
     be.add_argument(
         "--planner", type=Path, metavar="RUN",
         help="instead: a model-based run's planner, ms per decision beside its distilled policy network's",
