@@ -203,7 +203,7 @@ def overhead_rows(b: dict) -> list[tuple[str, str, str]]:
     a, e = b["added_ms"], b["energyplus_ms"]
     return [
         (f"BOPTEST API, POST /advance ({b['step_s'] / 60:g}-min steps)",
-         f"+{a['p50']:.2f} ms/step p50, p99 +{a['p99']:.2f}",
+         f"p50 +{a['p50']:.2f} / p99 +{a['p99']:.2f} ms",
          f"mean +{a['mean']:.2f} over {e['mean']:.2f} ms in process, x{b['ratio']:.2f} (target <= +2 ms); load "
          f"{b['load_average'][0]:.1f}-{b['load_average'][1]:.1f}"),
     ]  # fmt: skip
