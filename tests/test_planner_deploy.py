@@ -21,6 +21,7 @@ from parallel_eplus.buildings.weather.forecast import WEATHER, PerfectForecast
 from parallel_eplus.deploy.export.policy import export
 from parallel_eplus.deploy.serve.contract import Contract
 from parallel_eplus.deploy.serve.own_setpoints import OwnSetpoints
+from parallel_eplus.deploy.serve.planner_runtime import PlannerRuntime
 from parallel_eplus.evaluation.controllers import http_controller
 from parallel_eplus.evaluation.sweep import run_sweep
 from parallel_eplus.learning.model_based.control.mpc import MPC
@@ -89,8 +90,13 @@ def test_the_ensemble_graph_predicts_what_the_torch_ensemble_does():
 
 @pytest.mark.slow
 def test_export_writes_the_planner_and_checks_it_served_against_in_process(exported):
-    assert sorted(p.name for p in exported.iterdir()) == ["controller.json", "ensemble.onnx", "planner.npz"]
+    files = ["controller.json", "ensemble.onnx", "planner.npz", "rollout.onnx"]
+    assert sorted(p.name for p in exported.iterdir()) == files
     c = Contract.read(exported).data
+    rollout = c["onnx"]["rollout"]  # the horizon in one call, which the served planner runs (checked: the same plans)
+    assert (rollout["file"], rollout["horizon"], rollout["n_temps"]) == ("rollout.onnx", 8, 2)
+    served = PlannerRuntime(exported, Contract.read(exported)).planner.forward.rollout(8, 2)
+    assert served is not None and served.graph == (exported / "rollout.onnx").read_bytes()
     assert c["kind"] == "planner" and c["format"] == 2 and c["policy"]["algorithm"] == "mpc"
     assert c["export_check"]["decisions"] == 48 and c["export_check"]["max_abs_diff"] <= 1e-5
     assert [v["name"] for v in c["forecast"]["variables"]] == list(WEATHER) and c["forecast"]["steps"] == 8

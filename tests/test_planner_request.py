@@ -78,3 +78,48 @@ def test_a_contract_without_a_later_setting_plans_with_mpc_settings_default():
                              "disagreement_weight"}  # fmt: skip
     assert PlannerSettings.of(required) == PlannerSettings.of(mpc)
     assert PlannerSettings.of({**vars(mpc), "unknown": 1}) == PlannerSettings.of(mpc)  # other keys ignored
+
+
+def _ensemble(members: int = 3, n_in: int = S + 2 * A + X, hidden: int = 16, seed: int = 0):
+    from parallel_eplus.learning.model_based.runtime.ensemble_graph import EnsembleArrays
+
+    rng = np.random.default_rng(seed)
+    sizes = [n_in, hidden, hidden, S]
+    pairs = zip(sizes[:-1], sizes[1:], strict=True)
+    weights = [rng.normal(0, 0.5, (members, a, b)).astype(np.float32) for a, b in pairs]
+    biases = [rng.normal(0, 0.1, (members, 1, b)).astype(np.float32) for b in sizes[1:]]
+    return EnsembleArrays(weights, biases, rng.normal(0, 1, n_in), rng.uniform(0.5, 2, n_in),
+                          rng.normal(0, 0.1, S), rng.uniform(0.1, 1, S))  # fmt: skip
+
+
+@pytest.mark.parametrize("horizon", [1, H])
+def test_the_rollout_graph_gives_the_numbers_of_a_forward_per_step_and_the_same_plans(horizon):
+    """One call of the rollout graph per CEM iteration (ensemble_graph.py `build_rollout`) is the forward stepped
+    over the horizon with the state carried in numpy, to the last bit: the same costs and plans, with a reference,
+    energy weights, demand charges, each member's cost (`consensus`) and the worst member's comfort."""
+    from parallel_eplus.learning.model_based.runtime.ensemble_graph import OnnxEnsemble, build_graph, build_rollout
+
+    arrays = _ensemble()
+    forward = OnnxEnsemble(build_graph(arrays), {(horizon, K): build_rollout(arrays, horizon, K)})
+    rollout = forward.rollout(horizon, K)
+    assert rollout is not None
+    settings = PlannerSettings(horizon=horizon, candidates=24, iterations=2, elites=6, max_increment=0.15,
+                               init_std=0.1, disagreement_weight=0.2, comfort_risk="worst", terminal_weight=1.0,
+                               consensus=True, min_saving=0.01)  # fmt: skip
+    graph = Planner(forward, 3, K, settings, 0.5, 1e-3)
+    stepped = Planner(lambda x: forward(x), 3, K, settings, 0.5, 1e-3)  # no `rollout`: a forward per step
+    rng = np.random.default_rng(3)
+    request = PlanRequest(
+        state=rng.uniform(20, 24, (W, S)), last_action=rng.uniform(-0.5, 0.5, (W, A)),
+        exogenous=rng.normal(0, 1, (W, horizon, X)), applies=np.ones((W, horizon)),
+        bounds=np.tile([21.0, 25.0], (W, horizon, K, 1)), comfort_weight=10.0, support=(-np.ones(A), np.ones(A)),
+        warm=rng.normal(0, 0.05, (W, horizon, A)), seeds=[1, 2], energy_weights=rng.uniform(0.5, 2, (W, horizon, 3)),
+        reference=rng.uniform(-0.5, 0.5, (W, horizon, A)), follows=np.array([True, True, False]),
+        demand=DemandOutlook(rng.uniform(0, 5, (W, horizon, 2)), rng.uniform(0, 1, (W, horizon, 2)), 1, 0.1),
+    )  # fmt: skip
+    actions = np.clip(rng.normal(0, 0.5, (W, 7, horizon, A)), -1, 1).astype(np.float32)
+    assert np.array_equal(graph._rollout(request.state, request.last_action, actions, request.exogenous),
+                          stepped._rollout(request.state, request.last_action, actions, request.exogenous))  # fmt: skip
+    a, b = graph.plan(request), stepped.plan(request)
+    for name in ("action", "increments", "cost", "spread_k"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name

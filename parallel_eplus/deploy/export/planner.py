@@ -1,12 +1,13 @@
 """`parallel-eplus export runs/<mpc-run>`: a model-based planner as files a server runs without torch or EnergyPlus.
 
 Written: ensemble.onnx (every member's one-step prediction for a batch of candidates, ensemble_graph.py),
-planner.npz (the action support, the comfort calendar, the normalizers, and the building's own setpoints at every
-step of a year for the fallback, own_setpoints.py) and controller.json (the contract: readings, setpoints, the last
-setpoints and the forecast block a request carries, a first request the planner answers (`example`), the planner's
-settings, the fallback's thresholds, provenance). The own setpoints come from a year of the building's own controls
-on the planner's training weathers, made here (a minute or two), whatever the run trained on: the schedules are
-the building's, not the run's. On that record the members' disagreement about the coming step is calibrated
+rollout.onnx (the same forward over the planner's horizon in one call, `build_rollout`), planner.npz (the action
+support, the comfort calendar, the normalizers, and the building's own setpoints at every step of a year for the
+fallback, own_setpoints.py) and controller.json (the contract: readings, setpoints, the last setpoints and the
+forecast block a request carries, a first request the planner answers (`example`), the planner's settings, the
+fallback's thresholds, provenance). The own setpoints come from a year of the building's own controls on the
+planner's training weathers, made here (a minute or two), whatever the run trained on: the schedules are the
+building's, not the run's. On that record the members' disagreement about the coming step is calibrated
 (`max_step_spread_k`: twice the largest on it), and the contract's first setpoints (`outputs[].initial`) are ones
 the model has seen. Before anything is final, the served planner (planner_runtime.py) answers sampled decisions of
 that run and must give exactly the in-process planner's setpoints.
@@ -32,7 +33,13 @@ from parallel_eplus.buildings.scaling import to_unit
 from parallel_eplus.buildings.weather.forecast import WEATHER, WEATHER_UNITS
 from parallel_eplus.deploy.serve.contract import CONTRACT_FILE, Contract, output_entries, sensor_entries
 from parallel_eplus.deploy.serve.own_setpoints import own_table
-from parallel_eplus.deploy.serve.planner_runtime import ENSEMBLE_FILE, PLANNER_ARRAYS, PlannerRuntime, calendar_arrays
+from parallel_eplus.deploy.serve.planner_runtime import (
+    ENSEMBLE_FILE,
+    PLANNER_ARRAYS,
+    ROLLOUT_FILE,
+    PlannerRuntime,
+    calendar_arrays,
+)
 from parallel_eplus.deploy.serve.served_rule import rule_entry
 from parallel_eplus.learning.model_based.runtime.ensemble_graph import INPUT, OUTPUT
 from parallel_eplus.learning.model_based.runtime.features import step_times
@@ -77,7 +84,7 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
     served planner reads the one each request carries). `progress`: a progress bar while recording."""
     from parallel_eplus.learning.model_based.control.mpc import MPC
     from parallel_eplus.learning.model_based.control.saved_planner import PlannerOptions
-    from parallel_eplus.learning.model_based.runtime.ensemble_graph import build_graph
+    from parallel_eplus.learning.model_based.runtime.ensemble_graph import build_graph, build_rollout
 
     saved_path = source.parent / "config.json"
     saved = json.loads(saved_path.read_text()) if saved_path.is_file() else {}
@@ -100,6 +107,8 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
     out_dir.mkdir(parents=True, exist_ok=True)
     arrays = mpc.model.arrays()
     io.write_bytes(out_dir / ENSEMBLE_FILE, build_graph(arrays))
+    n_temps = len(mpc.layout.temperatures)
+    io.write_bytes(out_dir / ROLLOUT_FILE, build_rollout(arrays, mpc.settings.horizon, n_temps))
     with io.atomic_path(out_dir / PLANNER_ARRAYS) as tmp, open(tmp, "wb") as f:
         np.savez(f, support_low=mpc.support[0], support_high=mpc.support[1], **own, x_mean=arrays.x_mean,
                  x_std=arrays.x_std, **calendar_arrays(mpc.comfort_times))  # fmt: skip
@@ -114,7 +123,11 @@ def export_planner(source: Path, out_dir: Path, workers: int = 2, max_input_z: f
         "format": PLANNER_FORMAT,
         "kind": "planner",
         "onnx": {"file": ENSEMBLE_FILE, "input": INPUT, "output": OUTPUT, "sha256": _sha256(out_dir / ENSEMBLE_FILE),
-                 "meaning": "[members, batch, inputs] -> [members, batch, targets], physical units"},  # fmt: skip
+                 "meaning": "[members, batch, inputs] -> [members, batch, targets], physical units",
+                 "rollout": {"file": ROLLOUT_FILE, "sha256": _sha256(out_dir / ROLLOUT_FILE),
+                             "horizon": mpc.settings.horizon, "n_temps": n_temps,
+                             "meaning": "the planner's horizon of the same forward in one call (state, last "
+                             "action, actions, exogenous -> each member's state after each step)"}},  # fmt: skip
         "arrays": {"file": PLANNER_ARRAYS, "sha256": _sha256(out_dir / PLANNER_ARRAYS)},
         "inputs": inputs,
         "time": {"required": True, "meaning": "the building's local date and time at the start of the step the "

@@ -25,7 +25,7 @@ import numpy as np
 
 from parallel_eplus.buildings.scaling import from_unit, to_unit
 from parallel_eplus.buildings.weather.forecast import WEATHER
-from parallel_eplus.deploy.serve.contract import Contract, InputError
+from parallel_eplus.deploy.serve.contract import Contract, InputError, verified_file
 from parallel_eplus.deploy.serve.own_setpoints import OwnSetpoints
 from parallel_eplus.learning.model_based.runtime.calendar import Calendar, own_reference
 from parallel_eplus.learning.model_based.runtime.demand import DemandCharges, DemandOutlook
@@ -47,6 +47,7 @@ log = logging.getLogger("parallel_eplus.deploy.planner")
 
 PLANNER_ARRAYS = "planner.npz"
 ENSEMBLE_FILE = "ensemble.onnx"
+ROLLOUT_FILE = "rollout.onnx"  # the ensemble over the planner's horizon in one call (a contract before it has none)
 # What the weather can be anywhere on Earth: a forecast value outside is refused, naming it (the records: -89.2 °C,
 # 56.7 °C; the sun gives at most ~1361 W/m2 above the atmosphere, a little more on the ground under broken clouds).
 FORECAST_LIMITS = {"outdoor_drybulb_c": (-90.0, 60.0), "outdoor_rh_pct": (0.0, 100.0),
@@ -62,7 +63,10 @@ class PlannerRuntime:
         arrays = dict(np.load(Path(directory) / PLANNER_ARRAYS))
         self.layout = Layout(**{k: tuple(v) if isinstance(v, list) else v for k, v in p["layout"].items()})
         self.settings = PlannerSettings.of(p["settings"])  # a field an older contract lacks: its default
-        forward = OnnxEnsemble((Path(directory) / contract.data["onnx"]["file"]).read_bytes())
+        rollout = contract.data["onnx"].get("rollout")
+        rollouts = None if not rollout else {(rollout["horizon"], rollout["n_temps"]): verified_file(
+            directory, rollout, "rollout graph").read_bytes()}  # fmt: skip
+        forward = OnnxEnsemble((Path(directory) / contract.data["onnx"]["file"]).read_bytes(), rollouts)
         self.planner = Planner(forward, forward.members, len(self.layout.temperatures), self.settings,
                                p["margin_c"], p["power_weight"])  # fmt: skip
         self.comfort_weight, self.seed, self.step_minutes = p["comfort_weight"], p["seed"], p["step_minutes"]

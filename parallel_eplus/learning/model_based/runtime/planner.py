@@ -2,9 +2,9 @@
 
 For every worker at once: `candidates` sequences of `horizon` increments (each within ±`max_increment` of the
 normalized action, the action itself within the data's support) are rolled out through every member of the
-ensemble in one call per horizon step (ensemble_graph.py), scored, and the best `elites` refit the sampling
-distribution, `iterations` times; the best sequence's first action is applied and the rest (`Plan.increments`)
-warm-starts the next step's search.
+ensemble, the whole horizon in one call (ensemble_graph.py `build_rollout`), scored, and the best `elites` refit
+the sampling distribution, `iterations` times; the best sequence's first action is applied and the rest
+(`Plan.increments`) warm-starts the next step's search.
 
 The cost of a step (`Planner._add_step_cost`, the one place it is written; students/through_model.py has it in
 torch for the gradient, term for term) is the spec's energy term (every fuel, times the reward's `power_weight`:
@@ -315,41 +315,31 @@ class Planner:
         if reference is not None:
             actions = np.concatenate([actions, reference[:, None]], axis=1)
         w, n, h, a_n = actions.shape
-        e, k, ns, b = self.members, self.n_temps, s.shape[1], w * n
-        x0, x1 = ns + 2 * a_n, ns + 2 * a_n + exo.shape[2]
-        inputs = np.empty((e, w, n, x1), np.float32)  # one row layout: dataset.py's
-        inputs[..., :ns] = s[None, :, None]
-        inputs[..., ns : ns + a_n] = a_last[None, :, None]
-        flat = inputs.reshape(e, b, x1)
-        lo = np.repeat(r.bounds[..., 0] + self.margin, n, axis=0)  # [W*N, H, K]
-        hi = np.repeat(r.bounds[..., 1] - self.margin, n, axis=0)
-        applied = np.repeat(r.applies, n, axis=0) * (r.comfort_weight / self.margin / k)  # [W*N, H]
-        cost, worst = np.zeros((e, b) if members else b, np.float32), np.zeros(b, np.float32)
-        weights = None if r.energy_weights is None else np.repeat(np.asarray(r.energy_weights, np.float32), n, axis=0)
+        e, k, b = self.members, self.n_temps, w * n
+        states = self._rollout(s, a_last, actions, exo)  # [H, E, S, W*N]
+        # each step's bounds, where the band applies and the energy weights, the candidates last: [H, ..., W*N]
+        lo = np.repeat((r.bounds[..., 0] + self.margin).transpose(1, 2, 0), n, axis=-1)  # [H, K, W*N]
+        hi = np.repeat((r.bounds[..., 1] - self.margin).transpose(1, 2, 0), n, axis=-1)
+        applied = np.repeat(r.applies.T, n, axis=-1) * (r.comfort_weight / self.margin / k)  # [H, W*N]
+        weights = None
+        if r.energy_weights is not None:  # [H, P, W*N]
+            weights = np.repeat(np.asarray(r.energy_weights, np.float32).transpose(1, 2, 0), n, axis=-1)
+        terms = self._step_terms(states[:, :, k:], states[:, :, :k], lo, hi, applied, self._terminal(h),
+                                 weights=weights, reference_every=None if reference is None else n,
+                                 members=members)  # fmt: skip
+        cost = np.zeros((e, b) if members else b, np.float32)
+        for step in range(h):  # in the order a step at a time adds them (`_add_step_cost`)
+            for term in terms[:3]:
+                if term is not None:
+                    cost += term[step]
+        worst = np.zeros(b, np.float32) if terms[3] is None else terms[3].max(-2).max(0)
         if demand is not None:  # [W*N, H, C]; the rise above the running peak so far, kW [W*N, C]
             d_prices, d_running = (
                 np.repeat(np.asarray(v, np.float32), n, axis=0) for v in (demand.prices, demand.running)
             )
-            rise = np.zeros((b, d_prices.shape[2]), np.float32)
-        for step in range(h):
-            inputs[..., ns + a_n : x0] = actions[:, :, step]
-            inputs[..., x0:] = exo[None, :, None, step]
-            out = self.forward(flat)  # [E, W*N, ns]
-            temps = flat[:, :, :k] + out[:, :, :k]
-            if demand is not None:
-                kw = out[:, :, k + demand.part].sum(0) * (1 / e / 1000)  # [W*N]
-                above = np.where(d_prices[:, step] > 0, kw[:, None] - d_running[:, step], 0.0)
-                np.maximum(rise, above, out=rise)
-            sd = self._add_step_cost(cost, out, temps, lo[:, step], hi[:, step], applied[:, step], last=step == h - 1,
-                                     weights=None if weights is None else weights[:, step],
-                                     reference_every=None if reference is None else n)  # fmt: skip
-            if sd is not None:
-                np.maximum(worst, sd.max(-1), out=worst)
-            if step + 1 < h:  # the next step's state and last action
-                flat[:, :, :k] = temps
-                flat[:, :, k:ns] = out[:, :, k:]
-                inputs[..., ns : ns + a_n] = actions[:, :, step]
-        if demand is not None:
+            kw = states[:, :, k + demand.part].sum(1) * (1 / e / 1000)  # [H, W*N]
+            above = np.where(d_prices > 0, kw.T[:, :, None] - d_running, 0.0)  # [W*N, H, C]
+            rise = np.maximum(above.max(1), 0)
             cost += (rise * d_prices.max(axis=1)).sum(-1) * (demand.per_dollar * self.power_weight)
         if members:
             return cost.reshape(e, w, n)[:, :, :-1] if reference is not None else cost.reshape(e, w, n)
@@ -357,47 +347,109 @@ class Planner:
             return cost.reshape(w, n)[:, :-1], worst.reshape(w, n)[:, :-1]
         return cost.reshape(w, n), worst.reshape(w, n)
 
+    def _terminal(self, h: int) -> np.ndarray:
+        """[H, 1]: each step's comfort factor, 1 + `terminal_weight` on the horizon's last."""
+        factor = np.ones((h, 1), np.float32)
+        factor[-1] = 1 + self.settings.terminal_weight
+        return factor
+
+    def _rollout(self, s: np.ndarray, a_last: np.ndarray, actions: np.ndarray, exo: np.ndarray) -> np.ndarray:
+        """[H, E, S, W*N]: each member's state after each step of the candidates' `actions` [W, N, H, A] from `s`
+        [W, S] (each worker's, the same for its N candidates) after `a_last` [W, A], with `exo` [W, H, X]: the zone
+        temperatures plus the predicted changes, then the predicted energy parts. One call of the forward's rollout
+        graph (ensemble_graph.py `build_rollout`) where it has one, else a call of the forward per step; the same
+        numbers either way."""
+        w, n, h, a_n = actions.shape
+        e, k, ns, b = self.members, self.n_temps, s.shape[1], w * n
+        rollout = getattr(self.forward, "rollout", None)
+        rollout = rollout and rollout(h, k)
+        steps = np.ascontiguousarray(actions.transpose(2, 0, 1, 3)).reshape(h, b, a_n)  # [H, W*N, A]
+        exo_rows = np.repeat(np.asarray(exo, np.float32).swapaxes(0, 1), n, axis=1)  # [H, W*N, X]
+        if rollout is not None:
+            return rollout(np.repeat(s, n, axis=0), np.repeat(a_last, n, axis=0), steps, exo_rows)
+        x0, x1 = ns + 2 * a_n, ns + 2 * a_n + exo.shape[2]
+        flat = np.empty((e, b, x1), np.float32)  # one row layout: dataset.py's
+        flat[..., :ns] = np.repeat(s, n, axis=0)
+        flat[..., ns : ns + a_n] = np.repeat(a_last, n, axis=0)
+        states = np.empty((h, e, ns, b), np.float32)
+        for step in range(h):
+            flat[..., ns + a_n : x0] = steps[step]
+            flat[..., x0:] = exo_rows[step]
+            out = self.forward(flat)  # [E, W*N, ns]
+            flat[..., :k] += out[..., :k]  # the next step's state and last action
+            flat[..., k:ns] = out[..., k:]
+            flat[..., ns : ns + a_n] = steps[step]
+            states[step] = flat[..., :ns].swapaxes(1, 2)
+        return states
+
     def _add_step_cost(self, cost: np.ndarray, out: np.ndarray, temps: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                        applied: np.ndarray, *, last: bool, weights: np.ndarray | None,
                        reference_every: int | None) -> np.ndarray | None:  # fmt: skip
-        """One step's cost, the one place it is written (the module's docstring says why each term): added to
-        `cost` [B], the members' together, or [E, B], each member's. From the members' predictions `out` [E, B,
-        targets] (the energy parts after the `n_temps` temperature changes) and zone temperatures `temps` [E, B, K]:
+        """One step's cost (`_step_terms`), added to `cost` [B], the members' together, or [E, B], each member's,
+        from the members' predictions `out` [E, B, targets] (the energy parts after the `n_temps` temperature
+        changes) and zone temperatures `temps` [E, B, K], the bounds `lo`, `hi` [B, K], `applied` [B] and `weights`
+        [B, P]; `last`: the horizon's last step. Returns the spread [B, K] (None with one member)."""
+        factor = np.float32(1 + self.settings.terminal_weight if last else 1)
+        t = functools.partial(np.swapaxes, axis1=-1, axis2=-2)  # the candidates last, as `_step_terms` reads them
+        terms = self._step_terms(t(out[..., self.n_temps :]), t(temps), t(lo), t(hi), applied, factor,
+                                 weights=None if weights is None else t(weights), reference_every=reference_every,
+                                 members=cost.ndim == 2)  # fmt: skip
+        for term in terms[:3]:
+            if term is not None:
+                cost += term
+        return None if terms[3] is None else t(terms[3])
 
-        - energy: every predicted part, each times its weight this step (`weights` [B, P]; None: 1), times
+    def _step_terms(self, parts: np.ndarray, temps: np.ndarray, lo: np.ndarray, hi: np.ndarray, applied: np.ndarray,
+                    factor: np.ndarray, *, weights: np.ndarray | None, reference_every: int | None,
+                    members: bool) -> tuple:  # fmt: skip
+        """A step's cost, the one place it is written (the module's docstring says why each term), as its three terms
+        (energy, comfort, disagreement: each [..., B], the members' together, or [..., E, B], each member's; the
+        last None with one member) and the members' spread [..., K, B] (None with one member). For one step or for
+        every step at once (a leading step axis "..." on every array), the candidates last: from the members'
+        predicted energy parts `parts` [..., E, P, B] and zone temperatures `temps` [..., E, K, B]:
+
+        - energy: every predicted part, each times its weight this step (`weights` [..., P, B]; None: 1), times
           `power_weight`; the members' mean;
-        - comfort: the K beyond each zone's bounds shrunk by the margin (`lo`, `hi` [B, K]), summed over zones, times
-          `applied` [B] (where the band applies, times comfort_weight / margin / K), times 1 + `terminal_weight` on
-          the horizon's `last` step; the members' mean, or with `comfort_risk = "worst"` the worst member's. With a
-          reference (the last of every `reference_every` candidates), only what a member's prediction has beyond
-          its own on the reference;
+        - comfort: the K beyond each zone's bounds shrunk by the margin (`lo`, `hi` [..., K, B]), summed over zones,
+          times `applied` [..., B] (where the band applies, times comfort_weight / margin / K), times `factor` (1, or
+          1 + `terminal_weight` on the horizon's last step; [..., 1]); the members' mean, or with `comfort_risk =
+          "worst"` the worst member's. With a reference (the last of every `reference_every` candidates), only what
+          a member's prediction has beyond its own on the reference;
         - disagreement: the members' spread (standard deviation) of each zone temperature, summed over zones, times
           `disagreement_weight`; the same for each member.
 
-        Returns the spread [B, K] (None with one member). Sums, not means, over the members: numpy's mean costs
-        more per call. students/through_model.py `Rollouts.cost` is this step in torch, term for term."""
-        e, k, members = self.members, self.n_temps, cost.ndim == 2
+        Sums, not means, over the members: numpy's mean costs more per call; sums over parts and zones in the order
+        numpy sums a row (`_row_sum`). students/through_model.py `Rollouts.cost` is this step in torch, term for
+        term."""
+        e = self.members
         if members:
-            parts = out[:, :, k:] if weights is None else out[:, :, k:] * weights[None]
-            cost += parts.sum(-1) * self.power_weight
+            energy = _row_sum(parts if weights is None else parts * weights[..., None, :, :]) * self.power_weight
         elif weights is None:
-            cost += out[:, :, k:].sum(axis=(0, 2)) * (self.power_weight / e)
+            energy = _row_sum(parts).sum(-2) * (self.power_weight / e)
         else:
-            cost += (out[:, :, k:].sum(0) * weights).sum(-1) * (self.power_weight / e)
-        over = np.maximum(lo - temps, temps - hi)
+            energy = _row_sum(parts.sum(-3) * weights) * (self.power_weight / e)
+        over = np.maximum(lo[..., None, :, :] - temps, temps - hi[..., None, :, :])
         np.maximum(over, 0, out=over)
         if reference_every is not None:  # beyond the reference's, per member and zone (no credit for beating it)
-            rows = over.reshape(e, -1, reference_every, k)
-            over = np.maximum(rows - rows[:, :, -1:], 0).reshape(e, -1, k)
-        over = over.sum(-1)  # [E, B]
-        weight = applied * (1 + self.settings.terminal_weight if last else 1)
+            rows = over.reshape(*over.shape[:-1], -1, reference_every)
+            over = np.maximum(rows - rows[..., -1:], 0).reshape(over.shape)
+        over = _row_sum(over)  # [..., E, B]
+        weight = applied * factor
         if members:
-            cost += over * weight
+            comfort = over * weight[..., None, :]
         else:
-            cost += (over.max(0) if self.settings.comfort_risk == "worst" else over.sum(0) * (1 / e)) * weight
+            comfort = (over.max(-2) if self.settings.comfort_risk == "worst" else over.sum(-2) * (1 / e)) * weight
         if e == 1:
-            return None
-        centred = temps - temps.sum(0) * (1 / e)
-        sd = np.sqrt((centred * centred).sum(0) * (1 / (e - 1)))  # [B, K]
-        cost += sd.sum(-1) * self.settings.disagreement_weight
-        return sd
+            return energy, comfort, None, None
+        centred = temps - temps.sum(-3, keepdims=True) * (1 / e)
+        sd = np.sqrt((centred * centred).sum(-3) * (1 / (e - 1)))  # [..., K, B]
+        spread = _row_sum(sd) * self.settings.disagreement_weight
+        return energy, comfort, spread[..., None, :] if members else spread, sd
+
+
+def _row_sum(x: np.ndarray) -> np.ndarray:
+    """`x` [..., R, B] summed over R, in the order numpy sums a row of R numbers (`sum(-1)` of [..., B, R]): one
+    after the other below 8, pairwise from 8 (where it needs the copy)."""
+    if x.shape[-2] < 8:
+        return x.sum(-2)
+    return np.ascontiguousarray(np.swapaxes(x, -1, -2)).sum(-1)
