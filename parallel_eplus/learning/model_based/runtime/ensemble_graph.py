@@ -140,8 +140,8 @@ def build_rollout(arrays: EnsembleArrays, horizon: int, n_temps: int) -> bytes:
     state, outs = op("Expand", [start, members_by]), []  # [E, S, B]
     for t in range(horizon):
         row = op("Gather", [rest, const(f"t{t}", t, np.int64)], axis=0)  # [2A + X, B]
-        if t == 0:
-            x = op("Expand", [op("Concat", [first, row], axis=0), members_by])
+        if t == 0:  # [D, B], the same for every member: the first layer's product broadcasts it
+            x = op("Concat", [first, row], axis=0)
         else:
             x = op("Concat", [op("Div", [op("Sub", [state, s_mean]), s_std]), op("Expand", [row, members_by])], axis=1)
         for i in range(len(arrays.weights)):  # every member's dense layer at once: Wᵀ·x + b

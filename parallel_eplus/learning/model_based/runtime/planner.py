@@ -428,7 +428,8 @@ class Planner:
             energy = _row_sum(parts).sum(-2) * (self.power_weight / e)
         else:
             energy = _row_sum(parts.sum(-3) * weights) * (self.power_weight / e)
-        over = np.maximum(lo[..., None, :, :] - temps, temps - hi[..., None, :, :])
+        over = lo[..., None, :, :] - temps  # in place from here: fewer arrays made per call
+        np.maximum(over, temps - hi[..., None, :, :], out=over)
         np.maximum(over, 0, out=over)
         if reference_every is not None:  # beyond the reference's, per member and zone (no credit for beating it)
             rows = over.reshape(*over.shape[:-1], -1, reference_every)
@@ -442,7 +443,8 @@ class Planner:
         if e == 1:
             return energy, comfort, None, None
         centred = temps - temps.sum(-3, keepdims=True) * (1 / e)
-        sd = np.sqrt((centred * centred).sum(-3) * (1 / (e - 1)))  # [..., K, B]
+        sd = np.multiply(centred, centred, out=centred).sum(-3)
+        np.sqrt(np.multiply(sd, 1 / (e - 1), out=sd), out=sd)  # [..., K, B]
         spread = _row_sum(sd) * self.settings.disagreement_weight
         return energy, comfort, spread[..., None, :] if members else spread, sd
 
