@@ -43,6 +43,7 @@ RAY_TESTS = (
     "tests/test_evaluate.py::test_a_ray_evaluations_bar_moves_within_its_episodes",
     "tests/test_evaluate.py::test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder",
     "tests/test_model_based.py::test_the_ray_backend_runs_the_planner_too",
+    "tests/test_optimize.py::test_a_portfolio_on_ray",
     "tests/test_overlap.py::test_overlapped_batches_hold_every_workers_steps_once_in_order_with_their_costs",
     "tests/test_registry.py::",
     "tests/test_rllib.py::",

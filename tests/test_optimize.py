@@ -5,6 +5,7 @@ naming every candidate and either an exported controller or the do-no-harm answe
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -15,6 +16,8 @@ import pandas as pd
 import pytest
 
 from parallel_eplus.buildings.resources import model_file
+
+from .conftest import _started_by_us
 
 pytestmark = pytest.mark.slow
 
@@ -77,3 +80,43 @@ def test_optimize_is_interrupted_resumes_and_answers(tmp_path):
         assert "**Chosen: own controls.**" in report and not (out / "controller").exists()
     else:
         assert json.loads((out / "controller" / "controller.json").read_text())
+
+
+def _our_ray() -> list[str]:
+    """Ray's processes this test session started that are still alive."""
+    out = subprocess.run(["pgrep", "-af", "gcs_server|raylet|ray::"], capture_output=True, text=True).stdout
+    return [ln[:120] for ln in out.splitlines() if ln.strip() and _started_by_us(ln.split()[0])]
+
+
+def test_a_portfolio_on_ray_answers_each_building_reports_a_broken_one_and_stops_on_ctrl_c(tmp_path, no_leaks):
+    """`optimize A B C --ray local`: one Ray task per building. A finished building (the committed portfolio's
+    restaurant) is answered from its folder, a broken model is a row saying why, and a Ctrl-C while a third building
+    prepares stops its stage, ends the Ray it started and leaves the folder for a rerun."""
+    out = tmp_path / "portfolio"
+    root = Path(__file__).resolve().parents[1]
+    shutil.copytree(root / "results" / "optimize" / "full-service-restaurant", out / "full-service-restaurant")
+    broken = tmp_path / "broken.idf"
+    broken.write_text("Version,25.2;\nNot:AnObject, at all;\n")
+    models = [model_file(f"RefBldg{name}New2004_Chicago.idf") for name in ("FullServiceRestaurant", "SmallOffice")]
+    cmd = [sys.executable, "-m", "parallel_eplus.cli", "optimize", str(models[0]), str(broken), "--out", str(out),
+           "--ray", "local", "--workers", "2", "--quiet"]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 1, (done.stdout + done.stderr)[-3000:]  # one building could not be finished
+    summary = (out / "summary.md").read_text()
+    assert "| full-service-restaurant | own controls |" in summary and "| broken | not finished: preparing" in summary
+    assert "2 buildings placed" in done.stderr
+
+    proc = subprocess.Popen([*cmd[:5], str(models[1]), *cmd[6:]], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)  # fmt: skip
+    lines = []
+    for line in proc.stdout:  # the office's first stage under way on a Ray worker
+        lines.append(line)
+        if "small-office: prepare" in line:
+            break
+    time.sleep(2)
+    proc.send_signal(signal.SIGINT)
+    log = "".join(lines) + proc.communicate(timeout=600)[0]
+    assert proc.returncode == 130, log[-3000:]
+    assert "stopping 1 buildings' stages" in log
+    assert _status(out / "small-office").get("stages", {}).get("prepare", {}).get("state") != "done"
+    assert not _our_ray()  # the Ray it started, ended

@@ -71,8 +71,9 @@ def add_optimize(sub) -> argparse.ArgumentParser:
                     "warm-up) instead of BOPTEST's periods (no year runs), 2-day training episodes, 600 training "
                     "steps of a smaller planner search; the report says so")  # fmt: skip
     op.add_argument("--ray", metavar="ADDRESS",
-                    help="not built yet: placing the buildings on a Ray cluster is left for later (they run one "
-                    "after the other here)")  # fmt: skip
+                    help="run the buildings at once as Ray tasks, --workers cores each, on the cluster at ADDRESS "
+                    "(`local`: a Ray of this machine's cores); --out must be a folder every node sees at the same "
+                    "path")  # fmt: skip
     op.add_argument("--quiet", action="store_true", help="no progress bars")
     op.set_defaults(func=cmd_optimize)
     return op
@@ -81,9 +82,6 @@ def add_optimize(sub) -> argparse.ArgumentParser:
 def cmd_optimize(args: argparse.Namespace) -> int:
     from parallel_eplus.optimize import OptimizeSettings, run_optimize
 
-    if args.ray:
-        raise ValueError("--ray is not built yet: run the buildings here (one after the other), or one optimize per "
-                         "machine with its own --out")  # fmt: skip
     settings = OptimizeSettings(
         weathers=args.weathers, held_out=args.held_out, scenarios=args.scenarios, scenario_days=args.scenario_days,
         quick=args.quick, objective=args.objective, preset=args.preset, timesteps=args.timesteps,
@@ -93,7 +91,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         from parallel_eplus.presets.catalog import load_preset
 
         load_preset(settings.preset)  # an unknown name fails here, listing the presets
-    return run_optimize(args.sources, args.out, settings, show=not args.quiet)
+    return run_optimize(args.sources, args.out, settings, show=not args.quiet, ray_address=args.ray)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,6 +1,6 @@
 """One building or several: a single model or spec is optimized in DIR itself; several (or a folder of them) each in
 DIR/<name>/, one after the other, a failed one reported and the next one started, then DIR/summary.md tables every
-building's answer. (Placing the buildings on a Ray cluster, `--ray ADDRESS`, is not built yet.)"""
+building's answer. With `ray_address`, the buildings run at once as Ray tasks (placement.py) instead."""
 
 from __future__ import annotations
 
@@ -49,9 +49,16 @@ def folders_for(sources: list[Path], out: Path) -> list[BuildingFolder]:
     return folders
 
 
-def run_optimize(arguments: list[str], out: Path, settings: OptimizeSettings, show: bool = True) -> int:
-    """Optimize every building named; 0 when each has its answer, 1 when one could not be finished."""
+def run_optimize(
+    arguments: list[str], out: Path, settings: OptimizeSettings, show: bool = True, ray_address: str | None = None
+) -> int:
+    """Optimize every building named (on the Ray cluster at `ray_address`, "local" for this machine's); 0 when each
+    has its answer, 1 when one could not be finished."""
     folders = folders_for(sources_of(arguments), Path(out).resolve())
+    if ray_address:
+        from parallel_eplus.optimize.placement import optimize_on_ray
+
+        return _finish(optimize_on_ray(folders, settings, ray_address), folders, out, settings)
     rows = []
     for i, folder in enumerate(folders):
         if len(folders) > 1:
@@ -67,6 +74,10 @@ def run_optimize(arguments: list[str], out: Path, settings: OptimizeSettings, sh
                 raise
             log.error("%s: %s", folder.name, e)
             rows.append({"building": folder.name, "chosen": "", "why": str(e), "folder": folder.root})
+    return _finish(rows, folders, out, settings)
+
+
+def _finish(rows: list[dict], folders: list[BuildingFolder], out: Path, settings: OptimizeSettings) -> int:
     if len(folders) > 1:
         write_summary(rows, Path(out).resolve(), settings)
     for r in rows:
