@@ -222,29 +222,45 @@ batch_size = {{ choice = [96, 192] }}
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])  # `runs stop`'s (Ray workers block it), kill's
-def test_a_signal_to_one_trial_stops_it_with_a_checkpoint_and_the_others_go_on(tmp_path, signum):
-    """What `parallel-eplus runs stop` does to a trial: a signal to the process that runs it."""
+def test_a_signal_to_one_trial_stops_it_with_a_checkpoint_and_the_others_go_on(tmp_path):
+    """What `parallel-eplus runs stop` does to a trial: a signal to the process that runs it. SIGINT (`runs stop`'s:
+    Ray workers block it) to the first long trial once it saved a checkpoint, SIGTERM (kill's) to the second; the
+    short one finishes. One sweep for both signals: its trials queue for the 2 cores, one at a time."""
     pipes_before = our_pipe_dirs()
-    spec = write_spec(tmp_path, 'name = "one"\n' + BASE + "[grid]\ntimesteps = [20000, 192]\n")
+    spec = write_spec(tmp_path, 'name = "one"\n' + BASE + "[grid]\ntimesteps = [20000, 20001, 192]\n")
     cmd = [sys.executable, "-m", "parallel_eplus.cli", "sweep", str(spec)]
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
-    checkpoints = tmp_path / "runs" / "one" / "timesteps-20000" / "checkpoints"
-    deadline = time.monotonic() + 180
-    while not list(checkpoints.glob("model_*_steps.zip")) and time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.5)
-    owners = {d.split("-")[2] for d in our_pipe_dirs() - pipes_before}  # parallel-eplus-<pid>-...: the trial's
-    assert len(owners) == 1 and proc.poll() is None, (owners, proc.poll())
-    os.kill(int(owners.pop()), signum)
+    long = ["timesteps-20000", "timesteps-20001"]
+    signals: dict[str, int] = {}
+    deadline = time.monotonic() + 360
+    while len(signals) < 2 and time.monotonic() < deadline and proc.poll() is None:
+        saved = [t for t in long if t not in signals and any(_checkpoints(tmp_path, t).glob("model_*_steps.zip"))]
+        if not saved:
+            time.sleep(0.5)
+            continue
+        owners = {d.split("-")[2] for d in our_pipe_dirs() - pipes_before}  # parallel-eplus-<pid>-...: the trial's
+        assert len(owners) == 1, owners  # one trial at a time on the 2 cores
+        owner, signum = owners.pop(), signal.SIGINT if not signals else signal.SIGTERM
+        os.kill(int(owner), signum)
+        signals[saved[0]] = signum
+        while any(d.split("-")[2] == owner for d in our_pipe_dirs()) and time.monotonic() < deadline:
+            time.sleep(0.5)  # until that trial's workers are gone
+    assert len(signals) == 2 and set(signals.values()) == {signal.SIGINT, signal.SIGTERM}, (signals, proc.poll())
     out, _ = proc.communicate(timeout=300)
     assert proc.returncode == 130, out  # a trial stopped: the sweep says how to continue it
     states = {ln.split()[0]: ln.split()[1] for ln in out.splitlines() if ln.startswith("timesteps-")}
-    assert states == {"timesteps-20000": "stopped", "timesteps-192": "finished"}, out
-    cut_at = max(int(p.stem.split("_")[1]) for p in checkpoints.glob("model_*_steps.zip"))
-    status = json.loads((checkpoints.parent / "status.json").read_text())  # saved on the stop (as above)
-    assert status["state"] == "stopped" and status["steps"] == cut_at, (status, out)
+    assert states == {"timesteps-20000": "stopped", "timesteps-20001": "stopped", "timesteps-192": "finished"}, out
+    for trial in long:
+        checkpoints = _checkpoints(tmp_path, trial)
+        cut_at = max(int(p.stem.split("_")[1]) for p in checkpoints.glob("model_*_steps.zip"))
+        status = json.loads((checkpoints.parent / "status.json").read_text())  # saved on the stop (as above)
+        assert status["state"] == "stopped" and status["steps"] == cut_at, (trial, status, out)
     assert our_processes() == [] and our_pipe_dirs() - pipes_before == set()
+
+
+def _checkpoints(tmp_path: Path, trial: str) -> Path:
+    return tmp_path / "runs" / "one" / trial / "checkpoints"
 
 
 @pytest.mark.slow
