@@ -76,6 +76,10 @@ def test_optimize_is_interrupted_resumes_and_answers(tmp_path):
     assert (out / "savings.png").is_file() and (out / "typical-day.png").is_file()
     results = pd.read_csv(out / "results" / "quick.csv")
     assert set(results.candidate) == {"own", "learned"} and set(results.weather) == {"CA", "IL"}
+    answered = (out / "status.json").read_text(), report
+    third = subprocess.run(_command(out), capture_output=True, text=True, timeout=300)  # answered: nothing to do
+    assert third.returncode == 0 and "answered already" in third.stdout + third.stderr, third.stderr[-3000:]
+    assert ((out / "status.json").read_text(), (out / "report.md").read_text()) == answered
     if after["choice"]["chosen"] == "own":  # do no harm: nothing written, and the report says so
         assert "**Chosen: own controls.**" in report and not (out / "controller").exists()
     else:

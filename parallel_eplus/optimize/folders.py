@@ -97,6 +97,15 @@ class BuildingFolder:
     def done(self, name: str) -> bool:
         return self.stage(name).get("state") in ("done", "refused", "skipped")
 
+    def answered(self, budget_minutes: float) -> bool:
+        """Whether a rerun under this budget has nothing left to do: the report written under at least this budget
+        and no stage failed or unfinished (a failed one is tried again; a larger budget may train further)."""
+        stages = self.status().get("stages", {})
+        report = stages.get("report", {})
+        final = ("done", "refused", "skipped", "short")  # short: the same budget cannot fit it the next time either
+        return (report.get("state") == "done" and float(report.get("budget_minutes", -1.0)) >= budget_minutes
+                and all(s.get("state") in final for s in stages.values()))  # fmt: skip
+
     def set_stage(self, name: str, **fields) -> dict:
         """Merge `fields` into the stage's record (state: done, refused, skipped, failed, running)."""
         status = self.status()

@@ -51,6 +51,11 @@ def _check_settings(folder: BuildingFolder, settings: OptimizeSettings) -> None:
 
 def optimize_building(folder: BuildingFolder, settings: OptimizeSettings, show: bool = True) -> dict:
     _check_settings(folder, settings)
+    if folder.answered(settings.budget_minutes):  # nothing rewritten, no session counted
+        log.info("%s: answered already (%s)", folder.name, folder.report)
+        held = figures(read_results(folder.results), held_out=True)
+        metric = settings.metric(folder.stage("prepare")["kind"])
+        return _row(folder, choose(held, metric, weather_labels(settings.held_out)), held, metric)
     budget = Budget(folder, settings.budget_minutes)
     try:
         return _stages(folder, settings, budget, show)
@@ -107,7 +112,7 @@ def _stages(folder: BuildingFolder, settings: OptimizeSettings, budget: Budget, 
     day = _typical_day(folder, df, periods, settings, shown)
     pictures += [day] if day else []
     write_report(folder, settings, metric, train_f, held_f, choice, periods, pictures, notes)
-    folder.set_stage("report", state="done")
+    folder.set_stage("report", state="done", budget_minutes=settings.budget_minutes)
     log.info("%s: %s: %s (report: %s)", folder.name, choice.label, choice.reason, folder.report)
     return _row(folder, choice, held_f, metric)
 
