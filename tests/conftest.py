@@ -45,7 +45,6 @@ RAY_TESTS = (
     "tests/test_model_based.py::test_the_ray_backend_runs_the_planner_too",
     "tests/test_optimize.py::test_a_portfolio_on_ray",
     "tests/test_overlap.py::test_overlapped_batches_hold_every_workers_steps_once_in_order_with_their_costs",
-    "tests/test_registry.py::",
     "tests/test_rllib.py::",
     "tests/test_rollout.py::test_ray_actors_collect_the_batch_local_workers_collect",
     "tests/test_sweep.py::",
