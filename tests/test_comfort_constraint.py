@@ -16,6 +16,13 @@ from parallel_eplus.training.train import train
 from .test_train import scalars, small_config
 
 
+def _config(tmp_path, name: str, **overrides):
+    """The tests' short training: one weather (one template per worker to start, not one per weather), batches of
+    384 steps (one two-day episode per worker)."""
+    base = dict(weathers=["CA"], batch_size=384, timesteps=768, checkpoint_every=384)
+    return small_config(tmp_path, name, **(base | overrides))
+
+
 def test_the_multiplier_follows_what_each_batch_measured():
     """In log space, by the ratio of samples out of band to those the target allows: up while batches miss the
     target, down as fast when they beat it by as much, within its bounds."""
@@ -60,7 +67,7 @@ def test_the_cost_counts_the_edges_the_share_in_band_counts():
 def test_a_missed_target_raises_the_multiplier_and_resume_restores_it(tmp_path, no_leaks):
     """An untrained policy (the paper's initial spread) keeps far fewer than 99.5 % of samples in 22-25 C: each
     batch raises the multiplier. The env pays for energy only; the multiplier is in TensorBoard and checkpoints."""
-    cfg = small_config(tmp_path, "lag", comfort=ComfortConstraint(target_pct=99.5))
+    cfg = _config(tmp_path, "lag", comfort=ComfortConstraint(target_pct=99.5))
     final = train(cfg, progress=False)
     model = ALGORITHMS["trpo"].load(final, device="cpu")
     lag = model.comfort
@@ -73,16 +80,16 @@ def test_a_missed_target_raises_the_multiplier_and_resume_restores_it(tmp_path, 
     assert (steps["reward_comfort"] == 0).all() and (steps["reward_band"] == 0).all()
     np.testing.assert_allclose(steps["reward"], steps["reward_power"])
     # --resume continues the multiplier where the checkpoint left it
-    checkpoint = tmp_path / "runs" / "lag" / "checkpoints" / "model_1536_steps.zip"  # the second batch's
+    checkpoint = tmp_path / "runs" / "lag" / "checkpoints" / "model_768_steps.zip"  # the second batch's
     saved = ALGORITHMS["trpo"].load(checkpoint, device="cpu").comfort
-    train(small_config(tmp_path, "lag", timesteps=2304), resume=checkpoint)
+    train(_config(tmp_path, "lag", timesteps=1152), resume=checkpoint)
     resumed = ALGORITHMS["trpo"].load(tmp_path / "runs" / "lag" / "model.zip", device="cpu").comfort
     assert resumed.updates == saved.updates + 1  # one batch after the checkpoint, on from its saved state
 
 
 @pytest.mark.slow
 def test_a_target_beaten_lowers_the_multiplier_with_ppo(tmp_path, no_leaks):
-    cfg = small_config(tmp_path, "lag-low", algorithm="ppo", timesteps=768, comfort=ComfortConstraint(target_pct=1.0))
+    cfg = _config(tmp_path, "lag-low", algorithm="ppo", timesteps=384, comfort=ComfortConstraint(target_pct=1.0))
     train(cfg, progress=False)
     lag = ALGORITHMS["ppo"].load(tmp_path / "runs" / "lag-low" / "model.zip", device="cpu").comfort
     assert lag.updates == 1 and lag.measured_pct > 1.0 and lag.multiplier < 10.0
@@ -92,8 +99,8 @@ def test_a_target_beaten_lowers_the_multiplier_with_ppo(tmp_path, no_leaks):
 def test_sac_pays_the_multiplier_from_its_replay_buffer(tmp_path, no_leaks):
     from parallel_eplus.training.config import SACSettings
 
-    cfg = small_config(tmp_path, "lag-sac", algorithm="sac", timesteps=768, batch_size=384,
-                       sac=SACSettings(learning_starts=192, buffer_size=2000),
+    cfg = _config(tmp_path, "lag-sac", algorithm="sac", timesteps=384, batch_size=192,
+                       sac=SACSettings(learning_starts=96, buffer_size=2000),
                        comfort=ComfortConstraint(target_pct=99.5))  # fmt: skip
     train(cfg, progress=False)
     model = ALGORITHMS["sac"].load(tmp_path / "runs" / "lag-sac" / "model.zip", device="cpu")
@@ -113,7 +120,7 @@ def test_sac_pays_the_multiplier_from_its_replay_buffer(tmp_path, no_leaks):
 
 @pytest.mark.slow
 def test_ray_actors_return_the_costs_their_workers_reported(tmp_path, no_leaks):
-    cfg = small_config(tmp_path, "lag-ray", backend="ray", timesteps=768, comfort=ComfortConstraint(target_pct=99.5))
+    cfg = _config(tmp_path, "lag-ray", backend="ray", timesteps=384, comfort=ComfortConstraint(target_pct=99.5))
     train(cfg, progress=False)
     lag = ALGORITHMS["trpo"].load(tmp_path / "runs" / "lag-ray" / "model.zip", device="cpu").comfort
     assert lag.updates == 1 and 0.0 <= lag.measured_pct < 99.5 and lag.multiplier > 10.0
