@@ -40,7 +40,6 @@ RAY_TESTS = (
     "tests/test_bench.py::test_bench_measures_everything_and_writes_json",  # its Ray backend row
     "tests/test_comfort_constraint.py::test_ray_actors_return_the_costs_their_workers_reported",
     "tests/test_evaluate.py::test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures",
-    "tests/test_evaluate.py::test_a_ray_evaluations_bar_moves_within_its_episodes",
     "tests/test_evaluate.py::test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder",
     "tests/test_model_based.py::test_the_ray_backend_runs_the_planner_too",
     "tests/test_optimize.py::test_a_portfolio_on_ray",
