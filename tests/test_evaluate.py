@@ -71,16 +71,52 @@ def test_sweep_writes_table_and_figures(tmp_path, policy, no_leaks):
 
 
 @pytest.mark.slow
-def test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures(tmp_path, policy, no_leaks):
-    """Each episode a Ray task with the policy shipped to it: the same rows, the episode files brought back."""
-    pytest.importorskip("ray")
+def test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures_and_a_bar_moving_within_episodes(
+    tmp_path, policy, no_leaks, monkeypatch
+):
+    """Each episode a Ray task with the policy shipped to it: the same rows, the episode files brought back. And each
+    task reports its steps as it goes (every PROGRESS_STEPS), so the bar of a year-long evaluation moves before its
+    first episode ends, and ends at every step counted once: here a month (2,880 steps, two reports), the driver
+    reading them every 0.2 s rather than every POLL_S (a year took 50 s). One Ray for both, started as `evaluate`
+    starts its own (a sweep that starts and ends its own Ray: test_ctrl_c_in_a_ray_evaluation...)."""
+    ray = pytest.importorskip("ray")
+    from parallel_eplus.envs.ray_session import connect
+    from parallel_eplus.evaluation import ray_sweep
+    from parallel_eplus.evaluation.sweep import _job_config
+
     controllers = [Controller(BASELINE_LABEL, "baseline"), policy_controller(str(policy))]
     local = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "local", progress=False)
-    ray = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "ray", progress=False, backend="ray")
-    pd.testing.assert_frame_equal(ray.drop(columns="episode_dir"), local.drop(columns="episode_dir"))
-    assert all(str(d).startswith(str(tmp_path / "ray")) for d in ray.episode_dir)
-    write_results(ray, tmp_path / "ray")  # the figures read the episode files the tasks returned
-    assert is_png(tmp_path / "ray" / "west_zone_histogram.png")
+    assert connect(None, 2)
+    try:
+        swept = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "ray", progress=False, backend="ray")
+        pd.testing.assert_frame_equal(swept.drop(columns="episode_dir"), local.drop(columns="episode_dir"))
+        assert all(str(d).startswith(str(tmp_path / "ray")) for d in swept.episode_dir)
+        write_results(swept, tmp_path / "ray")  # the figures read the episode files the tasks returned
+        assert is_png(tmp_path / "ray" / "west_zone_histogram.png")
+
+        events: list[tuple[str, int]] = []
+
+        class Bar:  # what the sweep's tqdm is told
+            n = 0
+
+            def update(self, k: int) -> None:
+                self.n += k
+                events.append(("update", self.n))
+
+            def set_postfix(self, **_) -> None:
+                events.append(("episode ended", self.n))
+
+        days = 30
+        assert days * 96 > 2 * ray_sweep.PROGRESS_STEPS
+        monkeypatch.setattr(ray_sweep, "POLL_S", 0.2)
+        base = controllers[0]
+        job = (base, _job_config(base, "CA", None, days, None, tmp_path / "bar"))
+        rows, _ = ray_sweep.run_jobs([job], 1, None, Bar(), 900)
+    finally:
+        ray.shutdown()
+    first_end = events.index(next(e for e in events if e[0] == "episode ended"))
+    assert any(0 < n < days * 96 for kind, n in events[:first_end] if kind == "update")  # part of the month
+    assert events[-1][1] == rows[0]["steps"] == days * 96
 
 
 @pytest.mark.slow
@@ -171,11 +207,12 @@ def test_residual_policy_is_evaluated_as_a_correction_of_the_rule_based_controll
 def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alone(tmp_path, policy, no_leaks):
     final = policy  # the module's briefly trained policy: the online copies must leave its files as they were
     before = final.read_bytes(), (final.parent / "vecnormalize.npz").read_bytes()
+    from parallel_eplus.cli import main
+
     out = tmp_path / "eval"
-    cmd = [sys.executable, "-m", "parallel_eplus.cli", "evaluate", "--policy", str(final), "--online",
-           "--online-batch", "32", "--weathers", "CA,IL", "--run-days", "1", "--workers", "2",
-           "--out", str(out), "--quiet"]  # fmt: skip
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    args = ["evaluate", "--policy", str(final), "--online", "--online-batch", "32", "--weathers", "CA,IL",
+            "--run-days", "1", "--workers", "2", "--out", str(out), "--quiet"]  # fmt: skip
+    assert main(args) == 0  # in process: the command's process boundary is tests/faults/test_run_files.py's
     df = pd.read_csv(out / "results.csv")
     assert sorted(df["controller"].unique()) == ["TRPO (CA)", "TRPO (CA), online"]
     online = df[df["controller"] == "TRPO (CA), online"]
@@ -183,32 +220,6 @@ def test_online_protocol_keeps_learning_on_each_weather_and_leaves_the_model_alo
     assert online["reward_mean"].notna().all()
     assert (final.read_bytes(), (final.parent / "vecnormalize.npz").read_bytes()) == before
     assert not list(Path(tempfile.gettempdir()).glob("SB3-*"))  # the learning copies wrote no SB3 log folder
-
-
-def test_a_ray_evaluations_bar_moves_within_its_episodes(tmp_path, no_leaks):
-    """`--backend ray`: each task reports its steps as it goes (every PROGRESS_STEPS), so the bar of a year-long
-    evaluation moves before its first episode ends, and ends at every step counted once."""
-    pytest.importorskip("ray")
-    from parallel_eplus.evaluation import ray_sweep
-    from parallel_eplus.evaluation.sweep import _job_config
-
-    events: list[tuple[str, int]] = []
-
-    class Bar:  # what the sweep's tqdm is told
-        n = 0
-
-        def update(self, k: int) -> None:
-            self.n += k
-            events.append(("update", self.n))
-
-        def set_postfix(self, **_) -> None:
-            events.append(("episode ended", self.n))
-
-    base = Controller(BASELINE_LABEL, "baseline")
-    rows, _ = ray_sweep.run_jobs([(base, _job_config(base, "CA", None, 365, None, tmp_path))], 1, None, Bar(), 900)
-    first_end = events.index(next(e for e in events if e[0] == "episode ended"))
-    assert any(0 < n < 365 * 96 for kind, n in events[:first_end] if kind == "update")  # part of the year
-    assert events[-1][1] == rows[0]["steps"] == 365 * 96
 
 
 def test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder(tmp_path, no_leaks):
@@ -229,11 +240,11 @@ def test_ctrl_c_in_a_ray_evaluation_leaves_no_process_and_no_episode_folder(tmp_
     proc = subprocess.Popen([sys.executable, "-m", "parallel_eplus.cli", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
     deadline = time.monotonic() + 180
-    while not scratch() - before:  # the episodes have started
+    while len(scratch() - before) < 2:  # both episodes have started
         assert proc.poll() is None, proc.stdout.read()
         assert time.monotonic() < deadline
-        time.sleep(0.5)
-    time.sleep(3)
+        time.sleep(0.2)
+    time.sleep(1)  # and are under way
     proc.send_signal(signal.SIGINT)
     out, _ = proc.communicate(timeout=180)
     assert proc.returncode != 0 and "interrupted" in out
