@@ -157,12 +157,12 @@ def test_spec_errors_name_the_bad_band_and_kpis(tmp_path):
 
 @pytest.mark.slow
 def test_a_scenario_period_lies_where_its_definition_says(tmp_path, no_leaks):
-    """BOPTEST's days from the built-in controls' loads (here five weeks of January: days 14-34 are available), and
+    """BOPTEST's days from the built-in controls' loads (here January's first 22 days: days 14-21 are available), and
     the run that scores one: a week of warm-up, then the two weeks centred on the day, on the same weekdays."""
     from parallel_eplus.evaluation.scenarios import LOADS, find_days, loads, period
 
     base = [Controller(BASELINE_LABEL, "baseline")]
-    df = run_sweep(base, ["CA"], 35, 1, tmp_path / "loads", None, False, "office-small", extra_outputs=LOADS)
+    df = run_sweep(base, ["CA"], 22, 1, tmp_path / "loads", None, False, "office-small", extra_outputs=LOADS)
     year = Path(df["episode_dir"][0])
     heat, cool = loads(year)
     days = find_days(heat, cool)
@@ -200,9 +200,9 @@ def test_the_loads_are_read_at_every_step_of_a_model_with_its_own_detailed_outpu
     from parallel_eplus.evaluation.scenarios import LOADS, loads
 
     base = [Controller(BASELINE_LABEL, "baseline")]
-    df = run_sweep(base, ["CA"], 2, 1, tmp_path / "loads", None, False, "office-medium", extra_outputs=LOADS)
+    df = run_sweep(base, ["CA"], 1, 1, tmp_path / "loads", None, False, "office-medium", extra_outputs=LOADS)
     heat, cool = loads(Path(df["episode_dir"][0]))
-    assert len(heat) == len(cool) == 2 * 144 and not heat.isna().any() and not cool.isna().any()
+    assert len(heat) == len(cool) == 144 and not heat.isna().any() and not cool.isna().any()
     assert heat.index.is_monotonic_increasing and (heat > 0).any()  # January: the zones are heated
 
 
@@ -259,7 +259,7 @@ def test_training_reports_each_episode_beside_the_built_in(tmp_path, no_leaks):
     from parallel_eplus.training.train import train
 
     cfg = TrainConfig(
-        workers=1, weathers=["CA"], building="office-small", run_days=1, timesteps=288, batch_size=144,
+        workers=1, weathers=["CA"], building="office-small", run_days=1, timesteps=144, batch_size=144,
         run_name="ratios", runs_dir=str(tmp_path / "runs"), tensorboard_dir=str(tmp_path / "tb"),
         init_from_baseline=True,
     )  # fmt: skip
