@@ -37,16 +37,13 @@ def _template(env: EnergyPlusEnv, weather: int = 0) -> fork.Template:
     return t
 
 
-# The most cold episodes any test here compares with, by (weather, building): each test takes the first few.
-COLD_EPISODES = {("CA", None): 4, ("FL", None): 3, ("CA", "office-small"): 3}
-
-
 @pytest.fixture(scope="module")
 def cold(tmp_path_factory):
-    """`cold(weather, n, building)`: n episodes of a cold env (each in a process of its own, nothing prepared or
-    forked) under the zero action, and the folder they were written to. A cold env's episodes are the same whatever
-    follows them, so each (weather, building) runs once for the module, as many episodes as any test compares."""
-    made: dict[tuple, tuple[list[np.ndarray], Path]] = {}
+    """`cold(weather, n, building)`: what n episodes of a cold env (each in a process of its own, nothing prepared or
+    forked) under the zero action give, and the folder they were written to. A cold env's episodes are the same
+    whatever follows them, and without a random start or noisy weather each one is the same as the first: one runs
+    per (weather, building) for the module, and stands for the n (a forked episode that differed from it fails)."""
+    made: dict[tuple, tuple[np.ndarray, Path]] = {}
 
     def episodes(weather: str, n: int = 1, building: str | None = None) -> tuple[list[np.ndarray], Path]:
         key = (weather, building)
@@ -54,12 +51,12 @@ def cold(tmp_path_factory):
             out = tmp_path_factory.mktemp(f"cold-{weather}")
             env = EnergyPlusEnv(weather=weather, run_days=1, output_dir=out, prepare_next=False, building=building)
             try:
-                made[key] = [_episode(env) for _ in range(COLD_EPISODES[key])], out
+                assert not env.config.random_start and env.config.weather_noise is None
+                made[key] = _episode(env), out
             finally:
                 env.close()
-        runs, out = made[key]
-        assert n <= len(runs), f"COLD_EPISODES[{key}] is {len(runs)}: raise it to {n}"
-        return runs[:n], out
+        run, out = made[key]
+        return [run] * n, out
 
     return episodes
 
