@@ -69,37 +69,59 @@ def _energyplus_children(pid: int) -> list[int]:
     return [int(p) for p in out.stdout.split()]
 
 
+def _stop(proc: subprocess.Popen, sig: int) -> str:
+    """Signal the trainer; its output (whichever stream was piped) once it has exited and every EnergyPlus process
+    is gone."""
+    proc.send_signal(sig)
+    out = "".join(text or "" for text in proc.communicate(timeout=60))
+    gone = _wait_for(lambda: our_processes() == [], 60, "every EnergyPlus process gone")
+    print(f"{sig.name}: EnergyPlus processes gone {gone:.1f} s after the trainer exited")
+    return out
+
+
+def _resumed_from(err: str, last: Path) -> int:
+    steps = int(last.stem.split("_")[1])
+    assert f"resuming cut from runs/cut/checkpoints/{last.name} at step {steps}" in err, err
+    return steps
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
-def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_checkpoint(tmp_path, sig):
+def test_a_stopped_trainer_leaves_nothing_for_long_and_resumes_from_its_last_checkpoint(tmp_path):
+    """One run stopped twice: SIGTERM (its cleanup runs: a checkpoint, nothing left), resumed, then SIGKILL (no
+    cleanup: its pipe directories stay, `clean` lists them, the next start sweeps them), resumed to its end."""
     run = tmp_path / "runs" / "cut"
     env = _private_env(tmp_path)
     proc = subprocess.Popen(_train_cmd("cut"), cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)  # fmt: skip
     _wait_for(lambda: len(_checkpoints(run)) >= 2, 600, "two checkpoints", proc)
-    proc.send_signal(sig)
-    out, _ = proc.communicate(timeout=60)
-    gone = _wait_for(lambda: our_processes() == [], 60, "every EnergyPlus process gone")
-    print(f"{sig.name}: EnergyPlus processes gone {gone:.1f} s after the trainer exited")
+    out = _stop(proc, signal.SIGTERM)
+    assert proc.returncode == 130 and "checkpoint saved" in out, out
+    assert _pipe_dirs_of(proc.pid, env) == set()
     last = _checkpoints(run)[-1]
-    left = _pipe_dirs_of(proc.pid, env)
-    if sig == signal.SIGTERM:
-        assert proc.returncode == 130 and "checkpoint saved" in out, out
-        assert left == set()
-    else:
-        assert proc.returncode == -signal.SIGKILL
-        assert left, "a SIGKILLed trainer runs no cleanup: its pipe directories stay until the next start"
-        assert all(leftovers.owner_alive(Path(env["TMPDIR"], d)) is False for d in left)
-        listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
-        assert all(d in listed for d in left), listed
+
+    # resumed, then SIGKILLed once it has saved a checkpoint of its own
+    cmd = _train_cmd("cut")[:-3] + ["--resume", "runs/cut", "--quiet"]
+    killed = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    first = int(last.stem.split("_")[1])
+    _wait_for(lambda: int(_checkpoints(run)[-1].stem.split("_")[1]) > first, 600, "a checkpoint after the resume",
+              killed)  # fmt: skip
+    err = _stop(killed, signal.SIGKILL)
+    assert killed.returncode == -signal.SIGKILL
+    _resumed_from(err, last)
+    last = _checkpoints(run)[-1]
+    left = _pipe_dirs_of(killed.pid, env)
+    assert left, "a SIGKILLed trainer runs no cleanup: its pipe directories stay until the next start"
+    assert all(leftovers.owner_alive(Path(env["TMPDIR"], d)) is False for d in left)
+    listed = subprocess.run(_cli("clean", "--dry-run"), env=env, capture_output=True, text=True, check=True).stdout
+    assert all(d in listed for d in left), listed
 
     steps = int(last.stem.split("_")[1])
     cmd = _train_cmd("cut", steps + 192)[:-3] + ["--resume", "runs/cut", "--quiet"]
     resumed = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     _, err = resumed.communicate(timeout=300)
     assert resumed.returncode == 0, err
-    assert f"resuming cut from runs/cut/checkpoints/{last.name} at step {steps}" in err
-    assert _pipe_dirs_of(proc.pid, env) == set()  # the resumed run's first pipe swept the dead run's
+    assert _resumed_from(err, last) == steps
+    assert _pipe_dirs_of(killed.pid, env) == set()  # the resumed run's first pipe swept the dead run's
     assert _pipe_dirs_of(resumed.pid, env) == set()
     assert our_processes() == []
     assert pd.read_csv(run / "episodes.csv")["timesteps"].max() > steps
@@ -140,24 +162,27 @@ def test_a_trainer_killed_while_energyplus_is_stopped_leaves_a_process_that_clea
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGSTOP], ids=["SIGKILL", "SIGSTOP"])
 def test_energyplus_killed_or_stopped_during_training_restarts_and_the_run_completes(
-    tmp_path, no_leaks, sig, caplog, monkeypatch
+    tmp_path, no_leaks, caplog, monkeypatch
 ):
-    # worker 0 struck mid-way through its second one-day episode, after it reported step 10 (strikes.py)
+    # both workers struck mid-way through their second one-day episode, after they reported step 10 (strikes.py):
+    # worker 0's EnergyPlus killed, worker 1's stopped (its 2 s step timeout ends it)
     cfg = small_config(tmp_path, "hit", weathers=["CA"], run_days=1, timesteps=768, batch_size=192, step_timeout_s=2,
                        keep_episodes=1)  # fmt: skip
-    hit = strike_after_step(monkeypatch, sig, worker="0", episode=2, step=10)
+    killed = strike_after_step(monkeypatch, signal.SIGKILL, worker="0", episode=2, step=10)
+    stopped = strike_after_step(monkeypatch, signal.SIGSTOP, worker="1", episode=2, step=10)
     final = train(cfg, progress=False)
-    assert hit, "no EnergyPlus process was struck"
+    assert killed and stopped, "an EnergyPlus process was not struck"
+    assert "worker 0: EnergyPlus failed" in caplog.text and "worker 1: EnergyPlus failed" in caplog.text
     assert "restarting its episode" in caplog.text
     assert final.is_file() and pd.read_csv(final.parent / "episodes.csv")["timesteps"].max() >= 768 - 2 * 96
-    # The struck episode keeps its evidence whole, whatever --keep-episodes prunes: why, and EnergyPlus's own log
-    # (on a loaded machine a 2 s step timeout may restart another episode too: the struck one is the one asked about)
+    # The struck episodes keep their evidence whole, whatever --keep-episodes prunes: why, and EnergyPlus's own log
+    # (on a loaded machine a 2 s step timeout may restart another episode too: the struck ones are those asked about)
     failures = sorted((final.parent / "episodes").glob("worker-*/episode-*/failure.txt"))
-    failure = final.parent / "episodes" / "worker-0" / "episode-000002-CA" / "failure.txt"
-    assert failure in failures, failures
-    assert "EnergyPlus" in failure.read_text() and (failure.parent / "eplusout.err").is_file()
+    for worker, why in (("0", "EnergyPlus died"), ("1", "within 2 s")):
+        failure = final.parent / "episodes" / f"worker-{worker}" / "episode-000002-CA" / "failure.txt"
+        assert failure in failures, failures
+        assert why in failure.read_text() and (failure.parent / "eplusout.err").is_file()
 
 
 @pytest.mark.slow
