@@ -98,63 +98,80 @@ def test_the_own_jump_is_the_morning_setpoint_step_the_calendar_recorded():
     assert MPC.load(planner_file(PLANNER)).own_jump() == 0.0  # the data center: no thermostat action
 
 
-def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_prefers_its_plan():
+def _decisions(options: str, members: bool = False, own_cost: bool = False) -> tuple[MPC, list[dict]]:
+    """The office planner under `options` at each hour of an April and a July day (zones at 22 and 25 C): its
+    action; the own plan as a candidate can follow it; the search's cost; with `members`, each member's predicted
+    cost of the plan the search chose and of the own plan (`members=True`) and their mean; with `own_cost`, the own
+    plan's cost alone."""
+    a_last = np.array([[0.5, -0.5]], np.float32)
+    mpc = PlannerOptions.parse(options).apply(MPC.load(planner_file(OFFICE)))
+    decisions = []
+    for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
+        obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
+        s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
+        for hour in range(24):
+            info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
+            exo, applies, bounds, weights = mpc.future([info])
+            reference = _follow(a_last, mpc.baseline_plan([info], bounds, a_last), mpc.settings.max_increment,
+                                *mpc.support)  # fmt: skip
+            action = mpc.act(obs, [info], a_last)
+            steps = np.concatenate([np.zeros((1, 1, 2)), np.cumsum(mpc.last.increments[:, :-1], axis=1)], axis=1)
+            pair = np.stack([action[:, None] + steps, reference], axis=1).astype(np.float32)
+            seen = PlanRequest(s, a_last, exo, applies, bounds, mpc.comfort_weight, mpc.support, mpc.warm, [0],
+                               energy_weights=weights, reference=reference)  # fmt: skip
+            d = {"key": (month, hour), "action": action, "reference": reference[:, 0], "cost": mpc.last.cost[0]}
+            if members:  # [E, W, 2]: the chosen plan's, the own plan's
+                d |= {"members": mpc.planner._cost(seen, pair, members=True), "mean": mpc.planner._cost(seen, pair)[0]}
+            if own_cost:
+                d["own_cost"] = mpc.planner._cost(seen, reference[:, None])[0][0, 0]
+            decisions.append(d)
+    return mpc, decisions
+
+
+@pytest.fixture(scope="module")
+def own_plan_decisions() -> list[dict]:
+    """The planner with the own plan as its reference and no other setting (consensus off, min_saving 0, no radius):
+    the decisions each test below weighs its setting against, made once."""
+    return _decisions("comfort_reference=baseline", members=True, own_cost=True)[1]
+
+
+def _left(d: dict) -> bool:
+    """Whether the planner left the own plan's action."""
+    return not np.allclose(d["action"], d["reference"], atol=1e-6)
+
+
+def test_with_consensus_the_planner_leaves_the_own_plan_only_where_every_member_prefers_its_plan(own_plan_decisions):
     """Each member's cost (`members=True`) averages to the planner's; with `consensus`, the action is the own plan's
     unless every member predicts the plan the search chose costs less; without it, the search's best plan acts
     where some member prefers the own plan (April and July nights here)."""
-    a_last = np.array([[0.5, -0.5]], np.float32)
     outcomes = {}
-    for consensus in ("false", "true"):
-        options = PlannerOptions.parse(f"comfort_reference=baseline,consensus={consensus}")
-        mpc = options.apply(MPC.load(planner_file(OFFICE)))
-        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
-            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
-            s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
-            for hour in range(24):
-                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
-                exo, applies, bounds, weights = mpc.future([info])
-                reference = mpc.baseline_plan([info], bounds, a_last)
-                reference = _follow(a_last, reference, mpc.settings.max_increment, *mpc.support)  # as a candidate can
-                action = mpc.act(obs, [info], a_last)
-                steps = np.concatenate([np.zeros((1, 1, 2)), np.cumsum(mpc.last.increments[:, :-1], axis=1)], axis=1)
-                pair = np.stack([action[:, None] + steps, reference], axis=1).astype(np.float32)
-                seen = PlanRequest(s, a_last, exo, applies, bounds, mpc.comfort_weight, mpc.support, mpc.warm, [0],
-                                   energy_weights=weights, reference=reference)  # fmt: skip
-                per = mpc.planner._cost(seen, pair, members=True)  # [E, W, 2]: the chosen plan's, the own plan's
-                np.testing.assert_allclose(per.mean(0), mpc.planner._cost(seen, pair)[0], rtol=1e-4, atol=1e-4)
-                own = np.allclose(action, reference[:, 0], atol=1e-6)
-                outcomes[consensus, month, hour] = (own, bool(np.all(per[:, 0, 0] < per[:, 0, 1])))
+    with_it = _decisions("comfort_reference=baseline,consensus=true", members=True)[1]
+    for consensus, decisions in (("false", own_plan_decisions), ("true", with_it)):
+        for d in decisions:
+            per = d["members"]
+            np.testing.assert_allclose(per.mean(0), d["mean"], rtol=1e-4, atol=1e-4)
+            outcomes[(consensus, *d["key"])] = (not _left(d), bool(np.all(per[:, 0, 0] < per[:, 0, 1])))
     with_consensus = [v for k, v in outcomes.items() if k[0] == "true"]
     assert all(own or preferred for own, preferred in with_consensus)  # left only where every member preferred
     assert any(not own for own, _ in with_consensus)  # and it did leave it
     assert any(not own and not preferred for (c, *_), (own, preferred) in outcomes.items() if c == "false")
 
 
-def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_much_less_predicted_cost():
+def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_much_less_predicted_cost(
+    own_plan_decisions,
+):
     """`min_saving`: the own plan's action unless the plan the search chose is predicted to cost at least that share
     less than it over the horizon; a larger share leaves it less often, and 0 as before. Refused without the own
     plan to weigh against."""
-    a_last = np.array([[0.5, -0.5]], np.float32)
     left = {}
     for share in (0.0, 0.02, 0.5):
-        options = PlannerOptions.parse(f"comfort_reference=baseline,min_saving={share}")
-        mpc = options.apply(MPC.load(planner_file(OFFICE)))
+        options = f"comfort_reference=baseline,min_saving={share}"
+        decisions = own_plan_decisions if share == 0.0 else _decisions(options, own_cost=True)[1]  # 0: the default
         left[share] = 0
-        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
-            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
-            for hour in range(24):
-                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
-                exo, applies, bounds, weights = mpc.future([info])
-                reference = _follow(a_last, mpc.baseline_plan([info], bounds, a_last), mpc.settings.max_increment,
-                                    *mpc.support)  # fmt: skip
-                action = mpc.act(obs, [info], a_last)
-                s = mpc.layout.state(obs[:, : len(mpc.layout.sensors)])
-                seen = PlanRequest(s, a_last, exo, applies, bounds, mpc.comfort_weight, mpc.support, mpc.warm, [0],
-                                   energy_weights=weights, reference=reference)  # fmt: skip
-                own_cost = mpc.planner._cost(seen, reference[:, None])[0][0, 0]
-                if not np.allclose(action, reference[:, 0], atol=1e-6):
-                    left[share] += 1
-                    assert own_cost - mpc.last.cost[0] >= share * abs(own_cost) - 1e-3  # it paid for leaving
+        for d in decisions:
+            if _left(d):
+                left[share] += 1
+                assert d["own_cost"] - d["cost"] >= share * abs(d["own_cost"]) - 1e-3  # it paid for leaving
     assert left[0.0] > left[0.02] >= left[0.5] and left[0.0] > 0
     with pytest.raises(ValueError, match="comfort_reference=baseline"):
         PlannerOptions.parse("comfort_reference=band,min_saving=0.02").apply(MPC.load(planner_file(OFFICE)))
@@ -162,24 +179,13 @@ def test_with_a_minimum_saving_the_planner_leaves_the_own_plan_only_for_that_muc
         PlannerOptions.parse("min_saving=1.5")
 
 
-def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan():
+def test_with_an_own_radius_the_thermostats_stay_that_near_the_own_plan(own_plan_decisions):
     """`baseline_radius`: every thermostat action within that much (normalized) of the own plan's at the step it acts,
     where without it the search strays further; refused without the own plan."""
-    a_last = np.array([[0.5, -0.5]], np.float32)
-    furthest = {}
-    for radius in ("", ",baseline_radius=0.1"):
-        mpc = PlannerOptions.parse(f"comfort_reference=baseline{radius}").apply(MPC.load(planner_file(OFFICE)))
-        assert mpc.follows.all()  # the office's two actions are its thermostats
-        furthest[radius] = 0.0
-        for month, outdoor, zone in ((4, 15.0, 22.0), (7, 30.0, 25.0)):
-            obs = np.array([[outdoor, *[zone] * 5, 3000.0, 0.0, 0.0, 0.5]], np.float32)
-            for hour in range(24):
-                info = {"time": dt.datetime(2013, month, 8, hour, 0), "weather": "CA"}
-                bounds = mpc.future([info])[2]
-                reference = _follow(a_last, mpc.baseline_plan([info], bounds, a_last), mpc.settings.max_increment,
-                                    *mpc.support)  # fmt: skip
-                action = mpc.act(obs, [info], a_last)
-                furthest[radius] = max(furthest[radius], float(np.abs(action - reference[:, 0]).max()))
+    mpc, radius = _decisions("comfort_reference=baseline,baseline_radius=0.1")
+    assert mpc.follows.all()  # the office's two actions are its thermostats
+    furthest = {r: max(float(np.abs(d["action"] - d["reference"]).max()) for d in decisions)
+                for r, decisions in (("", own_plan_decisions), (",baseline_radius=0.1", radius))}  # fmt: skip
     assert furthest[",baseline_radius=0.1"] <= 0.1 + 1e-5 < furthest[""]
     with pytest.raises(ValueError, match="comfort_reference=baseline"):
         PlannerOptions.parse("baseline_radius=0.1").apply(MPC.load(planner_file(OFFICE)))
@@ -201,7 +207,7 @@ def test_a_planner_whose_own_plan_is_the_rule_keeps_the_supply_air_near_the_rule
                       comfort=ComfortConstraint(target_pct=97.5))  # fmt: skip
     train(cfg, progress=False)
     planner = planner_controller(str(tmp_path / "runs" / "ruled" / "planner"))
-    df = run_sweep([planner], ["CO"], 2, 1, tmp_path / "eval", progress=False, building="office-medium")
+    df = run_sweep([planner], ["CO"], 1, 1, tmp_path / "eval", progress=False, building="office-medium")
     steps = pd.read_parquet(Path(df["episode_dir"][0]) / "steps.parquet")
     rule = Controller("rule", "rbc").make("office-medium")
     low, high = 12.0, 18.0  # office-medium's supply_air_c
