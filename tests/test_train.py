@@ -42,21 +42,25 @@ def scalars(tb_dir: Path) -> dict[str, list]:
 
 
 @pytest.mark.slow
-def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path, no_leaks):
-    cfg = small_config(tmp_path, "short")
+def test_training_writes_metrics_per_weather_gives_three_weathers_equal_episodes_and_resume_keeps_the_cycle(
+    tmp_path, no_leaks
+):
+    """One run (3 one-day episodes per worker, 3 batches): its files, metrics per weather and deterministic policy;
+    two workers give three weathers equal episodes; moved, it resumes and keeps the cycle."""
+    cfg = small_config(tmp_path, "fair", run_days=1, timesteps=576, batch_size=192, checkpoint_every=192)
     final = train(cfg, progress=False)
-    run = tmp_path / "runs" / "short"
+    run = tmp_path / "runs" / "fair"
     assert final == run / "model.zip" and (run / "vecnormalize.npz").is_file()
     assert not list(run.rglob("*.pkl"))  # data-only statistics beside the model and in every checkpoint
     assert sorted((run / "checkpoints").glob("model_vecnormalize_*_steps.npz"))
     assert (run / "config.json").is_file() and (run / "episodes.csv").is_file()
     assert sorted((run / "checkpoints").glob("model_*_steps.zip"))
-    kept = sorted((run / "episodes").glob("worker-*/episode-*/steps.parquet"))  # the newest 2 per worker
+    kept = sorted((run / "episodes").glob("worker-*/episode-*/steps.parquet"))  # the newest 2 per worker (of 3)
     assert len(kept) == 4 and all((ep.parent / "model.idf").is_file() for ep in kept)
     assert not list((run / "episodes").rglob("eplusout.csv"))  # EnergyPlus's own CSV is off in training
-    tags = scalars(tmp_path / "tb" / "short")
+    tags = scalars(tmp_path / "tb" / "fair")
     for weather in ("CA", "CO", "FL"):  # worker 0 cycles CA, CO, FL; worker 1 CO, FL, CA
-        own = scalars(tmp_path / "tb" / "short" / f"weather-{weather}")  # one run per weather: one chart per tag
+        own = scalars(tmp_path / "tb" / "fair" / f"weather-{weather}")  # one run per weather: one chart per tag
         for metric in ("power_kw", "it_power_kw", "hvac_power_kw", "west_temp_mean", "in_22_25_pct", "return"):
             assert f"episode/{metric}" in own, (weather, metric)
     assert "throughput/env_steps_per_s" in tags and "train/value_loss" in tags
@@ -71,14 +75,8 @@ def test_training_writes_metrics_per_weather_and_a_deterministic_policy(tmp_path
     np.testing.assert_array_equal(a1, a2)
     assert a1.shape == (1, 4) and np.all(np.abs(a1) <= 1)
 
-
-@pytest.mark.slow
-def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cycle(tmp_path, no_leaks):
-    cfg = small_config(tmp_path, "fair", run_days=1, timesteps=576, batch_size=576)  # 3 one-day episodes per worker
-    train(cfg, progress=False)
-    csv = tmp_path / "runs" / "fair" / "episodes.csv"
+    csv = run / "episodes.csv"
     assert episodes_per_weather(csv) == {"CA": 2, "CO": 2, "FL": 2}
-    tags = scalars(tmp_path / "tb" / "fair")
     assert [e.value for e in tags["episodes/CO"]][-1] == 2
     # Moved (as to another machine, or restored from a commit): the run continues where it is now, logs too.
     home = tmp_path / "moved"
@@ -89,7 +87,7 @@ def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cyc
     last = csv.read_text().splitlines()[-1].split(",", 1)[1]
     with csv.open("a") as f:  # an episode after the last save, as a run killed then leaves it: collected again
         f.write(f"999999,{last}\n")
-    train(small_config(tmp_path, "fair", run_days=1, timesteps=1152, batch_size=576), resume=home / "runs" / "fair")
+    train(small_config(tmp_path, "fair", run_days=1, timesteps=1152, batch_size=192), resume=home / "runs" / "fair")
     assert not (tmp_path / "runs").exists() and not (tmp_path / "tb").exists()
     assert episodes_per_weather(csv) == {"CA": 4, "CO": 4, "FL": 4}
     assert [e.value for e in scalars(home / "tb" / "fair")["episodes/CO"]][-1] == 4
@@ -100,7 +98,8 @@ def test_two_workers_give_three_weathers_equal_episodes_and_resume_keeps_the_cyc
 @pytest.mark.slow
 def test_ray_backend_trains_locally(tmp_path, no_leaks, caplog):
     pytest.importorskip("ray")
-    cfg = small_config(tmp_path, "ray", weathers=["CA"], timesteps=768, backend="ray", workers_per_actor=1)
+    cfg = small_config(tmp_path, "ray", weathers=["CA"], run_days=1, timesteps=384, batch_size=384, backend="ray",
+                       workers_per_actor=1)  # fmt: skip
     with caplog.at_level(logging.INFO, logger="parallel_eplus"):
         final = train(cfg, progress=False)
     assert final.is_file()
@@ -114,7 +113,7 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
     pipes_before = our_pipe_dirs()
     cmd = [
         sys.executable, "-m", "parallel_eplus.cli", "train", "--workers", "2", "--weathers", "CA",
-        "--run-days", "2", "--timesteps", "100000", "--batch-size", "512", "--run-name", "cut", "--quiet",
+        "--run-days", "1", "--timesteps", "100000", "--batch-size", "192", "--run-name", "cut", "--quiet",
     ]  # fmt: skip
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -136,11 +135,11 @@ def test_interrupt_saves_checkpoint_leaves_nothing_and_resume_continues(tmp_path
     cut_at = int(checkpoints[-1].stem.split("_")[1])
     assert cut_at > 0
 
-    resumed = train(TrainConfig(timesteps=cut_at + 512), resume=tmp_path / "runs" / "cut", progress=False)
+    resumed = train(TrainConfig(timesteps=cut_at + 192), resume=tmp_path / "runs" / "cut", progress=False)
     from sb3_contrib import TRPO
 
     model = TRPO.load(resumed, device="cpu")
-    assert model.num_timesteps >= cut_at + 512
+    assert model.num_timesteps >= cut_at + 192
     steps = [e.step for e in scalars(tmp_path / "tensorboard_logs" / "cut")["time/fps"]]
     assert max(steps) > cut_at  # TensorBoard curves continue past the cut, not from zero
     # A finished run resumes from its final model, which is newer than its last checkpoint.
@@ -224,7 +223,7 @@ def test_sac_trains_checkpoints_resumes_and_its_policy_evaluates(tmp_path, no_le
     final = train(resumed, resume=run, progress=False)
     assert pd.read_csv(run / "episodes.csv")["timesteps"].max() > 400
     with caplog.at_level("WARNING"):
-        train(TrainConfig(timesteps=800), resume=checkpoint, progress=False)
+        train(TrainConfig(timesteps=400), resume=checkpoint, progress=False)  # 200 steps on from the checkpoint
     assert "empty buffer" in caplog.text
 
     act = load_policy(final)
