@@ -19,16 +19,9 @@ from parallel_eplus.evaluation.sweep import run_sweep
 CRAC = "datacenter-crac"
 
 
-def test_sweep_counts_the_buildings_steps(tmp_path, capsys, no_leaks):
-    df = run_sweep([Controller(BASELINE_LABEL, "baseline")], ["CA"], 1, 1, tmp_path, progress=True, building=CRAC)
-    assert df["steps"].tolist() == [144] and (df["band_low_c"][0], df["band_high_c"][0]) == (18.0, 27.0)
-    assert "144/144" in capsys.readouterr().err  # the progress bar's total is the building's day
-    figure = plot_path(Path(df["episode_dir"][0]))  # its time series: the servers' inlet air and its band
-    assert figure.is_file() and figure.stat().st_size > 1000
-
-
-def test_online_evaluation_runs_the_buildings_whole_episode(tmp_path, no_leaks):
-    """`evaluate --online` learns for one whole episode of the building (144 steps here, not 96)."""
+def test_sweep_and_online_evaluation_count_and_run_the_buildings_whole_episode(tmp_path, capsys, no_leaks):
+    """A sweep counts the building's steps (144 a day here, not 96) for its own controls and a policy trained on it,
+    and `evaluate --online` learns for one whole episode of it."""
     from parallel_eplus.experiments.online import run_online
     from parallel_eplus.training.config import TrainConfig
     from parallel_eplus.training.train import train
@@ -46,9 +39,13 @@ def test_online_evaluation_runs_the_buildings_whole_episode(tmp_path, no_leaks):
     elsewhere = "/elsewhere/parallel_eplus/buildings/specs/datacenter-crac.toml"
     config.write_text(json.dumps({**saved, "building": elsewhere}))
     policy = policy_controller(str(final))
-    assert policy.building and run_sweep([policy], ["CA"], 1, 1, tmp_path / "frozen", False, building=CRAC)[
-        "steps"
-    ].tolist() == [144]
+    assert policy.building
+    base = Controller(BASELINE_LABEL, "baseline")
+    df = run_sweep([base, policy], ["CA"], 1, 1, tmp_path / "frozen", progress=True, building=CRAC)
+    assert df["steps"].tolist() == [144, 144] and (df["band_low_c"][0], df["band_high_c"][0]) == (18.0, 27.0)
+    assert "288/288" in capsys.readouterr().err  # the progress bar's total: two episodes of the building's day
+    figure = plot_path(Path(df["episode_dir"][0]))  # its time series: the servers' inlet air and its band
+    assert figure.is_file() and figure.stat().st_size > 1000
     df = run_online([policy], ["CA"], 1, 1, tmp_path / "eval", batch_size=16)
     assert df["steps"].tolist() == [144] and df["online_updates"].tolist() == [144 // 16]
 
