@@ -1,6 +1,7 @@
 """The release as a user installs it: `python -m build` makes the sdist and the wheel (from the sdist), and the wheel,
 installed with its extras into a fresh venv outside the checkout, runs the user's path from another directory:
-`building check`, a 1-day `train`, `evaluate --baseline`, `export` and `serve`.
+`simulate` (built-in files travel as package data; nothing is written where the user stands), `building check`, a
+1-day `train`, `evaluate --baseline`, `export` and `serve`.
 
 The venv gets torch first, pinned, as scripts/setup.sh does (so pip never pulls CUDA), then the wheel with
 `[train,export,serve]`: `train` runs EnergyPlus, learns and evaluates; `export` adds onnx (it includes `train`);
@@ -111,6 +112,7 @@ def test_the_wheel_installed_outside_the_checkout_trains_evaluates_exports_and_s
     shipped += [f"buildings/models/{m}" for m in models]
     for name in shipped:
         assert f"parallel_eplus/{name}" in names, name
+    assert not any(n.endswith(".epw") for n in names)  # the EnergyPlus wheel ships the paper's weathers
 
     # A fresh venv outside the checkout: torch pinned first (the CPU build), then the wheel with its extras.
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
@@ -126,14 +128,17 @@ def test_the_wheel_installed_outside_the_checkout_trains_evaluates_exports_and_s
     cache = tmp_path / "cache"  # the C bridge compiled from the wheel's source, not found in the developer's cache
     env_user = env | {"XDG_CACHE_HOME": str(cache)}
     pe = venv / "bin" / "parallel-eplus"
-    where = _run([venv / "bin" / "python", "-c", "import parallel_eplus; print(parallel_eplus.__file__)"], user,
-                 env_user, 120).stdout.strip()  # fmt: skip
-    assert where.startswith(str(venv)), where
+    probe = "import parallel_eplus.buildings.datacenter as m; print(m.__file__); print(m.AGENT_IDF)"
+    where = _run([venv / "bin" / "python", "-c", probe], user, env_user, 120).stdout.split()
+    assert len(where) == 2 and all(w.startswith(str(venv)) for w in where), where  # the model is the wheel's
     assert _run([pe, "--version"], user, env_user, 60).stdout.strip() == f"parallel-eplus {VERSION}"
+    simulate = _run([pe, "simulate", "--days", "1", "--quiet", "--weather", "CA"], user, env_user, 600)
+    assert "samples in band" in simulate.stdout
+    assert list(user.iterdir()) == []  # nothing written where the user stands
 
     check = _run([pe, "building", "check", "datacenter-2zone"], user, env_user, 300)
     assert "datacenter-2zone: ok" in check.stdout + check.stderr
-    _run([pe, "train", "--workers", "1", "--weathers", "CA", "--run-days", "1", "--timesteps", "192",
+    _run([pe, "train", "--workers", "1", "--weathers", "CA", "--run-days", "1", "--timesteps", "96",
           "--batch-size", "96", "--run-name", "wheel"], user, env_user, 600)  # fmt: skip
     assert (user / "runs" / "wheel" / "model.zip").is_file()
     if shutil.which("cc"):
