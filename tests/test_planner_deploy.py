@@ -6,7 +6,6 @@ from __future__ import annotations
 import datetime as dt
 import json
 import logging
-import os
 import re
 import subprocess
 import sys
@@ -246,14 +245,25 @@ def test_the_bearer_scheme_is_case_insensitive(exported):
             assert r.status_code == 401 and r.json()["field"] == "authorization", header
 
 
+@pytest.fixture(scope="module")
+def quiet_persistence(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    """`parallel-eplus export RUN --persistence --quiet`, a process of its own: the directory and what it wrote."""
+    out = tmp_path_factory.mktemp("persistence") / "out"
+    r = subprocess.run([sys.executable, "-m", "parallel_eplus.cli", "export", str(RUN), "-o", str(out),
+                        "--record-days", "1", "--workers", "1", "--persistence", "--quiet"], capture_output=True,
+                       text=True, timeout=600)  # fmt: skip
+    return out, r
+
+
 @pytest.mark.slow
-def test_a_planner_exported_with_persistence_answers_without_a_forecast_and_says_so(tmp_path):
-    export(RUN, tmp_path, record_days=1, persistence=True)
+def test_a_planner_exported_with_persistence_answers_without_a_forecast_and_says_so(quiet_persistence):
+    out, r = quiet_persistence
+    assert r.returncode == 0, r.stderr
     from fastapi.testclient import TestClient
 
     from parallel_eplus.deploy.serve.server import create_app
 
-    with TestClient(create_app(tmp_path)) as c:
+    with TestClient(create_app(out)) as c:
         answer = act(c, {k: v for k, v in body().items() if k != "forecast"}).json()
     assert answer["forecast"] == "persistence" and answer["fallback"] is False
 
@@ -289,12 +299,10 @@ def test_serving_off_loopback_needs_a_token_file_and_tls_needs_both_files(export
 
 
 @pytest.mark.slow
-def test_export_quiet_writes_no_progress_bar(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "parallel_eplus.cli", "export", str(RUN), "-o", str(tmp_path / "out"),
-                        "--record-days", "1", "--workers", "1", "--quiet"], capture_output=True, text=True,
-                       timeout=600)  # fmt: skip
+def test_export_quiet_writes_no_progress_bar(quiet_persistence):
+    out, r = quiet_persistence
     assert r.returncode == 0, r.stderr
-    assert (tmp_path / "out" / "controller.json").is_file()
+    assert (out / "controller.json").is_file()
     output = r.stdout + r.stderr
     assert "step/s" not in output and "\r" not in output and "%|" not in output, output[-2000:]
     assert len(output) < 4000, output[-2000:]  # the log's lines, not a bar redrawn hundreds of times
@@ -373,20 +381,28 @@ def test_a_served_planner_writes_nothing_to_the_users_home(exported, tmp_path, m
 
 
 @pytest.mark.slow
-def test_evaluate_sends_the_token_from_a_file_or_the_environment_and_never_shows_it(exported, tmp_path, monkeypatch):
+def test_evaluate_sends_the_token_from_a_file_or_the_environment_and_never_shows_it(
+    exported, tmp_path, monkeypatch, caplog, capfd
+):
     from parallel_eplus.evaluation.http_controller import TOKEN_VARIABLE, client_token
 
     token, wrong, log = tmp_path / "token", tmp_path / "wrong", tmp_path / "server.log"
     token.write_text(TOKEN + "\n")
     token.chmod(0o600)
     wrong.write_text("not-the-token-0123456789\n")
-    env = {k: v for k, v in os.environ.items() if k != TOKEN_VARIABLE}
     evaluate = ("evaluate", "--building", "datacenter-2zone", "--weathers", "CA", "--run-days", "1", "--workers", "1",
                 "--quiet")  # fmt: skip
 
     def run(*args: str, **extra: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "parallel_eplus.cli", *evaluate, *args], capture_output=True,
-                              text=True, timeout=600, env={**env, **extra})  # fmt: skip
+        """`parallel-eplus evaluate ARGS` in this process (a fresh interpreter pays torch's import each time), with
+        `extra` as its only token variable: its exit code, what it printed, and its log at INFO with its stderr."""
+        with monkeypatch.context() as m, caplog.at_level(logging.INFO):
+            m.delenv(TOKEN_VARIABLE, raising=False)
+            for name, value in extra.items():
+                m.setenv(name, value)
+            done = cli(*evaluate, *args)
+        printed = capfd.readouterr()
+        return subprocess.CompletedProcess(done.args, done.returncode, printed.out, done.stderr + printed.err)
 
     with serving(exported, log, "--token-file", str(token), headers={"Authorization": f"Bearer {TOKEN}"}) as url:
         none = run("--controller-url", url, "--out", str(tmp_path / "none"))
@@ -405,6 +421,7 @@ def test_evaluate_sends_the_token_from_a_file_or_the_environment_and_never_shows
         assert get(url + "/health", {"Authorization": f"Bearer {TOKEN}"})["act"] == 96
     for r in (none, refused, done):
         assert TOKEN not in r.stdout + r.stderr
+    assert TOKEN not in caplog.text
     assert TOKEN not in log.read_text() and log.read_text().count("POST /act 200") == 96
 
 
