@@ -432,12 +432,11 @@ def test_evaluate_refuses_a_policy_that_is_not_the_served_controller(exported, t
     from parallel_eplus.evaluation.controllers import check_same_controllers, policy_controllers
 
     with serving(exported, tmp_path / "server.log") as url:
-        r = subprocess.run([sys.executable, "-m", "parallel_eplus.cli", "evaluate", "--policy", str(RUN),
-                            "--controller-url", url, "--building", "datacenter-2zone", "--weathers", "CA",
-                            "--run-days", "1", "--out", str(tmp_path / "out")], capture_output=True, text=True,
-                           timeout=300)  # fmt: skip
+        r = cli("evaluate", "--policy", str(RUN), "--controller-url", url, "--building", "datacenter-2zone",
+                "--weathers", "CA", "--run-days", "1", "--out", str(tmp_path / "out"))  # fmt: skip
         assert r.returncode == 2 and "is not the controller" in r.stderr, r.stderr
         assert f"give --policy {RUN / 'best' / 'planner'} " in r.stderr
+        caplog.clear()  # the refusal above
         served = http_controller(url)
         check_same_controllers([planner_controller(str(RUN / "best" / "planner"))], [served])  # the same: quiet
         assert not caplog.records
