@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from parallel_eplus.engine.config import SimulationConfig, policy_action_names
+from parallel_eplus.engine.pipes import leftovers
 from parallel_eplus.envs.env import action_space, observation_space
 from parallel_eplus.envs.ray_session import connect
 from parallel_eplus.errors import EnergyPlusError, WorkerLostError
@@ -250,6 +251,8 @@ class RayVectorEnv:
             self.actors = []
         if self._owns_ray and ray.is_initialized():
             ray.shutdown()
+        # an actor lost mid-run (SIGKILL, OOM) ran no cleanup: its pipe directories on this node name a dead owner
+        leftovers.sweep()
 
 
 def _log_placement(nodes: list[str], slices: list[slice]) -> None:

@@ -104,13 +104,11 @@ def test_a_worker_lost_during_an_overlapped_update_ends_the_run_after_a_checkpoi
 
 def test_an_actor_lost_during_an_overlapped_update_ends_the_run_after_a_checkpoint(tmp_path, no_leaks, monkeypatch):
     pytest.importorskip("ray")
-    # its three weathers and 144-step batches as before: with one weather and 72-step batches, a run of it left the
-    # lost actor's pipe directories in the temp folder at the session's end (its owner killed, nothing swept them)
-    cfg = _config(tmp_path, "lost-ray", backend="ray", workers_per_actor=1, weathers=["CA", "CO", "FL"],
-                  batch_size=2 * BATCH, timesteps=40 * BATCH)  # fmt: skip
+    cfg = _config(tmp_path, "lost-ray", backend="ray", workers_per_actor=1, batch_size=BATCH, timesteps=40 * BATCH)
     struck = _strike_at_first_update(monkeypatch, lambda: _kill_one("ray::WorkerGroup"))
     with pytest.raises(WorkerLostError, match="was lost"):
         train(cfg, progress=False)
     assert struck
-    assert _checkpoint_steps(cfg) == [2 * BATCH]
+    assert _checkpoint_steps(cfg) == [BATCH]
     assert _left_running() == [] and _ours("ray::") == []
+    assert leftovers.stale_pipe_dirs() == []  # the lost actor ran no cleanup: its pipe directories swept at the end
