@@ -52,9 +52,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         controllers[-1].make(building)  # the spec's settings for its rule: a wrong one fails here
     for target in _temperatures(args.rbc_targets, "--rbc-targets") if args.rbc_targets else []:
         controllers.append(Controller(f"{RBC_LABEL} ({target:g} °C)", "rbc", rbc_target_c=target))
-    from parallel_eplus.learning.model_based.control.saved_planner import planner_controller
-
     for path in args.policy or []:  # a model-based run's planner, else a policy or a folder of runs (seeds)
+        from parallel_eplus.learning.model_based.control.saved_planner import planner_controller  # torch: only here
+
         planner = planner_controller(path, args.planner)
         controllers += [planner] if planner else policy_controllers(path)
     if getattr(args, "oracle", None) is not None:  # plans on EnergyPlus itself (learning/oracle/)

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import lfilter
 
 from parallel_eplus.buildings.weather.epw import read_epw, records_per_hour, replace_columns
 
@@ -90,6 +89,8 @@ def ou_noise(n: int, sigma: float, mu: float, tau_h: float, rng: np.random.Gener
     eps = rng.standard_normal(n)
     drive = mu * dt_h / tau_h + sigma * math.sqrt(2.0 / tau_h) * math.sqrt(dt_h) * eps
     drive[0] = mu + sigma * eps[0]  # x[0]: the stationary law; then x[i] = a x[i-1] + drive[i]
+    from scipy.signal import lfilter  # here: scipy costs every process importing the env ~1 s of start-up
+
     return lfilter([1.0], [1.0, -a], drive)
 
 
