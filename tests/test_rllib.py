@@ -46,7 +46,7 @@ def test_rllib_ppo_trains_with_two_env_runners_sharing_one_output_dir(tmp_path, 
         algo = config.build_algo()
         try:
             try:
-                results = [algo.train() for _ in range(3)]
+                results = [algo.train() for _ in range(2)]  # 2: each runner's first episode is pruned
             except Exception as e:  # an env runner's error: its own cause, short, where CI's log cut shows it
                 cause = str(e).strip().splitlines()
                 short = "\n".join(cause[:3] + ["..."] + cause[-25:])
@@ -57,16 +57,16 @@ def test_rllib_ppo_trains_with_two_env_runners_sharing_one_output_dir(tmp_path, 
             algo.stop()
     finally:
         ray.shutdown()
-    assert results[-1]["num_env_steps_sampled_lifetime"] == 3 * 2 * STEPS_PER_DAY and restarts == 0
-    assert len({r["pid"] for r in runners}) == 2 and all(r["episodes"] >= 3 for r in runners), runners
+    assert results[-1]["num_env_steps_sampled_lifetime"] == 2 * 2 * STEPS_PER_DAY and restarts == 0
+    assert len({r["pid"] for r in runners}) == 2 and all(r["episodes"] >= 2 for r in runners), runners
     folders = sorted(out.iterdir())
-    # Both runners began CA episode 1, 2, 3 on the same config: every one has a folder of its own.
+    # Both runners began CA episode 1, 2 (and maybe 3) on the same config: every one has a folder of its own.
     assert len(folders) == sum(r["episodes"] for r in runners), (folders, runners)
     assert all(f.name.startswith("episode-") and f.name.endswith("-CA") for f in folders)
     workers = [json.loads((f / SUMMARY_FILE).read_text())["worker"] for f in folders if (f / SUMMARY_FILE).is_file()]
     assert set(workers) == {"runner-1", "runner-2"}, workers  # each summary names the env runner that ran it
     finished = [json.loads((f / SUMMARY_FILE).read_text()) for f in folders if (f / SUMMARY_FILE).is_file()]
-    assert len([s for s in finished if s["complete"] and s["steps"] == STEPS_PER_DAY]) >= 6
+    assert len([s for s in finished if s["complete"] and s["steps"] == STEPS_PER_DAY]) >= 4
     # keep_episodes=1: each env keeps its own newest whole and prunes only its own older ones
     whole = [str(f) for f in folders if (f / "steps.parquet").is_file()]
     assert sorted(whole) == sorted(r["current"] for r in runners)
