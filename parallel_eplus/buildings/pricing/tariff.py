@@ -16,6 +16,7 @@ import csv
 import datetime as dt
 import tomllib
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -166,6 +167,10 @@ class Tariff:
 
     def mean_price(self) -> float:
         """The mean price over a year's hours (the reward's reference for cost in W-equivalents)."""
+        return self._mean_price
+
+    @cached_property
+    def _mean_price(self) -> float:  # once per tariff: a year of hours costs ~40 ms, and the reward asks every step
         if self.fixed is not None:
             return self.fixed
         if self.times:
