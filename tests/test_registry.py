@@ -100,16 +100,18 @@ def test_a_model_based_run_shows_its_checkpoint(tmp_path):
 @pytest.mark.slow
 def test_a_finished_run_and_the_same_run_as_an_older_version_left_it(tmp_path, no_leaks, monkeypatch):
     monkeypatch.setenv(TRIAL_VARIABLE, "trial-7")  # as a Ray Tune sweep sets it
-    train(small_config(tmp_path, "short"), progress=False)
+    # one batch of 2 one-day episodes a worker: the workers' weather cycles (CA, CO and CO, FL) cover all three
+    cfg = small_config(tmp_path, "short", run_days=1, timesteps=384, batch_size=384, checkpoint_every=384)
+    train(cfg, progress=False)
     status = json.loads((tmp_path / "runs" / "short" / STATUS_FILE).read_text())
     assert status["state"] == "finished" and status["trial"] == "trial-7" and status["steps"] == status["planned"]
     assert status["pid"] == os.getpid() and status["wall_s"] > 0
     out = _runs(tmp_path)
     assert out.splitlines()[1].split()[:3] == ["short", "finished", "trial"], out
-    assert "1536/1536" in out and "model.zip" in out and all(f"{w} " in out for w in ("CA", "CO", "FL"))
+    assert "384/384" in out and "model.zip" in out and all(f"{w} " in out for w in ("CA", "CO", "FL"))
     (tmp_path / "runs" / "short" / STATUS_FILE).unlink()  # as a run from before status.json left it
     [info] = registry.list_runs(tmp_path / "runs")
-    assert (info.state, info.steps, info.planned, info.wall_s) == ("finished", 1536, 1536, None)
+    assert (info.state, info.steps, info.planned, info.wall_s) == ("finished", 384, 384, None)
     shown = _runs(tmp_path, "show", "short")
     assert "state       finished" in shown and "latest episode of each weather" in shown and "algorithm" in shown
 
@@ -120,14 +122,15 @@ def _start(cwd: Path, name: str) -> subprocess.Popen:
     return subprocess.Popen(cmd, cwd=cwd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
-def _wait_running(cwd: Path, name: str, proc: subprocess.Popen, steps: int = 384) -> registry.RunInfo:
+def _wait_running(cwd: Path, name: str, proc: subprocess.Popen) -> registry.RunInfo:
+    """Until the run says it is running, past its first checkpoint (one batch, 192 steps)."""
     deadline = time.monotonic() + 180
     while True:
         assert proc.poll() is None, proc.communicate()[0]
         assert time.monotonic() < deadline, "the run did not get going within 180 s"
         if (cwd / "runs" / name / STATUS_FILE).is_file():
             info = registry.read_run(cwd / "runs" / name)
-            if info.state == "running" and info.checkpoint is not None and info.steps >= steps:
+            if info.state == "running" and info.checkpoint is not None and info.steps >= 192:
                 return info
         time.sleep(0.5)
 
@@ -155,7 +158,7 @@ def test_runs_stop_ends_a_running_training_with_a_checkpoint_and_nothing_left(tm
 def test_a_trainer_killed_with_sigkill_is_listed_as_failed_not_running(tmp_path, no_leaks):
     proc = _start(tmp_path, "killed")
     try:
-        _wait_running(tmp_path, "killed", proc, steps=192)
+        _wait_running(tmp_path, "killed", proc)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
