@@ -31,6 +31,11 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
 @pytest.fixture
 def ray_head():
     """A head node with the job server (the dashboard) on 127.0.0.1; yields (jobs address, environment)."""
@@ -51,11 +56,14 @@ def ray_head():
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:  # the job server answers once the head's agent is up
+            assert head.poll() is None, "ray start --head exited"
+            if not _listening(dashboard):  # (a socket's answer costs nothing; each `ray job list` is a Python start)
+                time.sleep(0.25)
+                continue
             ok = subprocess.run([RAY, "job", "list", "--address", address], env=env, capture_output=True)
             if ok.returncode == 0:
                 break
-            assert head.poll() is None, "ray start --head exited"
-            time.sleep(2)
+            time.sleep(1)
         yield address, env
     finally:
         head.send_signal(signal.SIGTERM)  # `ray start --block` stops the node's processes, then itself
@@ -83,7 +91,7 @@ def test_a_sweep_submitted_as_a_ray_job_stops_with_checkpoints_and_nothing_left(
     checkpoints = tmp_path / "runs" / "job" / "seed-0" / "checkpoints"
     deadline = time.monotonic() + 240
     while not list(checkpoints.glob("model_*_steps.zip")) and time.monotonic() < deadline:
-        time.sleep(1)
+        time.sleep(0.5)
     logs = subprocess.run([RAY, "job", "logs", *job, "sweep-job"], env=env, capture_output=True, text=True).stdout
     assert list(checkpoints.glob("model_*_steps.zip")), logs
 
