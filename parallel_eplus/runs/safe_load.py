@@ -42,6 +42,11 @@ def _box(item: dict, where: str) -> spaces.Box:
     return spaces.Box(bounds[0], bounds[1], dtype=dtype)
 
 
+def _no_optimizer(params, lr, **kwargs) -> None:
+    """Acting needs no optimizer, and building one imports torch._dynamo (about 2 s of CPU a process)."""
+    return None
+
+
 def load_policy_network(model_zip: Path):
     """The policy of a saved model, in evaluation mode, built without unpickling anything from the file."""
     try:
@@ -71,7 +76,9 @@ def load_policy_network(model_zip: Path):
     _, params, _ = load_from_zip_file(model_zip, device="cpu", custom_objects=serialized)
     if data.get("use_sde") is True and module == "stable_baselines3.common.policies":
         kwargs["use_sde"] = True  # gSDE's exploration parameters: a matrix of log-stds (acting ignores them)
-    policy = _class(POLICY_CLASSES[module])(obs_space, act_space, lambda _: 0.0, **kwargs)
+    policy = _class(POLICY_CLASSES[module])(
+        obs_space, act_space, lambda _: 0.0, optimizer_class=_no_optimizer, **kwargs
+    )
     try:
         policy.load_state_dict(params["policy"])
     except (RuntimeError, KeyError) as e:
