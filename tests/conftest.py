@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -54,6 +55,65 @@ RAY_TESTS = (
 )
 
 
+# Of those, the tests that use a Ray without being about Ray's own start and stop: they share one per test process
+# (see `_a_shared_ray_for_the_ray_users`). The others start and end their own: a Ctrl-C or a lost actor's clean-up
+# that must leave no Ray, a Ray started despite a stale cluster, a subprocess, the bench's timings, RLlib's own init.
+SHARED_RAY_TESTS = (
+    "tests/faults/test_ray_faults.py::test_an_energyplus_worker_killed_inside_an_actor_restarts_there_and_the_run",
+    "tests/faults/test_ray_faults.py::test_a_lost_actor_stops_the_run_naming_its_node_after_a_checkpoint_that_res",
+    "tests/faults/test_ray_faults.py::test_a_failed_ray_episode_leaves_the_evaluation_standing",
+    "tests/test_comfort_constraint.py::test_ray_actors_return_the_costs_their_workers_reported",
+    "tests/test_evaluate.py::test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures",
+    "tests/test_model_based.py::test_the_ray_backend_runs_the_planner_too",
+    "tests/test_overlap.py::test_overlapped_batches_hold_every_workers_steps_once_in_order_with_their_costs[ray-",
+    "tests/test_rollout.py::test_ray_actors_collect_the_batch_local_workers_collect",
+    "tests/test_sweep.py::test_two_seeds_queue_two_workers_each_and_both_finish_as_run_folders",
+    "tests/test_sweep.py::test_a_failing_trial_is_reported_and_the_others_finish",
+    "tests/test_sweep.py::test_an_optuna_search_draws_its_trials_and_names_the_best",
+    "tests/test_sweep_eval.py::test_a_search_chooses_by_evaluation_and_prints_the_winning_configuration",
+    "tests/test_sweep_eval.py::test_asha_stops_a_trailing_trial_early_and_seeds_draw_one_curve_with_its_band",
+    "tests/test_sweep_eval.py::test_pbt_continues_the_trailing_trial_from_the_leaders_weights_with_perturbed_se",
+    "tests/test_train.py::test_ray_backend_trains_locally",
+)
+SHARED_RAY_CPUS = 2  # what the tests' queues assume (two seeds of two workers each wait for each other)
+_shared_ray: list[bool] = []  # whether this test process's shared Ray is up
+
+
+def _stop_shared_ray() -> None:
+    if _shared_ray:
+        import ray
+
+        ray.shutdown()
+        _shared_ray.clear()
+
+
+@pytest.fixture(autouse=True)
+def _a_shared_ray_for_the_ray_users(request):
+    """A SHARED_RAY_TESTS test runs on its process's one Ray, started by the package's own `connect` before it (as a
+    user's `ray.init` before `train` would be: our code then joins it and leaves it up), which saves a Ray start and
+    stop, 15-25 s on 2 loaded cores, per test. After it every core must be free again: an actor or trial left behind
+    fails the test (and the Ray is ended). Any other test finds no Ray up: it starts its own, or forks without Ray's
+    threads in the process."""
+    if not request.node.nodeid.startswith(SHARED_RAY_TESTS):
+        _stop_shared_ray()
+        yield
+        return
+    import ray
+
+    from parallel_eplus.envs.ray_session import connect
+
+    if not _shared_ray:
+        connect(None, SHARED_RAY_CPUS)
+        _shared_ray.append(True)
+    yield
+    deadline = time.monotonic() + 30
+    while (free := ray.available_resources().get("CPU", 0.0)) < SHARED_RAY_CPUS:
+        if time.monotonic() > deadline:
+            _stop_shared_ray()
+            pytest.fail(f"the test left Ray work holding {SHARED_RAY_CPUS - free:g} of {SHARED_RAY_CPUS} CPUs")
+        time.sleep(0.2)
+
+
 # Tests on a wall clock: a BACnet device stepping every 0.3-0.5 s that a supervisor must act within, or an answer
 # due within a few seconds. Marked `realtime`; .ci/run runs them alone, after the rest: beside a second test process
 # on 2 loaded cores, one of them missed a step and one took 5.6 s for 3.
@@ -89,6 +149,7 @@ def pytest_xdist_make_scheduler(config, log):
 
 def pytest_sessionfinish(session, exitstatus):
     """Nothing of ours may stay in the temp folder: fail the session, naming what was left, then tidy up."""
+    _stop_shared_ray()
     left = sorted(n for n in os.listdir(SESSION_TMP) if n.startswith(LEFT_IN_TMP))
     if left:
         reporter = session.config.pluginmanager.get_plugin("terminalreporter")

@@ -77,43 +77,38 @@ def test_a_sweep_through_ray_tasks_gives_the_local_sweeps_table_and_figures_and_
     """Each episode a Ray task with the policy shipped to it: the same rows, the episode files brought back. And each
     task reports its steps as it goes (every PROGRESS_STEPS), so the bar of a year-long evaluation moves before its
     first episode ends, and ends at every step counted once: here a month (2,880 steps, two reports), the driver
-    reading them every 0.2 s rather than every POLL_S (a year took 50 s). One Ray for both, started as `evaluate`
-    starts its own (a sweep that starts and ends its own Ray: test_ctrl_c_in_a_ray_evaluation...)."""
-    ray = pytest.importorskip("ray")
-    from parallel_eplus.envs.ray_session import connect
+    reading them every 0.2 s rather than every POLL_S (a year took 50 s). Both on the tests' shared Ray (conftest;
+    a sweep that starts and ends its own Ray: test_ctrl_c_in_a_ray_evaluation...)."""
+    pytest.importorskip("ray")
     from parallel_eplus.evaluation import ray_sweep
     from parallel_eplus.evaluation.sweep import _job_config
 
     controllers = [Controller(BASELINE_LABEL, "baseline"), policy_controller(str(policy))]
     local = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "local", progress=False)
-    assert connect(None, 2)
-    try:
-        swept = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "ray", progress=False, backend="ray")
-        pd.testing.assert_frame_equal(swept.drop(columns="episode_dir"), local.drop(columns="episode_dir"))
-        assert all(str(d).startswith(str(tmp_path / "ray")) for d in swept.episode_dir)
-        write_results(swept, tmp_path / "ray")  # the figures read the episode files the tasks returned
-        assert is_png(tmp_path / "ray" / "west_zone_histogram.png")
+    swept = run_sweep(controllers, ["CA", "FL"], 1, 2, tmp_path / "ray", progress=False, backend="ray")
+    pd.testing.assert_frame_equal(swept.drop(columns="episode_dir"), local.drop(columns="episode_dir"))
+    assert all(str(d).startswith(str(tmp_path / "ray")) for d in swept.episode_dir)
+    write_results(swept, tmp_path / "ray")  # the figures read the episode files the tasks returned
+    assert is_png(tmp_path / "ray" / "west_zone_histogram.png")
 
-        events: list[tuple[str, int]] = []
+    events: list[tuple[str, int]] = []
 
-        class Bar:  # what the sweep's tqdm is told
-            n = 0
+    class Bar:  # what the sweep's tqdm is told
+        n = 0
 
-            def update(self, k: int) -> None:
-                self.n += k
-                events.append(("update", self.n))
+        def update(self, k: int) -> None:
+            self.n += k
+            events.append(("update", self.n))
 
-            def set_postfix(self, **_) -> None:
-                events.append(("episode ended", self.n))
+        def set_postfix(self, **_) -> None:
+            events.append(("episode ended", self.n))
 
-        days = 30
-        assert days * 96 > 2 * ray_sweep.PROGRESS_STEPS
-        monkeypatch.setattr(ray_sweep, "POLL_S", 0.2)
-        base = controllers[0]
-        job = (base, _job_config(base, "CA", None, days, None, tmp_path / "bar"))
-        rows, _ = ray_sweep.run_jobs([job], 1, None, Bar(), 900)
-    finally:
-        ray.shutdown()
+    days = 30
+    assert days * 96 > 2 * ray_sweep.PROGRESS_STEPS
+    monkeypatch.setattr(ray_sweep, "POLL_S", 0.2)
+    base = controllers[0]
+    job = (base, _job_config(base, "CA", None, days, None, tmp_path / "bar"))
+    rows, _ = ray_sweep.run_jobs([job], 1, None, Bar(), 900)
     first_end = events.index(next(e for e in events if e[0] == "episode ended"))
     assert any(0 < n < days * 96 for kind, n in events[:first_end] if kind == "update")  # part of the month
     assert events[-1][1] == rows[0]["steps"] == days * 96
