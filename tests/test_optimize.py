@@ -124,3 +124,27 @@ def test_a_portfolio_on_ray_answers_each_building_reports_a_broken_one_and_stops
     assert "stopping 1 buildings' stages" in log
     assert _status(out / "small-office").get("stages", {}).get("prepare", {}).get("state") != "done"
     assert not _our_ray()  # the Ray it started, ended
+
+
+def test_a_portfolio_stopped_between_chunks_tables_what_is_answered_so_far(tmp_path, no_leaks):
+    """`studies/portfolio/run.sh`'s way: several buildings one after another, stopped by Ctrl-C while the second one
+    prepares. Its summary is still written: the first building answered (the committed restaurant, a rerun that
+    changes nothing), the second named as stopped, so the table grows chunk by chunk."""
+    out = tmp_path / "portfolio"
+    root = Path(__file__).resolve().parents[1]
+    shutil.copytree(root / "results" / "optimize" / "full-service-restaurant", out / "full-service-restaurant")
+    models = [model_file(f"RefBldg{name}New2004_Chicago.idf") for name in ("FullServiceRestaurant", "SmallOffice")]
+    cmd = [sys.executable, "-m", "parallel_eplus.cli", "optimize", *map(str, models), "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    for line in proc.stdout:  # the restaurant answered, the office's first stage under way
+        lines.append(line)
+        if "small-office: prepare" in line:
+            break
+    proc.send_signal(signal.SIGINT)
+    log = "".join(lines) + proc.communicate(timeout=300)[0]
+    assert proc.returncode == 130, log[-3000:]
+    summary = (out / "summary.md").read_text()
+    assert "| full-service-restaurant | own controls |" in summary, summary
+    assert "| small-office | not finished: stopped before its answer (rerun the same command" in summary, summary
+    assert "1 of 2 buildings answered" in summary

@@ -212,11 +212,16 @@ def _typical_day(folder, df, periods, settings, shown) -> str | None:
     return path.name if path else None
 
 
+def not_finished(folder: BuildingFolder, why: str) -> dict:
+    """A building's row without an answer, saying why (a portfolio's summary lists it so)."""
+    return {"building": folder.name, "chosen": "", "why": why, "folder": folder.root}
+
+
 def _unfinished(folder: BuildingFolder, settings: OptimizeSettings, why: str) -> dict:
     folder.report.write_text(f"# {folder.name}: not finished\n\n{why}\n\nLogs: `{folder.logs}`. Fix the cause and "
                              "rerun the same command: finished stages are kept.\n")  # fmt: skip
     log.error("%s: %s", folder.name, why)
-    return {"building": folder.name, "chosen": "", "why": why, "folder": folder.root}
+    return not_finished(folder, why)
 
 
 def _row(folder: BuildingFolder, choice: Choice, held, metric: str) -> dict:

@@ -16,7 +16,7 @@ import os
 from dataclasses import replace
 
 from parallel_eplus.optimize.folders import BuildingFolder
-from parallel_eplus.optimize.pipeline import optimize_building
+from parallel_eplus.optimize.pipeline import not_finished, optimize_building
 from parallel_eplus.optimize.settings import OptimizeSettings
 
 log = logging.getLogger(__name__)
@@ -31,9 +31,12 @@ def _optimize_one(folder: BuildingFolder, settings: OptimizeSettings) -> dict:
     return optimize_building(folder, settings, show=False)
 
 
-def optimize_on_ray(folders: list[BuildingFolder], settings: OptimizeSettings, address: str) -> list[dict]:
+def optimize_on_ray(
+    folders: list[BuildingFolder], settings: OptimizeSettings, address: str, rows: list[dict | None]
+) -> list[dict | None]:
     """Every building as a Ray task on the cluster at `address` ("local": a Ray of this machine's cores); their
-    answers in `folders`' order, a building that failed as a row saying why (the loop's rows, portfolio.py)."""
+    answers into `rows` in `folders`' order as each ends (so a Ctrl-C leaves those finished), a building that
+    failed as a row saying why (the loop's rows, portfolio.py)."""
     import ray
     from ray.exceptions import RayTaskError, TaskCancelledError
 
@@ -50,7 +53,6 @@ def optimize_on_ray(folders: list[BuildingFolder], settings: OptimizeSettings, a
         each = replace(settings, workers=workers)
         refs = {task.remote(folder, each): i for i, folder in enumerate(folders)}
         log.info("Ray: %d buildings placed, %d cores each (the cluster has %d)", len(folders), workers, cores)
-        rows: list[dict | None] = [None] * len(folders)
         pending = list(refs)
         try:
             while pending:
@@ -61,7 +63,7 @@ def optimize_on_ray(folders: list[BuildingFolder], settings: OptimizeSettings, a
                 except RayTaskError as e:
                     cause = e.cause if isinstance(e.cause, Exception) else e
                     log.error("%s: %s", folders[i].name, cause)
-                    rows[i] = {"building": folders[i].name, "chosen": "", "why": str(cause), "folder": folders[i].root}
+                    rows[i] = not_finished(folders[i], str(cause))
                 log.info("%d of %d buildings done", len(folders) - len(pending), len(folders))
         except KeyboardInterrupt:
             log.warning("interrupted: stopping %d buildings' stages (each keeps what it finished); rerun the same "
@@ -72,7 +74,7 @@ def optimize_on_ray(folders: list[BuildingFolder], settings: OptimizeSettings, a
                 with contextlib.suppress(TaskCancelledError, RayTaskError, ray.exceptions.GetTimeoutError):
                     ray.get(ref, timeout=CANCEL_WAIT_S)
             raise
-        return rows  # type: ignore[return-value]
+        return rows
     finally:
         if started:
             ray.shutdown()

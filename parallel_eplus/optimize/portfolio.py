@@ -10,13 +10,14 @@ from pathlib import Path
 import pandas as pd
 
 from parallel_eplus.optimize.folders import BuildingFolder, short_name
-from parallel_eplus.optimize.pipeline import optimize_building
+from parallel_eplus.optimize.pipeline import not_finished, optimize_building
 from parallel_eplus.optimize.prepare import source_of
 from parallel_eplus.optimize.settings import OptimizeSettings
 
 log = logging.getLogger(__name__)
 
 SUMMARY = "summary.md"
+STOPPED = "stopped before its answer (rerun the same command to continue)"
 
 
 def sources_of(arguments: list[str]) -> list[Path]:
@@ -53,28 +54,40 @@ def run_optimize(
     arguments: list[str], out: Path, settings: OptimizeSettings, show: bool = True, ray_address: str | None = None
 ) -> int:
     """Optimize every building named (on the Ray cluster at `ray_address`, "local" for this machine's); 0 when each
-    has its answer, 1 when one could not be finished."""
+    has its answer, 1 when one could not be finished. Stopped (Ctrl-C), several buildings' summary still tables what
+    is answered so far, the rest as not finished: a portfolio run in chunks shows its answers chunk by chunk."""
     folders = folders_for(sources_of(arguments), Path(out).resolve())
-    if ray_address:
-        from parallel_eplus.optimize.placement import optimize_on_ray
+    rows: list[dict | None] = [None] * len(folders)
+    try:
+        if ray_address:
+            from parallel_eplus.optimize.placement import optimize_on_ray
 
-        return _finish(optimize_on_ray(folders, settings, ray_address), folders, out, settings)
-    rows = []
-    for i, folder in enumerate(folders):
+            optimize_on_ray(folders, settings, ray_address, rows)
+        else:
+            for i, folder in enumerate(folders):
+                rows[i] = _one(folder, folders, i, settings, show)
+    except KeyboardInterrupt:
         if len(folders) > 1:
-            log.info("building %d of %d: %s (%s)", i + 1, len(folders), folder.name, folder.source)
-        try:
-            rows.append(optimize_building(folder, settings, show))
-        except KeyboardInterrupt:
-            log.warning("%s: interrupted; rerun the same command to continue (finished stages are kept in %s)",
-                        folder.name, folder.root)  # fmt: skip
+            so_far = [r or not_finished(f, STOPPED) for r, f in zip(rows, folders, strict=True)]
+            write_summary(so_far, Path(out).resolve(), settings)
+        raise
+    return _finish(rows, folders, out, settings)  # type: ignore[arg-type]
+
+
+def _one(folder: BuildingFolder, folders: list[BuildingFolder], i: int, settings: OptimizeSettings, show: bool) -> dict:
+    if len(folders) > 1:
+        log.info("building %d of %d: %s (%s)", i + 1, len(folders), folder.name, folder.source)
+    try:
+        return optimize_building(folder, settings, show)
+    except KeyboardInterrupt:
+        log.warning("%s: interrupted; rerun the same command to continue (finished stages are kept in %s)",
+                    folder.name, folder.root)  # fmt: skip
+        raise
+    except (ValueError, FileNotFoundError, OSError) as e:
+        if len(folders) == 1:
             raise
-        except (ValueError, FileNotFoundError, OSError) as e:
-            if len(folders) == 1:
-                raise
-            log.error("%s: %s", folder.name, e)
-            rows.append({"building": folder.name, "chosen": "", "why": str(e), "folder": folder.root})
-    return _finish(rows, folders, out, settings)
+        log.error("%s: %s", folder.name, e)
+        return not_finished(folder, str(e))
 
 
 def _finish(rows: list[dict], folders: list[BuildingFolder], out: Path, settings: OptimizeSettings) -> int:
