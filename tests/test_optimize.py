@@ -82,8 +82,9 @@ def test_optimize_is_interrupted_resumes_and_answers(tmp_path):
     assert ((out / "status.json").read_text(), (out / "report.md").read_text()) == answered
     if after["choice"]["chosen"] == "own":  # do no harm: nothing written, and the report says so
         assert "**Chosen: own controls.**" in report and not (out / "controller").exists()
-    else:
+    else:  # linked beside the report, so the folder can move
         assert json.loads((out / "controller" / "controller.json").read_text())
+        assert "Written: [controller/controller.json](controller/controller.json)" in report, report
 
 
 def _our_ray() -> list[str]:

@@ -4,6 +4,9 @@ preset, training, time per stage), so a reader can check every number against th
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import pandas as pd
 
 from parallel_eplus.optimize.choice import KH_ALLOWANCE, KH_ALLOWANCE_SHARE, METRIC_NAMES, MIN_SAVING, Choice
@@ -59,11 +62,12 @@ def write_report(folder: BuildingFolder, settings: OptimizeSettings, metric_key:
         lines += ["**No choice yet**: not every candidate is scored (rerun the same command to continue).", ""]
     else:
         lines += [f"**Chosen: {choice.label}.** {choice.reason[0].upper()}{choice.reason[1:]}.", ""]
-        if exported.get("written") and choice.candidate == "learned":
-            lines += [f"Written: `{exported['written']}` (`parallel-eplus export`: the controller with its contract); "
+        written = exported.get("written") and Path(os.path.relpath(exported["written"], folder.root)).as_posix()
+        if written and choice.candidate == "learned":  # beside the report: the link holds wherever the folder goes
+            lines += [f"Written: [{written}]({written}) (`parallel-eplus export`: the controller with its contract); "
                       f"serve it with `parallel-eplus serve {folder.controller}` (docs/deploy.md).", ""]  # fmt: skip
-        elif exported.get("written"):
-            lines += [f"Written: `{exported['written']}` ({exported.get('note')}).", ""]
+        elif written:
+            lines += [f"Written: [{written}]({written}) ({exported.get('note')}).", ""]
         elif exported.get("state") == "done":
             lines += ["No controller written: keep your own controls (nothing was found that does better on weathers "
                       "it never saw).", ""]  # fmt: skip
