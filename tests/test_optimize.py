@@ -23,16 +23,9 @@ pytestmark = pytest.mark.slow
 
 
 def _command(out: Path) -> list[str]:
-    from parallel_eplus.cli.parser import build_parser
-
-    try:  # `parallel-eplus optimize` once parser.py declares it; cli/optimize.py's own parser until then
-        build_parser().parse_args(["optimize", "x.idf"])
-        entry = ["-m", "parallel_eplus.cli", "optimize"]
-    except SystemExit:
-        entry = ["-m", "parallel_eplus.cli.optimize"]
     model = model_file("RefBldgSmallOfficeNew2004_Chicago.idf")
-    return [sys.executable, *entry, str(model), "--out", str(out), "--quick", "--weathers", "CA", "--held-out", "IL",
-            "--workers", "2", "--budget-minutes", "10", "--quiet"]  # fmt: skip
+    return [sys.executable, "-m", "parallel_eplus.cli", "optimize", str(model), "--out", str(out), "--quick",
+            "--weathers", "CA", "--held-out", "IL", "--workers", "2", "--budget-minutes", "10", "--quiet"]  # fmt: skip
 
 
 def _status(out: Path) -> dict:
