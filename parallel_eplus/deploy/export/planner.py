@@ -215,6 +215,13 @@ def _tariff_values(weights, spec, out_dir: Path) -> dict[str, object]:
     return values
 
 
+def _last(demos, r: int) -> np.ndarray:
+    """The setpoints in force before step `r` of the own-controls run, within the outputs' ranges: the own controls
+    are not bound by them (the large hotel's DOAS node read 10 C against [12, 22]), a served planner's
+    `last_setpoints` are."""
+    return np.clip(demos.physical[max(r - 1, 0)], demos.low, demos.high)
+
+
 def _body(contract: dict, mpc, demos, r: int) -> tuple[dict, dict]:
     """Step `r` of the own-controls run as a request (its readings, the last step's setpoints, the weather file's
     forecast), and as the in-process planner's info."""
@@ -229,7 +236,7 @@ def _body(contract: dict, mpc, demos, r: int) -> tuple[dict, dict]:
     truth = mpc.forecasts(weather).file.truth(times)
     body = {
         "time": t.isoformat(), "sensors": dict(zip(sensors, map(float, obs[: len(sensors)]), strict=True)),
-        "last_setpoints": dict(zip(names, map(float, demos.physical[max(r - 1, 0)]), strict=True)),
+        "last_setpoints": dict(zip(names, map(float, _last(demos, r)), strict=True)),
         "forecast": {n: truth[:, i].tolist() for i, n in enumerate(WEATHER)},
     }  # fmt: skip
     if contract["rule"]:
@@ -303,7 +310,7 @@ def _check(out_dir: Path, contract: dict, mpc, demos) -> tuple[np.ndarray, float
             body["demand_peaks_kw"] = mpc.demand.trackers[0].month_peaks(mpc.demand.charges.names, t)
             peaked += bool(body["demand_peaks_kw"])
         answer = runtime.act(body)
-        a_last = to_unit(demos.physical[r - 1 : r], demos.low, demos.high).astype(np.float32)
+        a_last = to_unit(_last(demos, r)[None], demos.low, demos.high).astype(np.float32)
         expected = demos.to_physical(mpc.act(obs[None], [info], a_last)[0])
         served = np.array([answer["setpoints"][n]["value"] for n in names])
         diff = max(diff, float(np.max(np.abs(served - expected))))
