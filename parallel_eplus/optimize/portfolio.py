@@ -112,7 +112,8 @@ def write_summary(rows: list[dict], out: Path, settings: OptimizeSettings) -> Pa
         kh = f"{r['kh_own']:.2f} → {r['kh']:.2f}" if "kh" in r else ""
         chosen = r["chosen"] or f"not finished: {r['why']}"
         link = Path(r["folder"]).relative_to(out) / "report.md"
-        lines.append(f"| {r['building']} | {chosen} | {r.get('metric', '')} | {x} | {best} | {kh} | [{link}]({link}) |")
+        report = f"[{link}]({link})" if (out / link).is_file() else ""  # a building not reached yet has none
+        lines.append(f"| {r['building']} | {chosen} | {r.get('metric', '')} | {x} | {best} | {kh} | {report} |")
     chosen = [r for r in rows if r["chosen"]]
     keep = sum(r["chosen"] == "own controls" for r in chosen)
     lines += ["", f"{len(chosen)} of {len(rows)} buildings answered: {len(chosen) - keep} with a controller to "
