@@ -117,6 +117,11 @@ def _one_rollout(out_dir, lockstep: bool, backend: str = "local", stats: list | 
         model.learn(256)  # one rollout, then one update (which leaves the buffer's contents alone)
         if stats is not None:
             stats.extend(venv.stats)
+        if backend == "ray":  # the actors acted on the numpy snapshot: their processes never imported torch or SB3
+            import ray
+
+            loaded = lambda _: sorted({"torch", "stable_baselines3"} & set(__import__("sys").modules))  # noqa: E731
+            assert ray.get([a.__ray_call__.remote(loaded) for a in venv.actors]) == [[], []]
         b = model.rollout_buffer
         return {k: getattr(b, k).copy() for k in ("observations", "actions", "rewards", "episode_starts", "values",
                                                   "log_probs", "returns")}  # fmt: skip
@@ -159,7 +164,8 @@ def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leak
 
 @pytest.mark.slow
 def test_ray_actors_collect_the_batch_local_workers_collect(tmp_path, no_leaks):
-    """Fragments from Ray actors (one call per actor per batch) fill the buffer the local loop fills."""
+    """Fragments from Ray actors (one call per actor per batch) fill the buffer the local loop fills; the actors'
+    processes import neither torch nor SB3."""
     pytest.importorskip("ray")
     local = _one_rollout(tmp_path / "local", lockstep=False)
     stats: list = []

@@ -103,7 +103,7 @@ def collect_fragment(
     stop: threading.Event | None = None,
     on_served: Callable[[], None] | None = None,
 ) -> Fragment:
-    """Run the pipelined loop over `env`'s workers (an `SB3VecEnv` stepping one by one) for one batch.
+    """Run the pipelined loop over `env`'s workers (an `EpisodeKeys` or `SB3VecEnv` stepping one by one) for one batch.
 
     `raw`: each worker's current raw observation; `starts`: whether its last step ended an episode.
     `stop` (set by another thread) ends the collection with KeyboardInterrupt: the learner is closing.

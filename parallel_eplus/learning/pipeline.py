@@ -43,7 +43,7 @@ def run_pipeline(
     normalize_terminal: Callable[[np.ndarray], np.ndarray] | None,
     on_vector_step: Callable[[list[dict], np.ndarray], bool],
 ) -> bool:
-    """Collect `n_steps` transitions per worker of `env` (an `SB3VecEnv` that steps one by one) into `sink`.
+    """Collect `n_steps` transitions per worker of `env` (an `EpisodeKeys` stepping one by one) into `sink`.
 
     `obs` (as the policy sees it) and `starts` (each worker's last `done`) are updated in place.
     `observe(i, raw)` returns worker i's new observation as the policy sees it (normalizing it, and

@@ -25,8 +25,8 @@ def actor_class(max_concurrency: int = 2):
     import ray
 
     from parallel_eplus.envs.vector_env import EnergyPlusVectorEnv
+    from parallel_eplus.learning.episode_keys import EpisodeKeys
     from parallel_eplus.learning.fragments import BatchOrder, Fragment, collect_fragment
-    from parallel_eplus.learning.sb3_adapter import SB3VecEnv
 
     @ray.remote(max_concurrency=max_concurrency)
     class WorkerGroup:
@@ -35,7 +35,7 @@ def actor_class(max_concurrency: int = 2):
             if config.spin_s is None:
                 config = replace(config, spin_s=_node_spin_s(len(shares)))
             self.venv = EnergyPlusVectorEnv(config, shares, max_restarts=max_restarts, first_worker=first_worker)
-            self.env = SB3VecEnv(self.venv)  # episode returns and SB3's info keys, as the learner's callbacks expect
+            self.env = EpisodeKeys(self.venv)  # episode returns and SB3's info keys, as the learner's callbacks expect
             self.starts = np.ones(self.venv.num_envs, dtype=bool)
             self._lock = threading.Lock()  # one collection, step or close at a time
             self._closing = threading.Event()

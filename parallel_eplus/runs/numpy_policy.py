@@ -3,28 +3,30 @@
 Why: with two workers, SB3's loop cost 0.93 ms of learner CPU per vector step, most of it torch
 dispatch for a 32x32 network, a `Normal` per step and tensor conversions, while every EnergyPlus
 worker waited for its action. The same arithmetic on numpy arrays costs 0.36 ms. A snapshot is a few
-kB of plain arrays, so it also travels: a Ray actor receives one per batch and acts on its node.
+kB of plain arrays, so it also travels: a Ray actor receives one per batch and acts on its node, where this module
+imports neither torch nor SB3 (they are imported where a snapshot is taken, in the learner).
 """
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch as th
-from gymnasium import spaces
-from stable_baselines3.common.distributions import DiagGaussianDistribution, StateDependentNoiseDistribution
-from stable_baselines3.common.policies import ActorCriticPolicy
-from stable_baselines3.common.preprocessing import is_image_space
-from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
 
 from parallel_eplus.buildings.scaling import denormalize
+
+if TYPE_CHECKING:
+    import torch as th
+    from stable_baselines3.common.policies import ActorCriticPolicy
 
 _HALF_LOG_2PI = 0.5 * math.log(2 * math.pi)
 
 
 def _layers(module: th.nn.Module) -> list[tuple[np.ndarray, np.ndarray, bool]] | None:
     """(weight.T, bias, tanh after?) per Linear of a Linear/Tanh stack; None for anything else."""
+    import torch as th
+
     layers: list[tuple[np.ndarray, np.ndarray, bool]] = []
     for m in module.modules() if isinstance(module, th.nn.Sequential) else [module]:
         if isinstance(m, th.nn.Sequential):
@@ -86,6 +88,12 @@ class NumpyPolicy:
     @staticmethod
     def supports(policy: ActorCriticPolicy) -> bool:
         """Exactly SB3's own classes (a subclass may override any step), on the CPU, flat spaces."""
+        from gymnasium import spaces
+        from stable_baselines3.common.distributions import DiagGaussianDistribution, StateDependentNoiseDistribution
+        from stable_baselines3.common.policies import ActorCriticPolicy
+        from stable_baselines3.common.preprocessing import is_image_space
+        from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
+
         if type(policy) is not ActorCriticPolicy or policy.device.type != "cpu":
             return False
         obs_space, act_space = policy.observation_space, policy.action_space
@@ -178,6 +186,8 @@ def squashed_mean(policy):
     """SAC's deterministic action (tanh of its actor's mean, mapped onto the action space as SB3's `predict` does) in
     numpy float64, as the on-policy mean above: the same arithmetic an exported controller runs (export/graph.py),
     so both give the same setpoints. None for anything but a plain MLP actor (torch then acts)."""
+    import torch as th
+    from stable_baselines3.common.torch_layers import FlattenExtractor
     from stable_baselines3.sac.policies import SACPolicy
 
     if (
