@@ -162,7 +162,9 @@ def test_pipelined_worker_that_crashes_or_hangs_restarts_alone(tmp_path, no_leak
         t0 = time.monotonic()
         assert venv.ready([0]) == [0]  # once its deadline has passed
         assert venv.receive_one(0) is None  # it is being restarted; meanwhile worker 1 can be served
-        assert time.monotonic() - t0 < 3.0
+        # the deadline (2 s), then the restart's start: it waits for the weather's template to park again, 0.8-1.1 s
+        # measured quiet (2026-12-07; a CI run took 1.04 s over a 3.0 s bound), not for the new episode's start-up
+        assert time.monotonic() - t0 < 3.5
         *_, truncated = _step_alone(venv, 1, zero)[:4]
         assert not truncated
         obs, reward, terminated, truncated, info = _answer(venv, 0)
