@@ -132,6 +132,41 @@ def test_the_energyplus_side_process_imports_no_data_or_learning_libraries():
     assert not heavy & loaded, f"the EnergyPlus side imports {sorted(heavy & loaded)}"
 
 
+def test_a_ray_actor_collecting_on_its_node_imports_neither_torch_nor_sb3(tmp_path):
+    """A Ray backend's actor (learning/ray_actor.py) acts on the policy's numpy snapshot: its process, given what the
+    learner sends it each batch (the snapshot and the observation statistics), loads neither torch nor SB3 (~3 s of
+    CPU and hundreds of MB per actor). Checked in a fresh process: Ray's idle workers may hold anything an earlier
+    task imported."""
+    import pickle
+
+    import numpy as np
+    import torch as th
+    from gymnasium import spaces
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    from parallel_eplus.learning.fragments import BatchOrder, ObsNormalizer
+    from parallel_eplus.runs.numpy_policy import NumpyPolicy
+
+    obs, act = spaces.Box(-np.inf, np.inf, (6,)), spaces.Box(-1.0, 1.0, (4,))
+    policy = ActorCriticPolicy(obs, act, lambda _: 1e-3, net_arch=[32, 32], activation_fn=th.nn.Tanh)
+    order = BatchOrder(NumpyPolicy(policy), ObsNormalizer(np.zeros(6), np.ones(6), 1e-8, 10.0), 64, 0.99,
+                       (act.low, act.high))  # fmt: skip
+    sent = tmp_path / "order.pkl"
+    sent.write_bytes(pickle.dumps(order))
+    probe = f"""import pickle, sys
+import numpy as np
+from parallel_eplus.learning.ray_actor import actor_class
+import parallel_eplus.envs.vector_env, parallel_eplus.learning.episode_keys, parallel_eplus.learning.fragments
+order = pickle.loads(open({str(sent)!r}, "rb").read())
+actions, values, log_probs = order.policy.sample(order.normalizer(np.ones((1, 6))), np.random.default_rng(0))
+assert actions.shape == (1, 4)
+print(" ".join(sorted(sys.modules)))"""
+    loaded = set(
+        subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()
+    )
+    assert not {"torch", "stable_baselines3"} & loaded, sorted({"torch", "stable_baselines3"} & loaded)
+
+
 # never in a plant room's install (the `train` extra's)
 HEAVY = {"torch", "stable-baselines3", "sb3-contrib", "pyenergyplus-lbnl", "gymnasium", "pandas", "matplotlib"}
 

@@ -117,11 +117,11 @@ def _one_rollout(out_dir, lockstep: bool, backend: str = "local", stats: list | 
         model.learn(256)  # one rollout, then one update (which leaves the buffer's contents alone)
         if stats is not None:
             stats.extend(venv.stats)
-        if backend == "ray":  # the actors acted on the numpy snapshot: their processes never imported torch or SB3
+        if backend == "ray":  # the actors step through SB3's episode keys without SB3 (test_packaging: no torch)
             import ray
 
-            loaded = lambda _: sorted({"torch", "stable_baselines3"} & set(__import__("sys").modules))  # noqa: E731
-            assert ray.get([a.__ray_call__.remote(loaded) for a in venv.actors]) == [[], []]
+            kind = lambda actor: type(actor.env).__name__  # noqa: E731
+            assert ray.get([a.__ray_call__.remote(kind) for a in venv.actors]) == ["EpisodeKeys", "EpisodeKeys"]
         b = model.rollout_buffer
         return {k: getattr(b, k).copy() for k in ("observations", "actions", "rewards", "episode_starts", "values",
                                                   "log_probs", "returns")}  # fmt: skip
@@ -164,8 +164,7 @@ def test_pipelined_rollout_collects_what_the_lockstep_one_does(tmp_path, no_leak
 
 @pytest.mark.slow
 def test_ray_actors_collect_the_batch_local_workers_collect(tmp_path, no_leaks):
-    """Fragments from Ray actors (one call per actor per batch) fill the buffer the local loop fills; the actors'
-    processes import neither torch nor SB3."""
+    """Fragments from Ray actors (one call per actor per batch) fill the buffer the local loop fills."""
     pytest.importorskip("ray")
     local = _one_rollout(tmp_path / "local", lockstep=False)
     stats: list = []
